@@ -1,0 +1,184 @@
+"""Names, constants and in-memory records of the PHAC-2 layout (PHAC2_FORMAT.md).
+
+Everything that both the reader and the synthetic generator must agree on lives here, so the
+generator cannot drift from what the reader expects.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from dataclasses import dataclass, field
+from functools import cache
+from importlib import resources
+
+import numpy as np
+
+ADJECTIVES: tuple[str, ...] = (
+    "absorbent", "bumpy", "compressible", "cool", "crinkly", "fuzzy",
+    "hairy", "hard", "metallic", "nice", "porous", "rough",
+    "scratchy", "slippery", "smooth", "soft", "solid", "springy",
+    "squishy", "sticky", "textured", "thick", "thin", "unpleasant",
+)  # fmt: skip
+
+# The four exploratory procedures: short name -> exact `controller_detail_state` string (S30).
+EPS: dict[str, bytes] = {
+    "squeeze": b"SQUEEZE_SET_PRESSURE_SLOW",
+    "hold": b"HOLD_FOR_10_SECONDS",
+    "slow_slide": b"SLIDE_5CM",
+    "fast_slide": b"MOVE_DOWN_5CM",
+}
+BASELINE_STATE = b"MOVE_ARM_START_POSITION"  # rows used as the at-rest baseline (BASELINES.md §1.1)
+
+FINGERS: tuple[str, ...] = ("finger_0", "finger_1")
+BIOTAC_CHANNELS: dict[str, tuple[int, ...]] = {  # dataset -> per-row shape after the row axis
+    "electrodes": (19,),
+    "pac": (22,),
+    "pdc": (),
+    "tac": (),
+    "tdc": (),
+}
+PAC_PER_ROW = 22
+ROW_RATE_HZ = 100.0  # one row per BioTac frame; time = row index / 100 (never `timestamps`)
+PAC_RATE_HZ = ROW_RATE_HZ * PAC_PER_ROW
+ADC_MAX = 4095
+
+TRIAL_PATTERN = re.compile(r"^(.*)_(\d{3})_(\d{2})$")
+NON_TRIAL_PREFIXES = ("adjectives", "train_test", "validation")
+POSITIVE_SPLIT_GROUP = "train_test_sets"
+NEGATIVE_SPLIT_GROUP = "train_test_negative_sets"
+
+
+@dataclass(frozen=True, order=True)
+class TrialName:
+    """A trial group name split into its parts, e.g. ``car_sponge_101_01``."""
+
+    name: str
+    stem: str
+    object_id: int
+    trial: int
+
+    @classmethod
+    def parse(cls, name: str) -> TrialName | None:
+        """Parse a root child's name; ``None`` for anything that is not a trial group."""
+        if name.startswith(NON_TRIAL_PREFIXES):
+            return None
+        m = TRIAL_PATTERN.match(name)
+        if m is None:
+            return None
+        stem_with_id = f"{m.group(1)}_{m.group(2)}"
+        return cls(name=name, stem=stem_with_id, object_id=int(m.group(2)), trial=int(m.group(3)))
+
+
+@dataclass(frozen=True)
+class ObjectInfo:
+    """One PHAC-2 object as listed in ``resources/objects.csv``."""
+
+    object_id: int
+    group_stem: str  # e.g. ``car_sponge_101`` (trial groups are ``<group_stem>_<TT>``)
+    display_name: str
+    material: str
+    labels: dict[str, int]  # adjective -> 0/1
+
+    @property
+    def positives(self) -> tuple[str, ...]:
+        return tuple(a for a in ADJECTIVES if self.labels[a])
+
+
+@cache
+def objects() -> tuple[ObjectInfo, ...]:
+    """The 60 real PHAC-2 objects with their 24 labels (copied from shared/data)."""
+    text = resources.files("tactile_exp.data").joinpath("resources/objects.csv").read_text()
+    rows = list(csv.DictReader(text.splitlines()))
+    return tuple(
+        ObjectInfo(
+            object_id=int(r["object_id"]),
+            group_stem=r["group_stem"],
+            display_name=r["display_name"],
+            material=r["material"],
+            labels={a: int(r[a]) for a in ADJECTIVES},
+        )
+        for r in rows
+    )
+
+
+@dataclass(frozen=True)
+class PublishedTest:
+    """One row of the published split table: a test object of one adjective."""
+
+    adjective: str
+    object_id: int
+    label: int
+    trials: tuple[int, ...] | None  # None = all trials of the object
+
+
+@cache
+def published_test_split() -> tuple[PublishedTest, ...]:
+    """The published per-adjective test objects (PHAC2_FORMAT.md §2)."""
+    text = resources.files("tactile_exp.data").joinpath("resources/test_split.csv").read_text()
+    out = []
+    for r in csv.DictReader(text.splitlines()):
+        trials = None if r["test_trials"] == "all" else tuple(int(t) for t in r["test_trials"].split())
+        out.append(PublishedTest(r["adjective"], int(r["object_id"]), int(r["label"]), trials))
+    return tuple(out)
+
+
+@dataclass
+class FingerData:
+    """Raw BioTac channels of one finger for one trial (int64 ADC counts, N rows)."""
+
+    electrodes: np.ndarray  # (N, 19)
+    pac: np.ndarray  # (N * 22,) flattened row-major: a continuous 2200 Hz stream
+    pdc: np.ndarray  # (N,)
+    tac: np.ndarray  # (N,)
+    tdc: np.ndarray  # (N,)
+
+
+@dataclass
+class TrialData:
+    """One trial as read from the file. Optional channels are ``None`` when the file lacks them."""
+
+    name: TrialName
+    fingers: tuple[FingerData, FingerData]
+    detail_state: np.ndarray  # (N,) bytes (S30), one state string per row
+    controller_state: np.ndarray | None = None  # (N,) int64 coarse code
+    adjectives: tuple[str, ...] = ()  # positive adjectives stored in the trial
+    gripper: dict[str, np.ndarray] = field(default_factory=dict)  # joint_position/velocity/effort
+    accelerometer: np.ndarray | None = None  # (N, 3)
+    translation: np.ndarray | None = None  # (N, 3) tool frame position (m)
+    rotation: np.ndarray | None = None  # (N, 4)
+
+    @property
+    def n_rows(self) -> int:
+        return int(self.detail_state.shape[0])
+
+    def segment(self, state: bytes) -> slice:
+        """Rows whose detail state equals ``state`` (one contiguous block), as a slice.
+
+        Raises ``ValueError`` naming the trial when the state is absent.
+        """
+        idx = np.flatnonzero(self.detail_state == state)
+        if idx.size == 0:
+            raise ValueError(f"trial {self.name.name}: no rows with state {state.decode()}")
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+
+    def ep_segments(self) -> dict[str, slice]:
+        """The four EP row ranges, keyed by short EP name (squeeze, hold, slow_slide, fast_slide)."""
+        return {ep: self.segment(state) for ep, state in EPS.items()}
+
+
+@dataclass(frozen=True)
+class Split:
+    """One adjective's train/test split, at trial level (E1).
+
+    Objects never appear on both sides, except a single positive object split by trial.
+    """
+
+    adjective: str
+    train: tuple[str, ...]  # trial group names
+    test: tuple[str, ...]
+    labels: dict[str, int]  # trial name -> 0/1 for this adjective (train and test)
+
+    def objects(self, part: str) -> set[int]:
+        names = self.train if part == "train" else self.test
+        return {TrialName.parse(n).object_id for n in names}  # type: ignore[union-attr]
