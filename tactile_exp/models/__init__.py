@@ -6,3 +6,6 @@ from tactile_exp.registry import Registry
 MODELS: Registry[Model] = Registry("model", Model)
 
 __all__ = ["MODELS", "Instances", "Model"]
+
+# Import the implementations so they register themselves (explicit: import errors stay visible).
+from tactile_exp.models import haptic_cnn, haptic_lstm, linear, random_guess  # noqa: E402, F401

@@ -1,0 +1,80 @@
+"""Combining instances of one object before classification (T4, Table I suffixes).
+
+An instance is what a model classifies on its own: one finger x one sub-sampled offset of a trial
+for the haptic signals (10 per trial), one trial for hand-designed features. ``combine=k`` groups
+the instances of ``k`` trials of one object (on one side of a split) into one unit; ``concat``
+joins their features as the paper does, ``mean`` averages them. ``separate`` keeps every instance
+as its own unit (rows G, H).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from tactile_exp.models.base import Instances
+from tactile_exp.registry import Registry
+
+
+class Combiner(ABC):
+    """Turns per-instance features into per-unit features."""
+
+    @abstractmethod
+    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances: ...
+
+
+COMBINERS: Registry[Combiner] = Registry("combine_instances", Combiner)
+
+
+def unit_members(instances: Instances, combine: int) -> list[np.ndarray]:
+    """Row indices of each unit: ``combine`` consecutive trials (by name) of one object.
+
+    Instances keep their order within a trial. A last group with fewer trials is filled by
+    repeating its own trials in order, so concatenated units always have the same width.
+    """
+    if combine < 1:
+        raise ValueError(f"combine must be >= 1, got {combine}")
+    units: list[np.ndarray] = []
+    for obj in np.unique(instances.object_id):
+        trials = np.unique(instances.trial[instances.object_id == obj])
+        for start in range(0, len(trials), combine):
+            available = trials[start : start + combine]
+            chunk = [available[i % len(available)] for i in range(combine)]
+            units.append(np.concatenate([np.flatnonzero(instances.trial == t) for t in chunk]))
+    return units
+
+
+def _units(instances: Instances, members: list[np.ndarray], X: np.ndarray) -> Instances:
+    first = np.array([m[0] for m in members])
+    labels = [np.unique(instances.y[m]) for m in members]
+    if any(len(lab) != 1 for lab in labels):
+        raise ValueError("instances of one unit disagree on the label")
+    return Instances(X, instances.y[first], instances.trial[first], instances.object_id[first])
+
+
+@COMBINERS.register("concat")
+class Concat(Combiner):
+    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances:
+        members = unit_members(instances, combine)
+        widths = {len(m) for m in members}
+        if len(widths) != 1:
+            raise ValueError(f"units have different numbers of instances {sorted(widths)}")
+        X = np.stack([features[m].reshape(-1) for m in members])
+        return _units(instances, members, X)
+
+
+@COMBINERS.register("mean")
+class Mean(Combiner):
+    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances:
+        members = unit_members(instances, combine)
+        X = np.stack([features[m].mean(axis=0) for m in members])
+        return _units(instances, members, X)
+
+
+@COMBINERS.register("separate")
+class Separate(Combiner):
+    """Every instance is its own unit; the engine then scores the model directly."""
+
+    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances:
+        return Instances(features, instances.y, instances.trial, instances.object_id)

@@ -1,0 +1,174 @@
+"""The edge between Hydra and the core: a resolved config becomes plain, validated settings once.
+
+Everything a job needs is checked here, before any data is read or any model trained, and each
+error names the config key and the allowed values.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from tactile_exp.data.layout import ADJECTIVES
+
+DEVICES = ("auto", "cpu", "cuda")
+# Keys that change where results go, not what they are: left out of the config hash.
+UNHASHED = ("tracking", "hydra")
+
+
+class ConfigError(ValueError):
+    """An impossible config value, reported before any work starts."""
+
+
+@dataclass(frozen=True)
+class Component:
+    """A config-group choice: registry name plus constructor keyword arguments."""
+
+    name: str
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Tracking:
+    uri: str | None
+    experiment: str
+    skip_finished: bool
+
+
+@dataclass(frozen=True)
+class Settings:
+    data: Component
+    modality: Component
+    model: Component
+    combiner: str
+    combine: int
+    split: str
+    adjectives: tuple[str, ...]
+    seed: int
+    device: str
+    cache_dir: Path
+    tracking: Tracking
+    choices: dict[str, str]  # config-group choices, e.g. {"model": "haptic_cnn", ...}
+    resolved: dict[str, Any]  # the whole resolved config, logged as params
+    config_hash: str
+    run_name: str
+    sweep_id: str = ""
+    output_dir: Path | None = None  # Hydra's job folder (holds .hydra/)
+
+
+def config_hash(resolved: dict[str, Any]) -> str:
+    kept = {k: v for k, v in resolved.items() if k not in UNHASHED}
+    return hashlib.sha256(json.dumps(kept, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _component(node: Any, group: str) -> Component:
+    if not isinstance(node, dict) or "name" not in node:
+        raise ConfigError(f"{group}: expected a mapping with a 'name' key, got {node!r}")
+    return Component(str(node["name"]), {k: v for k, v in node.items() if k != "name"})
+
+
+def settings_from_config(
+    cfg: DictConfig,
+    choices: dict[str, str] | None = None,
+    sweep_id: str = "",
+    output_dir: Path | None = None,
+) -> Settings:
+    """Resolve ``cfg`` and validate every value a job depends on."""
+    resolved: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
+    resolved.pop("hydra", None)
+    choices = dict(choices or {})
+    for group in ("data", "modality", "model", "combine_instances", "split"):
+        choices.setdefault(group, str(resolved[group]["name"]))
+
+    adjectives = resolved.get("adjectives")
+    if not adjectives:
+        raise ConfigError(f"adjectives: must list at least one of {', '.join(ADJECTIVES)}")
+    adjectives = [str(a) for a in adjectives]
+    unknown = [a for a in adjectives if a not in ADJECTIVES]
+    if unknown:
+        raise ConfigError(f"adjectives: unknown {unknown}; allowed: {', '.join(ADJECTIVES)}")
+    if len(set(adjectives)) != len(adjectives):
+        raise ConfigError(f"adjectives: listed twice in {adjectives}")
+
+    combine = resolved.get("combine")
+    if not isinstance(combine, int) or isinstance(combine, bool) or combine < 1:
+        raise ConfigError(f"combine: must be a whole number of trials >= 1, got {combine!r}")
+    combiner = str(resolved["combine_instances"]["name"])
+    if combiner == "separate" and combine != 1:
+        raise ConfigError(
+            "combine: combine_instances=separate scores every instance on its own; "
+            f"it takes combine=1, got {combine}"
+        )
+    device = resolved.get("device")
+    if device not in DEVICES:
+        raise ConfigError(f"device: must be one of {DEVICES}, got {device!r}")
+    seed = resolved.get("seed")
+    if not isinstance(seed, int):
+        raise ConfigError(f"seed: must be an integer, got {seed!r}")
+
+    tracking = resolved["tracking"]
+    experiment = choices.get("experiment")
+    model = choices["model"]
+    run_name = (
+        f"{experiment}-s{seed}"
+        if experiment and experiment != "None"
+        else f"{model}-{combiner}-c{combine}-s{seed}"
+    )
+    settings = Settings(
+        data=_component(resolved["data"], "data"),
+        modality=_component(resolved["modality"], "modality"),
+        model=_component(resolved["model"], "model"),
+        combiner=combiner,
+        combine=combine,
+        split=str(resolved["split"]["name"]),
+        adjectives=tuple(adjectives),
+        seed=seed,
+        device=device,
+        cache_dir=Path(str(resolved["cache_dir"])).expanduser(),
+        tracking=Tracking(
+            uri=tracking.get("uri"),
+            experiment=str(tracking["experiment"]),
+            skip_finished=bool(tracking.get("skip_finished", True)),
+        ),
+        choices=choices,
+        resolved=resolved,
+        config_hash=config_hash(resolved),
+        run_name=run_name,
+        sweep_id=sweep_id,
+        output_dir=output_dir,
+    )
+    check_components(settings)
+    return settings
+
+
+def check_components(settings: Settings) -> None:
+    """Every named component exists and accepts its parameters (models are built once, untrained)."""
+    from tactile_exp.combine import COMBINERS
+    from tactile_exp.data.sources import DATA_SOURCES
+    from tactile_exp.data.splits import SPLITS
+    from tactile_exp.modalities import MODALITIES
+    from tactile_exp.models import MODELS
+
+    for key, registry, name in (
+        ("data", DATA_SOURCES, settings.data.name),
+        ("modality", MODALITIES, settings.modality.name),
+        ("model", MODELS, settings.model.name),
+        ("combine_instances", COMBINERS, settings.combiner),
+        ("split", SPLITS, settings.split),
+    ):
+        if name not in registry:
+            raise ConfigError(f"{key}: unknown option {name!r}; known: {', '.join(registry)}")
+    try:
+        MODELS.build(settings.model.name, **settings.model.params)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"model.params ({settings.model.name}): {err}") from err
+    if settings.device == "cuda":
+        import torch
+
+        if not torch.cuda.is_available():
+            raise ConfigError("device: cuda requested but no CUDA device is available")

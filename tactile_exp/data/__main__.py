@@ -1,0 +1,96 @@
+"""``python -m tactile_exp.data generate|inspect|validate``: make, show and check PHAC-2 files."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tactile_exp.data.phac2 import PHAC2, DataError, default_cache_dir
+from tactile_exp.data.validate import summary, validate
+
+
+def _image_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        msg = f"--image-size {text!r}: expected WxH, e.g. 480x320"
+        raise argparse.ArgumentTypeError(msg) from None
+    return w, h
+
+
+def _generate(args: argparse.Namespace) -> Path:
+    from tactile_exp.data.synthetic import SyntheticSpec, default_file, generate
+
+    spec = SyntheticSpec(
+        seed=args.seed,
+        trials=args.trials,
+        duration_scale=args.duration_scale,
+        views=args.views,
+        image_width=args.image_size[0],
+        image_height=args.image_size[1],
+    )
+    return generate(args.out, spec) if args.out else default_file(default_cache_dir(), spec)
+
+
+def _default_file() -> Path:
+    from tactile_exp.data.synthetic import default_file
+
+    return default_file(default_cache_dir())
+
+
+def _inspect(path: Path, photo_dir: Path | None) -> None:
+    s = summary(PHAC2(path, photo_dir))
+    print(f"{s['path']}: {s['objects']} objects, {s['trials']} trials ({s['bad_trials']} bad)")
+    for ep, st in s["ep_rows"].items():
+        rows = f"{st['min']}..{st['max']} (median {st['median']:g})" if st else "none readable"
+        print(f"  EP {ep:<10} rows {rows}")
+    print("  adjective     +obj  train  test")
+    for adj, n_pos in s["positive_objects"].items():
+        sp = s["splits"][adj]
+        sizes = f"{sp['train']:>5}  {sp['test']:>4}" if "error" not in sp else sp["error"]
+        print(f"  {adj:<12} {n_pos:>4}  {sizes}")
+    missing = s["objects_without_photographs"]
+    print(f"  photographs: {s['photographs']}; objects without: {missing or 'none'}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m tactile_exp.data", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    gen = sub.add_parser("generate", help="write a synthetic PHAC-2 file and its photographs")
+    gen.add_argument("--out", type=Path, help="output .h5 (default: the cached default file)")
+    gen.add_argument("--seed", type=int, default=0)
+    gen.add_argument("--trials", type=int, default=10, help="trials per object")
+    gen.add_argument("--duration-scale", type=float, default=1.0)
+    gen.add_argument("--views", type=int, default=8, help="photographs per object")
+    gen.add_argument("--image-size", type=_image_size, default=(480, 320), metavar="WxH")
+    for name, text in (("inspect", "print a summary"), ("validate", "list every problem")):
+        cmd = sub.add_parser(name, help=text)
+        cmd.add_argument("path", nargs="?", type=Path, help="PHAC-2 .h5 (default: synthetic)")
+        cmd.add_argument("--photo-dir", type=Path, help="default: <file folder>/photographs")
+    sub.choices["validate"].add_argument(
+        "--no-photographs", action="store_true", help="skip the photograph checks"
+    )
+    args = parser.parse_args(argv)
+
+    if args.command == "generate":
+        print(_generate(args))
+        return 0
+    path = args.path or _default_file()
+    if args.command == "inspect":
+        try:
+            _inspect(path, args.photo_dir)
+        except DataError as e:
+            print(e, file=sys.stderr)
+            return 1
+        return 0
+    problems = validate(path, args.photo_dir, photographs=not args.no_photographs)
+    for p in problems:
+        print(p)
+    if not problems:
+        print("OK")
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,171 @@
+"""Per-adjective train/test splits (METHOD E1, E3; PHAC2_FORMAT §2).
+
+Each rule is a function ``(dataset, adjective, seed) -> Split`` in `SPLITS`. Every split leaves
+`check_split`, so no rule can hand out a split with object leakage or a one-class side.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import h5py
+import numpy as np
+
+from tactile_exp.data.layout import (
+    ADJECTIVES,
+    NEGATIVE_SPLIT_GROUP,
+    POSITIVE_SPLIT_GROUP,
+    Split,
+    TrialName,
+    published_test_split,
+)
+from tactile_exp.data.phac2 import DataError
+from tactile_exp.registry import Registry
+
+if TYPE_CHECKING:
+    from tactile_exp.data.phac2 import PHAC2
+
+TRAIN_RATIO = 0.9  # the authors' 90/10 (the "90_10" in the file name)
+
+SplitRule = Callable[["PHAC2", str, int], Split]
+SPLITS: Registry[Split] = Registry("split")
+
+
+def check_split(split: Split, where: str = "") -> Split:
+    """Reject leakage and one-class sides; `where` (file, rule) prefixes the error message.
+
+    An object may sit on both sides only when it is the single object of its class (the
+    authors split such an object by trial).
+    """
+    head = f"{where}: " if where else ""
+    adj = split.adjective
+    both = sorted(set(split.train) & set(split.test))
+    if both:
+        raise DataError(f"{head}split of {adj!r}: trial(s) {both[:5]} in both train and test")
+    for part, names in (("train", split.train), ("test", split.test)):
+        have = {split.labels[n] for n in names}
+        for label, word in ((1, "positive"), (0, "negative")):
+            if label not in have:
+                raise DataError(
+                    f"{head}split of {adj!r}: {part} has no {word} trial "
+                    f"(expected at least one positive and one negative on each side)"
+                )
+    objects_of = {1: set(), 0: set()}
+    for n, label in split.labels.items():
+        objects_of[label].add(_object(n))
+    for obj in sorted(split.objects("train") & split.objects("test")):
+        label = next(split.labels[n] for n in split.labels if _object(n) == obj)
+        if len(objects_of[label]) > 1:
+            raise DataError(
+                f"{head}split of {adj!r}: object {obj} in both train and test (expected no "
+                "shared object unless it is the only object of its class)"
+            )
+    return split
+
+
+def _object(name: str) -> int:
+    return TrialName.parse(name).object_id  # type: ignore[union-attr]
+
+
+def _trials_by_object(dataset: PHAC2, adjective: str) -> dict[int, dict[int, list[str]]]:
+    """label -> object id -> its trial names (sorted)."""
+    labels = dataset.labels()
+    out: dict[int, dict[int, list[str]]] = {1: {}, 0: {}}
+    for t in dataset.trials:
+        out[labels[t.object_id][adjective]].setdefault(t.object_id, []).append(t.name)
+    return out
+
+
+def _make(dataset: PHAC2, adjective: str, train: list[str], test: list[str], rule: str) -> Split:
+    labels = dataset.labels()
+    split = Split(
+        adjective=adjective,
+        train=tuple(sorted(train)),
+        test=tuple(sorted(test)),
+        labels={n: labels[_object(n)][adjective] for n in [*train, *test]},
+    )
+    return check_split(split, f"{dataset.path} ({rule} split)")
+
+
+@SPLITS.register("published")
+def published(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
+    """The published split: from the file's split groups, else from the package's table."""
+    if {POSITIVE_SPLIT_GROUP, NEGATIVE_SPLIT_GROUP} <= dataset.groups:
+        with h5py.File(dataset.path, "r") as f:
+            found = _read_split_groups(dataset, f, adjective)
+        if found is not None:
+            return found
+    try:
+        return _from_table(dataset, adjective)
+    except DataError as e:
+        warnings.warn(f"{e}; falling back to the random split with seed {seed}", stacklevel=2)
+        return random_split(dataset, adjective, seed)
+
+
+def _read_split_groups(dataset: PHAC2, f: h5py.File, adjective: str) -> Split | None:
+    parts: dict[str, list[str]] = {"train": [], "test": []}
+    trials = {t.name: t for t in dataset.trials}
+    for group, label in ((POSITIVE_SPLIT_GROUP, 1), (NEGATIVE_SPLIT_GROUP, 0)):
+        for part in parts:
+            key = f"/{group}/{adjective}/{part}"
+            node = f.get(key)
+            if not isinstance(node, h5py.Group):
+                warnings.warn(f"{dataset.path}: {key} missing; using the table", stacklevel=3)
+                return None
+            for name in node:
+                if name not in trials:
+                    raise DataError(
+                        f"{dataset.path}: {key}/{name} is not one of the file's trial groups"
+                    )
+                have = dataset.labels()[trials[name].object_id][adjective]
+                if have != label:
+                    raise DataError(
+                        f"{dataset.path}: {key} links {name}, whose {adjective} label is {have} "
+                        f"(expected {label})"
+                    )
+                parts[part].append(name)
+    return _make(dataset, adjective, parts["train"], parts["test"], "published")
+
+
+def _from_table(dataset: PHAC2, adjective: str) -> Split:
+    by_object = _trials_by_object(dataset, adjective)
+    rows = [r for r in published_test_split() if r.adjective == adjective]
+    test: list[str] = []
+    for r in rows:
+        trials = by_object[r.label].get(r.object_id)
+        if trials is None:
+            raise DataError(
+                f"{dataset.path}: published test object {r.object_id} ({adjective}={r.label}) "
+                "is not in the file"
+            )
+        test += [n for n in trials if r.trials is None or _trial_no(n) in r.trials]
+    chosen = set(test)
+    every = [n for objs in by_object.values() for names in objs.values() for n in names]
+    train = [n for n in every if n not in chosen]
+    return _make(dataset, adjective, train, test, "published")
+
+
+def _trial_no(name: str) -> int:
+    return TrialName.parse(name).trial  # type: ignore[union-attr]
+
+
+@SPLITS.register("random")
+def random_split(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
+    """The authors' rule with a seeded object order (§2): 90/10 by object, per class."""
+    rng = np.random.default_rng([seed, ADJECTIVES.index(adjective)])
+    train: list[str] = []
+    test: list[str] = []
+    for _, objs in sorted(_trials_by_object(dataset, adjective).items(), reverse=True):
+        ids = [int(i) for i in rng.permutation(sorted(objs))]
+        if len(ids) == 1:
+            trials = [str(n) for n in rng.permutation(objs[ids[0]])]
+            cut = len(trials) - len(trials) // 2
+            train += trials[:cut]
+            test += trials[cut:]
+            continue
+        n_train = min(max(int(TRAIN_RATIO * len(ids)), 1), max(len(ids) - 1, 1))
+        train += [n for i in ids[:n_train] for n in objs[i]]
+        test += [n for i in ids[n_train:] for n in objs[i]]
+    return _make(dataset, adjective, train, test, f"random seed={seed}")

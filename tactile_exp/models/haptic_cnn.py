@@ -1,0 +1,177 @@
+"""The haptic ConvNet (M1): grouped temporal convolutions, one group per haptic signal.
+
+PyTorch's CPU grouped ``Conv1d`` is the project's hot spot (DEPS.md §7): with 32 groups of a few
+channels it runs at a few GFLOP/s. The default ``impl="fast"`` computes the same convolution as
+one batched matrix product per layer: activations are kept as (groups, batch, time, channels),
+the padded time axis is unfolded into windows, and ``baddbmm`` multiplies the (groups,
+batch x time, channels x kernel) windows by the (groups, channels x kernel, width) filters.
+``impl="reference"`` runs the plain ``F.conv1d(groups=...)`` on the same parameters; the two agree
+to float rounding, which the tests and ``bench/bench_haptic_cnn.py`` check.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from tactile_exp.models import MODELS
+from tactile_exp.models.linear import SGDModel
+from tactile_exp.train import caffe_xavier_
+
+IMPLS = ("fast", "reference")
+
+
+def _conv_out_len(length: int, kernel: int, stride: int) -> int:
+    return (length + 2 * (kernel // 2) - kernel) // stride + 1
+
+
+def grouped_conv_fast(
+    h: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor, stride: int
+) -> torch.Tensor:
+    """Grouped 1-D convolution + ReLU on (G, n, T, c_in) activations -> (G, n, T_out, c_out).
+
+    ``weight`` has the ``Conv1d`` layout (G * c_out, c_in, k); padding is k // 2 on each side.
+    """
+    groups, n, _, c_in = h.shape
+    c_out, k = weight.shape[0] // groups, weight.shape[2]
+    pad = k // 2
+    windows = F.pad(h, (0, 0, pad, pad)).unfold(2, k, stride)  # (G, n, T_out, c_in, k)
+    t_out = windows.shape[2]
+    filters = weight.view(groups, c_out, c_in * k).transpose(1, 2)
+    out = torch.baddbmm(
+        bias.view(groups, 1, c_out), windows.reshape(groups, n * t_out, c_in * k), filters
+    )
+    return out.view(groups, n, t_out, c_out).relu()
+
+
+class GroupedTemporalConvNet(nn.Module):
+    """conv1..conv3 (+ ReLU each), each haptic signal in its own group; output conv3, flattened.
+
+    Input (n, C, T) with C = groups x c_in; channel c belongs to group c mod ``groups``, so with
+    both fingers concatenated along channels (finger-major, C = 64) each group sees the same
+    signal from both fingers. The output is conv3 flattened in (group, width, time) order, i.e.
+    the channel x time map of a ``Conv1d`` stack with channel g * width + j.
+    """
+
+    def __init__(
+        self,
+        n_channels: int,
+        n_steps: int,
+        *,
+        groups: int = 32,
+        kernel_sizes: Sequence[int] = (5, 5, 5),
+        widths: Sequence[int] = (4, 4, 4),
+        strides: Sequence[int] = (2, 2, 2),
+        impl: str = "fast",
+    ) -> None:
+        super().__init__()
+        if impl not in IMPLS:
+            raise ValueError(f"impl must be one of {', '.join(IMPLS)}, got {impl!r}")
+        if n_channels % groups:
+            raise ValueError(f"input has {n_channels} channels, not a multiple of groups={groups}")
+        if not len(kernel_sizes) == len(widths) == len(strides) == 3:
+            raise ValueError(
+                "kernel_sizes, widths and strides need one entry per conv layer (3), got "
+                f"{list(kernel_sizes)}, {list(widths)}, {list(strides)}"
+            )
+        for name, values in (("kernel_sizes", kernel_sizes), ("widths", widths)):
+            if min(values) < 1:
+                raise ValueError(f"{name} must be >= 1, got {list(values)}")
+        if min(strides) < 1:
+            raise ValueError(f"strides must be >= 1, got {list(strides)}")
+        self.groups, self.impl, self.strides = groups, impl, tuple(strides)
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        c_in, length = n_channels // groups, n_steps
+        for k, width, stride in zip(kernel_sizes, widths, strides, strict=True):
+            weight = nn.Parameter(torch.empty(groups * width, c_in, k))
+            caffe_xavier_(weight, c_in * k)
+            self.weights.append(weight)
+            self.biases.append(nn.Parameter(torch.zeros(groups * width)))
+            c_in, length = width, _conv_out_len(length, k, stride)
+        self.out_shape = (groups * widths[-1], length)  # conv3: channels x time
+        self.n_features = int(np.prod(self.out_shape))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        n, channels, steps = x.shape
+        x = x.view(n, channels // self.groups, self.groups, steps)
+        if self.impl == "reference":
+            h = x.transpose(1, 2).reshape(n, channels, steps)
+            for weight, bias, stride in zip(self.weights, self.biases, self.strides, strict=True):
+                h = F.conv1d(h, weight, bias, stride, weight.shape[2] // 2, 1, self.groups).relu()
+            return h.flatten(1)
+        h = x.permute(2, 0, 3, 1)  # (G, n, T, c_in)
+        for weight, bias, stride in zip(self.weights, self.biases, self.strides, strict=True):
+            h = grouped_conv_fast(h, weight, bias, stride)
+        return h.permute(1, 0, 3, 2).reshape(n, -1)
+
+
+@MODELS.register("haptic_cnn")
+class HapticCNN(SGDModel):
+    """Haptic ConvNet (M1) trained by the two-stage schedule (T2, T3) of ``SGDModel``.
+
+    The paper fixes three grouped conv layers with ReLU, groups of 32 and Xavier init, but not
+    kernels or widths. Defaults chosen for speed on a 2-core CPU (bench/bench_haptic_cnn.py):
+    kernels (5, 5, 5), widths (4, 4, 4) per group (128 channels per layer), stride 2 in every
+    layer (150 -> 75 -> 38 -> 19 steps), so conv3 gives 128 x 19 = 2,432 features per instance.
+    Stage 1 trains conv1..conv3 and the classification layer with ``pretrain_loss``; stage 2
+    fine-tunes only the classification layer with ``loss`` on frozen conv3 features.
+    ``transform`` returns conv3 activations flattened in (channel, time) order; reshape to
+    ``conv3_shape_`` for a channel x time map.
+    """
+
+    def __init__(
+        self,
+        *,
+        kernel_sizes: Sequence[int] = (5, 5, 5),
+        widths: Sequence[int] = (4, 4, 4),
+        strides: Sequence[int] = (2, 2, 2),
+        groups: int = 32,
+        impl: str = "fast",
+        epochs: int = 200,
+        finetune_epochs: int = 100,
+        batch_size: int = 1000,
+        lr: float = 0.01,
+        momentum: float = 0.9,
+        loss: str = "hinge",
+        pretrain_loss: str | None = "logistic",
+        seed: int = 0,
+        device: str = "auto",
+    ) -> None:
+        super().__init__(
+            epochs=epochs,
+            finetune_epochs=finetune_epochs,
+            batch_size=batch_size,
+            lr=lr,
+            momentum=momentum,
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            seed=seed,
+            device=device,
+        )
+        self.net_args = dict(
+            groups=groups,
+            kernel_sizes=tuple(kernel_sizes),
+            widths=tuple(widths),
+            strides=tuple(strides),
+            impl=impl,
+        )
+        GroupedTemporalConvNet(groups, 150, **self.net_args)  # validate the architecture now
+        self.conv3_shape_: tuple[int, int] | None = None
+
+    def _check_input(self, X: np.ndarray) -> None:
+        groups = self.net_args["groups"]
+        if X.ndim != 3 or X.shape[1] % groups:
+            raise ValueError(
+                f"haptic_cnn expects X of shape (n, channels, time) with channels a multiple "
+                f"of {groups} (32 signals per finger), got {X.shape}"
+            )
+
+    def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
+        net = GroupedTemporalConvNet(*input_shape, **self.net_args)
+        self.conv3_shape_ = net.out_shape
+        return net, net.n_features

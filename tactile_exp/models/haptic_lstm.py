@@ -1,0 +1,79 @@
+"""The haptic LSTM (M2): 10 recurrent units over time -> FC(10) + ReLU -> FC(1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from tactile_exp.models import MODELS
+from tactile_exp.models.linear import SGDModel
+from tactile_exp.train import caffe_xavier_
+
+
+class LSTMBody(nn.Module):
+    """LSTM over the time axis of (n, C, T) input; the last hidden state -> FC(hidden) + ReLU."""
+
+    def __init__(self, n_channels: int, hidden: int = 10, fc_width: int = 10) -> None:
+        super().__init__()
+        self.lstm = nn.LSTM(n_channels, hidden, batch_first=True)
+        self.fc = nn.Linear(hidden, fc_width)
+        for name, param in self.lstm.named_parameters():
+            if name.startswith("weight"):
+                caffe_xavier_(param, param.shape[1])
+            else:
+                nn.init.zeros_(param)
+        caffe_xavier_(self.fc.weight, hidden)
+        nn.init.zeros_(self.fc.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        _, (last, _) = self.lstm(x.transpose(1, 2))
+        return self.fc(last[-1]).relu()
+
+
+@MODELS.register("haptic_lstm")
+class HapticLSTM(SGDModel):
+    """Haptic LSTM (M2) trained by the two-stage schedule of ``SGDModel``.
+
+    All C input signals (32, or 64 with both fingers) enter the LSTM at every time step. Stage 1
+    trains everything with ``pretrain_loss``; stage 2 fine-tunes only the final FC(1) with
+    ``loss``. ``transform`` returns the FC(10) activations after the ReLU.
+    """
+
+    def __init__(
+        self,
+        *,
+        hidden: int = 10,
+        fc_width: int = 10,
+        epochs: int = 200,
+        finetune_epochs: int = 100,
+        batch_size: int = 1000,
+        lr: float = 0.01,
+        momentum: float = 0.9,
+        loss: str = "hinge",
+        pretrain_loss: str | None = "logistic",
+        seed: int = 0,
+        device: str = "auto",
+    ) -> None:
+        super().__init__(
+            epochs=epochs,
+            finetune_epochs=finetune_epochs,
+            batch_size=batch_size,
+            lr=lr,
+            momentum=momentum,
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            seed=seed,
+            device=device,
+        )
+        for name, value in (("hidden", hidden), ("fc_width", fc_width)):
+            if not (isinstance(value, int) and value >= 1):
+                raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+        self.hidden, self.fc_width = hidden, fc_width
+
+    def _check_input(self, X: np.ndarray) -> None:
+        if X.ndim != 3:
+            raise ValueError(f"haptic_lstm expects X of shape (n, channels, time), got {X.shape}")
+
+    def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
+        return LSTMBody(input_shape[0], self.hidden, self.fc_width), self.fc_width

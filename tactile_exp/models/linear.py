@@ -1,0 +1,217 @@
+"""The two-stage SGD schedule (T2, T3) and the linear "loss layer" it ends in.
+
+``SGDModel`` is a body (input -> features) followed by one linear classification layer, trained
+in two stages:
+
+1. the whole network with ``pretrain_loss`` (``loss`` when ``pretrain_loss`` is None) for
+   ``epochs`` epochs;
+2. when ``pretrain_loss`` is set, the classification layer alone is fine-tuned with ``loss`` for
+   ``finetune_epochs`` epochs on the frozen body's features. The paper ("after learning the
+   weights for the convolutional layers, fine-tuning with hinge-loss") leaves open whether the
+   body moves in stage 2; we keep it frozen, as the combined-instance heads (T4) do, which also
+   lets stage 2 run on features computed once.
+
+``LinearModel`` (registered as ``linear``) is the model with an identity body on standardised
+inputs: what ``head()`` returns for combined instances.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from torch import nn
+
+from tactile_exp.models import MODELS
+from tactile_exp.models.base import EpochCallback, History, Instances, Model
+from tactile_exp.models.losses import LOSSES
+from tactile_exp.train import caffe_xavier_, resolve_device, seed_everything, sgd_epochs
+from tactile_exp.train import validate_sgd_args
+
+INFERENCE_BATCH = 4096
+
+
+class SGDModel(Model):
+    """A body plus a linear classification layer, trained by the two-stage SGD schedule."""
+
+    def __init__(
+        self,
+        *,
+        epochs: int = 200,
+        finetune_epochs: int = 100,
+        batch_size: int = 1000,
+        lr: float = 0.01,
+        momentum: float = 0.9,
+        loss: str = "hinge",
+        pretrain_loss: str | None = "logistic",
+        seed: int = 0,
+        device: str = "auto",
+    ) -> None:
+        validate_sgd_args(
+            epochs=epochs,
+            finetune_epochs=finetune_epochs,
+            batch_size=batch_size,
+            lr=lr,
+            momentum=momentum,
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            known_losses=LOSSES.names(),
+        )
+        self.device = resolve_device(device)
+        self.epochs = epochs
+        self.finetune_epochs = finetune_epochs
+        self.batch_size = batch_size
+        self.lr = lr
+        self.momentum = momentum
+        self.loss = loss
+        self.pretrain_loss = pretrain_loss
+        self.seed = seed
+        self.body_: nn.Module | None = None
+        self.classifier_: nn.Linear | None = None
+        self.input_shape_: tuple[int, ...] | None = None
+
+    @abstractmethod
+    def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
+        """A fresh body for rows of ``input_shape`` and the width of its features."""
+
+    def _check_input(self, X: np.ndarray) -> None:
+        """Raise ValueError when training rows do not suit this model."""
+
+    def _fit_preprocessing(self, X: np.ndarray) -> None:
+        """Learn input statistics from the training rows (nothing by default)."""
+
+    def _preprocess(self, X: np.ndarray) -> np.ndarray:
+        return X
+
+    def _tensor(self, X: np.ndarray) -> torch.Tensor:
+        if self.body_ is None or self.classifier_ is None:
+            raise RuntimeError(f"{type(self).__name__} is not fitted; call fit first")
+        X = np.asarray(X)
+        if X.shape[1:] != self.input_shape_:
+            raise ValueError(
+                f"{type(self).__name__}: X rows have shape {X.shape[1:]}, "
+                f"the model was fitted on rows of shape {self.input_shape_}"
+            )
+        X = self._preprocess(X)
+        return torch.as_tensor(np.ascontiguousarray(X, dtype=np.float32), device=self.device)
+
+    def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
+        X = np.asarray(train.X)
+        if len(X) == 0:
+            raise ValueError(f"{type(self).__name__}.fit: no training instances")
+        self._check_input(X)
+        generator = seed_everything(self.seed)
+        self._fit_preprocessing(X)
+        body, width = self._build_body(X.shape[1:])
+        classifier = nn.Linear(width, 1)
+        caffe_xavier_(classifier.weight, width)
+        nn.init.zeros_(classifier.bias)
+        self.body_ = body.to(self.device)
+        self.classifier_ = classifier.to(self.device)
+        self.input_shape_ = X.shape[1:]
+        Xt = self._tensor(X)
+        yt = torch.as_tensor(np.asarray(train.y), dtype=torch.float32, device=self.device)
+
+        finetune = self.pretrain_loss is not None and self.finetune_epochs > 0
+        n_epochs = self.epochs + (self.finetune_epochs if finetune else 0)
+        done = 0
+
+        def reporter(metric: str) -> Callable[[float], None]:
+            def report(value: float) -> None:
+                nonlocal done
+                done += 1
+                if on_epoch is not None:
+                    on_epoch(done, n_epochs, {metric: value})
+
+            return report
+
+        body_, classifier_ = self.body_, self.classifier_
+        common = dict(
+            batch_size=self.batch_size, lr=self.lr, momentum=self.momentum, generator=generator
+        )
+        body_.train()
+        history: History = {
+            "train_loss": sgd_epochs(
+                lambda x: classifier_(body_(x)).squeeze(1),
+                [*body_.parameters(), *classifier_.parameters()],
+                Xt,
+                yt,
+                loss=LOSSES[self.pretrain_loss or self.loss],
+                epochs=self.epochs,
+                report=reporter("train_loss"),
+                **common,
+            )
+        }
+        if finetune:
+            history["finetune_loss"] = sgd_epochs(
+                lambda f: classifier_(f).squeeze(1),
+                list(classifier_.parameters()),
+                self._features(Xt),
+                yt,
+                loss=LOSSES[self.loss],
+                epochs=self.finetune_epochs,
+                report=reporter("finetune_loss"),
+                **common,
+            )
+        return history
+
+    @torch.no_grad()
+    def _features(self, X: torch.Tensor) -> torch.Tensor:
+        self.body_.eval()
+        parts = [self.body_(X[i : i + INFERENCE_BATCH]) for i in range(0, len(X), INFERENCE_BATCH)]
+        if not parts:
+            return X.new_zeros((0, self.classifier_.in_features))
+        return torch.cat(parts)
+
+    def transform(self, X: np.ndarray) -> np.ndarray:
+        """The body's features for each row of ``X``: (n, D) float32."""
+        return self._features(self._tensor(X)).cpu().numpy()
+
+    @torch.no_grad()
+    def decision_function(self, X: np.ndarray) -> np.ndarray:
+        scores = self.classifier_(self._features(self._tensor(X))).squeeze(1)
+        return scores.double().cpu().numpy()
+
+    def head(self) -> Model:
+        """A linear classifier with this model's training settings, for combined features."""
+        return LinearModel(
+            epochs=self.epochs,
+            finetune_epochs=self.finetune_epochs,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            momentum=self.momentum,
+            loss=self.loss,
+            pretrain_loss=self.pretrain_loss,
+            seed=self.seed,
+            device=str(self.device),
+        )
+
+
+@MODELS.register("linear")
+class LinearModel(SGDModel):
+    """A linear classifier on flattened, standardised features (the paper's loss layer).
+
+    Inputs are standardised with the training rows' mean and std (constant columns keep std 1),
+    so one learning rate suits concatenated activations of any size and scale. With the default
+    schedule the same layer is trained with logistic loss, then fine-tuned with hinge loss.
+    """
+
+    learns_representation = False
+
+    def _fit_preprocessing(self, X: np.ndarray) -> None:
+        flat = X.reshape(len(X), -1).astype(np.float64)
+        std = flat.std(axis=0)
+        self.mean_ = flat.mean(axis=0).astype(np.float32)
+        self.scale_ = np.where(std > 0, std, 1.0).astype(np.float32)
+
+    def _preprocess(self, X: np.ndarray) -> np.ndarray:
+        return (X.reshape(len(X), -1) - self.mean_) / self.scale_
+
+    def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
+        return nn.Identity(), int(np.prod(input_shape))
+
+    def transform(self, X: np.ndarray) -> np.ndarray:
+        """Flattened rows (the identity: a linear model learns no representation)."""
+        return np.asarray(X).reshape(len(X), -1)

@@ -1,0 +1,114 @@
+"""The SGD loop shared by every trained model (T3), device resolution and seeding.
+
+Kept free of the model registry (losses arrive as callables) so models can import it without an
+import cycle; the two-stage schedule that uses it lives in ``models/linear.py`` (``SGDModel``).
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Callable, Collection
+
+import numpy as np
+import torch
+from torch import nn
+
+Loss = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (scores, y01) -> mean loss
+
+
+def resolve_device(device: str) -> torch.device:
+    """``"auto"`` -> CUDA when available, else CPU; otherwise the named device, checked."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        resolved = torch.device(device)
+    except RuntimeError as err:
+        raise ValueError(f"device={device!r} is not 'auto', 'cpu' or 'cuda[:N]'") from err
+    if resolved.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device={device!r} but CUDA is not available; use 'auto' or 'cpu'")
+    return resolved
+
+
+def seed_everything(seed: int) -> torch.Generator:
+    """Seed Python, numpy and torch; return a CPU generator for batch shuffling."""
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+    return torch.Generator().manual_seed(seed)
+
+
+def validate_sgd_args(
+    *,
+    epochs: int,
+    finetune_epochs: int,
+    batch_size: int,
+    lr: float,
+    momentum: float,
+    loss: str,
+    pretrain_loss: str | None,
+    known_losses: Collection[str],
+) -> None:
+    """Raise ValueError naming the first bad argument and what is allowed."""
+    losses = ", ".join(sorted(known_losses))
+    checks = [
+        (isinstance(epochs, int) and epochs >= 1, f"epochs must be an int >= 1, got {epochs!r}"),
+        (
+            isinstance(finetune_epochs, int) and finetune_epochs >= 0,
+            f"finetune_epochs must be an int >= 0, got {finetune_epochs!r}",
+        ),
+        (
+            isinstance(batch_size, int) and batch_size >= 1,
+            f"batch_size must be an int >= 1, got {batch_size!r}",
+        ),
+        (lr > 0, f"lr must be > 0, got {lr!r}"),
+        (0 <= momentum < 1, f"momentum must be in [0, 1), got {momentum!r}"),
+        (loss in known_losses, f"loss must be one of {losses}, got {loss!r}"),
+        (
+            pretrain_loss is None or pretrain_loss in known_losses,
+            f"pretrain_loss must be one of {losses} or None, got {pretrain_loss!r}",
+        ),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(message)
+
+
+def sgd_epochs(
+    forward: Callable[[torch.Tensor], torch.Tensor],
+    params: list[nn.Parameter],
+    X: torch.Tensor,
+    y: torch.Tensor,
+    *,
+    loss: Loss,
+    epochs: int,
+    batch_size: int,
+    lr: float,
+    momentum: float,
+    generator: torch.Generator,
+    report: Callable[[float], None] | None = None,
+) -> list[float]:
+    """Minibatch SGD with momentum over shuffled ``X``; returns the mean loss of each epoch."""
+    optimiser = torch.optim.SGD(params, lr=lr, momentum=momentum)
+    n = len(X)
+    curve = []
+    for _ in range(epochs):
+        order = torch.randperm(n, generator=generator).to(X.device)
+        total = torch.zeros((), device=X.device)
+        for start in range(0, n, batch_size):
+            index = order[start : start + batch_size]
+            value = loss(forward(X[index]), y[index])
+            optimiser.zero_grad(set_to_none=True)
+            value.backward()
+            optimiser.step()
+            total += value.detach() * len(index)
+        curve.append(float(total) / n)
+        if report is not None:
+            report(curve[-1])
+    return curve
+
+
+def caffe_xavier_(weight: torch.Tensor, fan_in: int) -> torch.Tensor:
+    """Caffe's default "xavier" filler (the paper's init): U(+-sqrt(3 / fan_in))."""
+    bound = (3.0 / fan_in) ** 0.5
+    with torch.no_grad():
+        return weight.uniform_(-bound, bound)
