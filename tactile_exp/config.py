@@ -147,7 +147,7 @@ def settings_from_config(
 
 
 def check_components(settings: Settings) -> None:
-    """Every named component exists and accepts its parameters (models are built once, untrained)."""
+    """Every named component exists and accepts its parameters (models built once, untrained)."""
     from tactile_exp.combine import COMBINERS
     from tactile_exp.data.sources import DATA_SOURCES
     from tactile_exp.data.splits import SPLITS

@@ -87,7 +87,7 @@ def _epoch_logger(adjective: str) -> EpochCallback:
 
 
 def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
-    """Open the data, check every split and read/cache the shared arrays: all bad input surfaces here."""
+    """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
     n_trials = max(np.bincount([t.object_id for t in dataset.trials]))
     if settings.combine > n_trials:
@@ -112,7 +112,9 @@ def run(settings: Settings) -> JobResult:
     if settings.tracking.skip_finished:
         done = tracker.finished_run(settings.config_hash)
         if done is not None:
-            log.info("skipping %s: run %s already FINISHED with this config", settings.run_name, done)
+            log.info(
+                "skipping %s: run %s already FINISHED with this config", settings.run_name, done
+            )
             return JobResult(done, float("nan"), {}, skipped=True)
 
     params = flatten(settings.resolved)
@@ -142,7 +144,9 @@ def run(settings: Settings) -> JobResult:
             )
         aucs = {a: r.auc for a, r in results.items()}
         mean = evaluate.mean_auc(aucs)
-        tracker.log_metrics(parent_id, {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}})
+        tracker.log_metrics(
+            parent_id, {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}}
+        )
         _log_summary(tracker, parent_id, settings, dataset, results)
         log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)
     return JobResult(parent_id, mean, results)

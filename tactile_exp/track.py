@@ -34,7 +34,7 @@ def project_root() -> Path:
 
 
 def resolve_uri(uri: str | None) -> str:
-    """Config value, else $MLFLOW_TRACKING_URI, else sqlite:///<project>/mlflow.db (never ./mlruns)."""
+    """Config value, else $MLFLOW_TRACKING_URI, else sqlite:///<project>/mlflow.db (not ./mlruns)."""
     if uri:
         return uri
     if os.environ.get("MLFLOW_TRACKING_URI"):
@@ -78,7 +78,9 @@ class Tracker:
             if found is not None:
                 return found.experiment_id
             try:
-                return self.client.create_experiment(name, artifact_location=_artifact_root(self.uri))
+                return self.client.create_experiment(
+                    name, artifact_location=_artifact_root(self.uri)
+                )
             except Exception:
                 if attempt == 4:
                     raise

@@ -73,7 +73,7 @@ def write_file(
     split_groups: dict[str, tuple[list[str], list[str]]] | None = None,
     photos: dict[int, list[str]] | None = None,
 ) -> Path:
-    """Write a PHAC-2 file; `signals=False` writes only each trial's `adjectives` (fast, for splits).
+    """Write a PHAC-2 file; `signals=False` writes only each trial's `adjectives` (for splits).
 
     `split_groups`: adjective -> (train names, test names), written as hard links into the
     positive/negative split groups by each trial's label. `photos`: object id -> file names.

@@ -172,7 +172,7 @@ def pool_moments(
 
 
 def pc_polyfit(poly: np.ndarray, mean: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """(k, deg+1) polyfit of each PC series (x - mean) @ axes, from the raw columns' fit ``poly``."""
+    """(k, deg+1) polyfit of each PC series (x - mean) @ axes, from the raw columns' fits."""
     coef = poly @ axes  # a fit is linear in the signal
     coef[0] -= mean @ axes  # the constant term absorbs the centring
     return coef.T
@@ -213,36 +213,68 @@ class TrialStatic:
     electrodes: list[ElectrodeStats]  # one per EP
 
 
-def _guarded(values: dict[str, float], names: Sequence[str], fn, where: str) -> None:
-    """Store fn()'s numbers under ``names``; on TooShort or non-finite output warn and fill."""
+def _report(note: str, fills: list[str] | None) -> None:
+    if fills is None:
+        warnings.warn(note, FeatureWarning, 4)
+    else:
+        fills.append(note)
+
+
+def _guarded(
+    values: dict[str, float], names: Sequence[str], fn, where: str, fills: list[str] | None
+) -> None:
+    """Store fn()'s numbers under ``names``; on TooShort or non-finite output fill and report.
+
+    A fill is a warning, or a line appended to ``fills`` when the caller summarises many trials.
+    """
     try:
         out = fn()
-        out = out if isinstance(out, tuple) else (out,)
+        out = out if isinstance(out, tuple) else (float(out),)
         if not np.all(np.isfinite(out)):
             raise TooShort("non-finite result")
     except TooShort as e:
-        warnings.warn(f"{where}: {'/'.join(names)} filled with {FILL}: {e}", FeatureWarning, 2)
+        _report(f"{where}: {'/'.join(names)} filled with {FILL}: {e}", fills)
         out = (FILL,) * len(names)
     values.update(zip(names, out, strict=True))
 
 
-def electrode_stats(x: np.ndarray, where: str) -> ElectrodeStats:
+def warn_fills(fills: Sequence[str]) -> None:
+    """One warning summarising the fills of many trials (count per feature, first example)."""
+    if not fills:
+        return
+    per: dict[str, int] = {}
+    for note in fills:
+        feature = note.split(": ")[1].split(" filled")[0]
+        per[feature] = per.get(feature, 0) + 1
+    counts = ", ".join(f"{k} x{v}" for k, v in sorted(per.items()))
+    warnings.warn(
+        f"{len(fills)} static feature value(s) filled with {FILL} (EP too short or degenerate): "
+        f"{counts}; e.g. {fills[0]}",
+        FeatureWarning,
+        2,
+    )
+
+
+def electrode_stats(x: np.ndarray, where: str, fills: list[str] | None = None) -> ElectrodeStats:
     count = len(x)
     mean = x.mean(axis=0) if count else np.zeros(x.shape[1])
     centred = x - mean
     try:
         poly = polyfit_coefficients(x)
     except TooShort as e:
-        warnings.warn(f"{where}: electrode polyfit filled with {FILL}: {e}", FeatureWarning, 2)
+        _report(f"{where}: electrode_polyfit filled with {FILL}: {e}", fills)
         poly = np.full((POLY_DEGREE + 1, x.shape[1]), FILL)
     return ElectrodeStats(count, mean, centred.T @ centred, poly)
 
 
-def trial_static(trial: TrialData, f_max: float | None = AUTHORS_F_MAX) -> TrialStatic:
+def trial_static(
+    trial: TrialData, f_max: float | None = AUTHORS_F_MAX, fills: list[str] | None = None
+) -> TrialStatic:
     """The 23 base numbers per EP (gripper/transform ones only when present) and electrode stats.
 
-    Signals are baseline-subtracted with the mean of the trial's MOVE_ARM_START_POSITION rows
-    (gripper and transform signals are not, as the authors).
+    Short EPs give `FILL` values, reported as warnings or appended to ``fills``. Signals are
+    baseline-subtracted with the mean of the trial's MOVE_ARM_START_POSITION rows (gripper
+    and transform signals are not, as the authors).
     """
     rest = trial.segment(BASELINE_STATE)
     fingers = []
@@ -268,33 +300,35 @@ def trial_static(trial: TrialData, f_max: float | None = AUTHORS_F_MAX) -> Trial
             pdc, tac, tdc = fd["pdc"][rows_slice], fd["tac"][rows_slice], fd["tdc"][rows_slice]
             stream = fd["pac"][rows_slice].reshape(-1)
             f = f"_f{i}"
-            _guarded(values, ["pdc_rise" + f], lambda x=pdc: pdc_steepest_rise(x), where)
-            _guarded(values, ["pdc_area" + f], lambda x=pdc: area(x), where)
-            _guarded(values, ["pdc_max" + f], lambda x=pdc: maximum(x), where)
+            _guarded(values, ["pdc_rise" + f], lambda x=pdc: pdc_steepest_rise(x), where, fills)
+            _guarded(values, ["pdc_area" + f], lambda x=pdc: area(x), where, fills)
+            _guarded(values, ["pdc_max" + f], lambda x=pdc: maximum(x), where, fills)
             _guarded(
                 values,
                 [n + f for n in PAC_NAMES],
                 lambda s=stream: spectral_features(*pac_spectrum(s, f_max)),
                 where,
+                fills,
             )
-            _guarded(values, ["tac_area" + f], lambda x=tac: area(x), where)
-            _guarded(values, ["tdc_tau" + f], lambda x=tdc: tdc_time_constant(x), where)
+            _guarded(values, ["tac_area" + f], lambda x=tac: area(x), where, fills)
+            _guarded(values, ["tdc_tau" + f], lambda x=tdc: tdc_time_constant(x), where, fills)
         if grip is not None:
-            _guarded(values, GRIPPER_NAMES, lambda g=grip[rows_slice]: gripper_stats(g), where)
+            g = grip[rows_slice]
+            _guarded(values, GRIPPER_NAMES, lambda g=g: gripper_stats(g), where, fills)
         if trial.translation is not None:
             tr = trial.translation[rows_slice]
-            _guarded(values, TRANSFORM_NAMES, lambda x=tr: hand_descent(x), where)
+            _guarded(values, TRANSFORM_NAMES, lambda x=tr: hand_descent(x), where, fills)
         order = [f"{n}_f{i}" for n in FINGER_FEATURES for i in (0, 1)]
         order += [n for n in (*GRIPPER_NAMES, *TRANSFORM_NAMES) if n in values]
         names = order
         rows.append([values[n] for n in order])
-        stats.append(electrode_stats(electrodes[rows_slice], where))
+        stats.append(electrode_stats(electrodes[rows_slice], where, fills))
     missing = [
         label
         for label, absent in (("gripper", grip is None), ("transforms", trial.translation is None))
         if absent
     ]
-    if missing:
+    if missing and fills is None:
         warnings.warn(
             f"trial {trial.name.name}: no {' or '.join(missing)} channel; "
             f"those static features are left out",
@@ -316,6 +350,8 @@ class StaticTable:
     mean: np.ndarray  # (n, 4, 38)
     scatter: np.ndarray  # (n, 4, 38, 38)
     poly: np.ndarray  # (n, 4, 6, 38)
+
+    KEYS = ("trials", "names", "base", "count", "mean", "scatter", "poly")
 
     @classmethod
     def from_records(cls, trials: Sequence[str], records: Sequence[TrialStatic]) -> StaticTable:
@@ -382,7 +418,8 @@ class StaticFeatures:
         idx = table.index(train)
         self.axes_ = []
         for e in range(len(PHASES)):
-            mean, scatter = pool_moments(table.count[idx, e], table.mean[idx, e], table.scatter[idx, e])
+            moments = table.count[idx, e], table.mean[idx, e], table.scatter[idx, e]
+            mean, scatter = pool_moments(*moments)
             self.axes_.append((mean, principal_axes(scatter, N_ELECTRODE_PCS)))
         return self
 
@@ -392,7 +429,7 @@ class StaticFeatures:
 
     def transform(self, table: StaticTable, trials: Sequence[str]) -> np.ndarray:
         if not self.per_trial_pca and self.axes_ is None:
-            raise RuntimeError("StaticFeatures(per_trial_pca=False) must be fitted before transform")
+            raise RuntimeError("StaticFeatures(per_trial_pca=False): call fit before transform")
         out = []
         for i in table.index(trials):
             parts = []
@@ -403,6 +440,8 @@ class StaticFeatures:
                 else:
                     mean, axes = self.axes_[e]  # type: ignore[index]
                 coef = pc_polyfit(table.poly[i, e], mean, axes)
+                if table.count[i, e] < POLY_DEGREE + 1:  # too short: the fit was filled
+                    coef = np.full_like(coef, FILL)
                 parts += [table.base[i, e], order_polyfit(coef, self.interleave)]
             out.append(np.concatenate(parts))
         return np.asarray(out, dtype=float).reshape(len(out), -1)

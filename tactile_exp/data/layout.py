@@ -118,7 +118,8 @@ def published_test_split() -> tuple[PublishedTest, ...]:
     text = resources.files("tactile_exp.data").joinpath("resources/test_split.csv").read_text()
     out = []
     for r in csv.DictReader(text.splitlines()):
-        trials = None if r["test_trials"] == "all" else tuple(int(t) for t in r["test_trials"].split())
+        listed = r["test_trials"]
+        trials = None if listed == "all" else tuple(int(t) for t in listed.split())
         out.append(PublishedTest(r["adjective"], int(r["object_id"]), int(r["label"]), trials))
     return tuple(out)
 
@@ -163,7 +164,7 @@ class TrialData:
         return slice(int(idx[0]), int(idx[-1]) + 1)
 
     def ep_segments(self) -> dict[str, slice]:
-        """The four EP row ranges, keyed by short EP name (squeeze, hold, slow_slide, fast_slide)."""
+        """The four EP row ranges keyed by short name (squeeze, hold, slow_slide, fast_slide)."""
         return {ep: self.segment(state) for ep, state in EPS.items()}
 
 

@@ -327,10 +327,8 @@ class _TrialReader:
             if idx.size == 0:
                 raise self.fail(key, f"EP {ep} ({state.decode()}) absent, expected a block of rows")
             if idx.size < MIN_EP_ROWS:
-                raise self.fail(
-                    key, f"EP {ep} ({state.decode()}) has {idx.size} row(s), "
-                    f"expected at least {MIN_EP_ROWS}",
-                )  # fmt: skip
+                rows = f"{idx.size} row(s), expected at least {MIN_EP_ROWS}"
+                raise self.fail(key, f"EP {ep} ({state.decode()}) has {rows}")
             if idx[-1] - idx[0] + 1 != idx.size:
                 raise self.fail(
                     key, f"EP {ep} ({state.decode()}) split into several blocks, expected one"
@@ -353,8 +351,10 @@ class _TrialReader:
             return out
         ctrl = self.array("state/controller_state", (), integer=True, required=False)
         out.controller_state = None if ctrl is None else np.asarray(ctrl, dtype=np.int64)
-        floats = {k: self.array(k, tail, integer=False, required=False) for k, tail in
-                  _OPTIONAL_FLOAT.items()}  # fmt: skip
+        floats = {
+            k: self.array(k, tail, integer=False, required=False)
+            for k, tail in _OPTIONAL_FLOAT.items()
+        }
         out.gripper = {
             k.split("/")[1]: v
             for k, v in floats.items()

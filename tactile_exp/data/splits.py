@@ -100,7 +100,7 @@ def published(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
     try:
         return _from_table(dataset, adjective)
     except DataError as e:
-        warnings.warn(f"{e}; falling back to the random split with seed {seed}", stacklevel=2)
+        warnings.warn(f"{e}; falling back to the random split with seed {seed}", stacklevel=3)
         return random_split(dataset, adjective, seed)
 
 
@@ -112,7 +112,7 @@ def _read_split_groups(dataset: PHAC2, f: h5py.File, adjective: str) -> Split | 
             key = f"/{group}/{adjective}/{part}"
             node = f.get(key)
             if not isinstance(node, h5py.Group):
-                warnings.warn(f"{dataset.path}: {key} missing; using the table", stacklevel=3)
+                warnings.warn(f"{dataset.path}: {key} missing; using the table", stacklevel=4)
                 return None
             for name in node:
                 if name not in trials:

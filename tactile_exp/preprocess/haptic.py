@@ -19,6 +19,7 @@ from typing import Protocol
 import numpy as np
 
 from tactile_exp.data.layout import EPS, PAC_PER_ROW, TrialData, TrialName
+from tactile_exp.data.phac2 import default_cache_dir
 from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
 
 CODE_VERSION = 1  # bump when the cached arrays' meaning changes
@@ -206,8 +207,6 @@ def load_haptic_arrays(
     """``compute_haptic_arrays``, cached under ``cache_dir`` (default: the reader's cache dir)."""
     check_settings(steps, offsets, pac_downsample)
     if cache_dir is None:
-        from tactile_exp.data.phac2 import default_cache_dir
-
         cache_dir = default_cache_dir()
     key = cache_key(
         kind="haptic", dataset=dataset.identity(), steps=int(steps), offsets=int(offsets),
@@ -306,7 +305,7 @@ class HapticPreprocessor:
         self._weight, self._bias = weight, bias
         return self
 
-    def transform(self, trials: Sequence[str | TrialName], chunk: int = 32) -> np.ndarray:
+    def transform(self, trials: Sequence[str | TrialName]) -> np.ndarray:
         """(n, 2 fingers, offsets, n_channels, steps) float32 for ``trials``, in order."""
         if not hasattr(self, "_weight"):
             raise RuntimeError("HapticPreprocessor.transform called before fit")
@@ -315,11 +314,10 @@ class HapticPreprocessor:
         k = N_SCALAR + self.n_components
         out = np.empty((idx.size, 2, a.offsets, len(EPS), k, a.steps), dtype=np.float32)
         weight = self._weight.astype(np.float32)[:, None]  # (2, 1, 4, k, 23)
-        for s in range(0, idx.size, chunk):
-            rows = idx[s : s + chunk]
-            # the signals are stored minus `centre`: fold W @ centre + b into a per-trial bias
-            bias = np.einsum("fekc,nfc->nfek", self._weight, a.centre[rows]) + self._bias
-            block = out[s : s + chunk]
-            np.matmul(weight, a.signals[rows], out=block)
-            block += bias[:, :, None, :, :, None].astype(np.float32)
+        # the signals are stored minus `centre`: fold W @ centre + b into a per-trial bias
+        bias = np.einsum("fekc,nfc->nfek", self._weight, a.centre[idx]) + self._bias
+        bias = bias[:, :, None, :, :, None].astype(np.float32)
+        for j, i in enumerate(idx):  # one trial at a time: no copy of the selected signals
+            np.matmul(weight, a.signals[i], out=out[j])
+            out[j] += bias[j]
         return out.reshape(idx.size, 2, a.offsets, len(EPS) * k, a.steps)

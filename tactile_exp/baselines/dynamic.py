@@ -1,0 +1,300 @@
+"""Chu et al.'s dynamic features: per adjective, 16 discrete HMM chains (BASELINES.md §2).
+
+A chain (EP x sensor) is PCA(97% variance) -> resample each trial to T steps -> k-means into K
+symbols -> `hmmlearn.hmm.CategoricalHMM` with N states, trained on positive trials only; a
+trial's feature is its log-likelihood under the chain (not length-normalised, as the authors).
+
+PCA and linear resampling are both linear, so projecting after resampling equals resampling
+after projecting. A trial is therefore reduced once to (row count, mean, scatter) per chain plus
+its raw rows resampled to each T of the grid (`SequenceTable`); the per-split PCA is fitted from
+pooled moments, never from the raw rows again.
+
+N, T, K are chosen inside the training positives: some positive training objects are held out,
+candidates are scored by mean held-out log-likelihood (the authors' criterion), and the chosen
+chain is refitted on all training positives. ``leak_test_positives=True`` reproduces the authors'
+leak (choose on the test positives, refit on train + test positives); never the default.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from hmmlearn import hmm
+from sklearn.cluster import KMeans
+from threadpoolctl import threadpool_limits
+
+from tactile_exp.baselines.static import PHASES, pool_moments, principal_axes
+from tactile_exp.data.layout import Split, TrialData, TrialName
+
+SENSORS: tuple[str, ...] = ("electrodes", "pac", "pdc", "tac")
+CHAINS: tuple[tuple[str, str], ...] = tuple((ep, s) for ep in PHASES for s in SENSORS)
+VARIANCE_KEPT = 0.97
+HMM_ITER, HMM_TOL = 100, 0.01
+PROB_FLOOR = 1e-10  # scoring guard: an unseen transition/emission costs log(1e-10), not -inf
+GRIDS: dict[str, dict[str, tuple[int, ...]]] = {
+    # small: the values the authors' stored chains mostly ended with (T=20, K=5), N chosen
+    "small": {"n_states": (6, 12), "length": (20,), "symbols": (5,)},
+    "authors": {"n_states": (12, 15, 18), "length": (20, 25, 30), "symbols": (5, 10, 12)},
+}
+
+
+class DynamicWarning(UserWarning):
+    """A chain input was degenerate (empty EP) or its hyperparameters could not be chosen."""
+
+
+def sensor_rows(trial: TrialData, rows: slice, sensor: str) -> np.ndarray:
+    """Raw rows of both fingers side by side: electrodes (n,38), pac (n,44), pdc/tac (n,2)."""
+    parts = []
+    for f in trial.fingers:
+        if sensor == "pac":
+            parts.append(f.pac.reshape(trial.n_rows, -1)[rows])
+        else:
+            parts.append(getattr(f, sensor)[rows].reshape(rows.stop - rows.start, -1))
+    return np.hstack(parts).astype(float)
+
+
+def resample(x: np.ndarray, length: int) -> np.ndarray:
+    """(length, d) linear interpolation of each column at positions k*n/length (IDL congrid)."""
+    n = len(x)
+    pos = np.arange(length) * n / length
+    return np.column_stack([np.interp(pos, np.arange(n), col) for col in x.T])
+
+
+@dataclass
+class SequenceTable:
+    """Per trial and chain: row moments and the raw rows resampled to each grid length."""
+
+    trials: list[str]
+    count: np.ndarray  # (n_trials, 16)
+    mean: list[np.ndarray]  # per chain (n_trials, d)
+    scatter: list[np.ndarray]  # per chain (n_trials, d, d)
+    seqs: dict[int, list[np.ndarray]]  # T -> per chain (n_trials, T, d)
+
+    @classmethod
+    def from_trials(cls, trials: Sequence[TrialData], lengths: Sequence[int]) -> SequenceTable:
+        count = np.zeros((len(trials), len(CHAINS)))
+        mean: list[list[np.ndarray]] = [[] for _ in CHAINS]
+        scatter: list[list[np.ndarray]] = [[] for _ in CHAINS]
+        seqs: dict[int, list[list[np.ndarray]]] = {T: [[] for _ in CHAINS] for T in lengths}
+        for i, trial in enumerate(trials):
+            segments = trial.ep_segments()
+            for c, (ep, sensor) in enumerate(CHAINS):
+                x = sensor_rows(trial, segments[ep], sensor)
+                if len(x) == 0:
+                    raise ValueError(f"trial {trial.name.name}: EP {ep} has no rows")
+                m = x.mean(axis=0)
+                count[i, c] = len(x)
+                mean[c].append(m)
+                scatter[c].append((x - m).T @ (x - m))
+                for T in lengths:
+                    seqs[T][c].append(resample(x, T))
+        return cls(
+            [t.name.name for t in trials],
+            count,
+            [np.array(m) for m in mean],
+            [np.array(s) for s in scatter],
+            {T: [np.array(s) for s in per] for T, per in seqs.items()},
+        )
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        out = {"trials": np.array(self.trials), "count": self.count}
+        for c in range(len(CHAINS)):
+            out[f"mean{c}"], out[f"scatter{c}"] = self.mean[c], self.scatter[c]
+            for T, per in self.seqs.items():
+                out[f"seq{c}_{T}"] = per[c]
+        return out
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray], lengths: Sequence[int]) -> SequenceTable:
+        n = range(len(CHAINS))
+        return cls(
+            [str(t) for t in a["trials"]],
+            a["count"],
+            [a[f"mean{c}"] for c in n],
+            [a[f"scatter{c}"] for c in n],
+            {T: [a[f"seq{c}_{T}"] for c in n] for T in lengths},
+        )
+
+    @staticmethod
+    def keys(lengths: Sequence[int]) -> tuple[str, ...]:
+        per = [f"{k}{c}" for c in range(len(CHAINS)) for k in ("mean", "scatter")]
+        seq = [f"seq{c}_{T}" for c in range(len(CHAINS)) for T in lengths]
+        return ("trials", "count", *per, *seq)
+
+    def index(self, trials: Sequence[str]) -> np.ndarray:
+        pos = {t: i for i, t in enumerate(self.trials)}
+        unknown = [t for t in trials if t not in pos]
+        if unknown:
+            raise KeyError(f"dynamic features: unknown trial(s) {unknown[:5]}")
+        return np.array([pos[t] for t in trials], dtype=int)
+
+
+def pca_axes(scatter: np.ndarray, variance: float = VARIANCE_KEPT) -> np.ndarray:
+    """(d, k) principal axes keeping ``variance`` of the total, k as sklearn's PCA(0.97)."""
+    values = np.clip(np.sort(np.linalg.eigvalsh(scatter))[::-1], 0.0, None)
+    total = values.sum()
+    k = 1 if total <= 0 else int(np.searchsorted(np.cumsum(values) / total, variance, "right") + 1)
+    return principal_axes(scatter, min(k, len(values)))
+
+
+def forward_loglik(
+    startprob: np.ndarray, transmat: np.ndarray, emission: np.ndarray, symbols: np.ndarray
+) -> np.ndarray:
+    """(m,) log P(sequence) of m equal-length symbol sequences (m, T), scaled forward pass."""
+    start, trans, emit = (
+        np.maximum(p, PROB_FLOOR) / np.maximum(p, PROB_FLOOR).sum(axis=-1, keepdims=True)
+        for p in (startprob, transmat, emission)
+    )
+    alpha = start * emit[:, symbols[:, 0]].T
+    loglik = np.zeros(len(symbols))
+    for t in range(symbols.shape[1]):
+        if t:
+            alpha = (alpha @ trans) * emit[:, symbols[:, t]].T
+        scale = alpha.sum(axis=1)
+        loglik += np.log(scale)
+        alpha /= scale[:, None]
+    return loglik
+
+
+class HMMChain:
+    """One chain: PCA(97%) -> k-means(K) symbols -> CategoricalHMM(N), on resampled sequences."""
+
+    def __init__(self, n_states: int, n_symbols: int, seed: int = 0, n_init: int = 10) -> None:
+        self.n_states = n_states
+        self.n_symbols = n_symbols
+        self.seed = seed
+        self.n_init = n_init
+
+    def fit(
+        self, count: np.ndarray, mean: np.ndarray, scatter: np.ndarray, seqs: np.ndarray
+    ) -> HMMChain:
+        """count (m,), mean (m,d), scatter (m,d,d): the fit trials' raw rows; seqs (m,T,d)."""
+        self.mean_, pooled = pool_moments(count, mean, scatter)
+        self.axes_ = pca_axes(pooled)
+        points = self._project(seqs).reshape(-1, self.axes_.shape[1])
+        with warnings.catch_warnings(), threadpool_limits(1):  # threads only add overhead here
+            warnings.simplefilter("ignore")  # too few distinct points for K: KMeans still labels
+            self.kmeans_ = KMeans(self.n_symbols, n_init=self.n_init, random_state=self.seed)
+            labels = self.kmeans_.fit_predict(points)
+        self.hmm_ = hmm.CategoricalHMM(
+            n_components=self.n_states,
+            n_features=self.n_symbols,
+            n_iter=HMM_ITER,
+            tol=HMM_TOL,
+            random_state=self.seed,
+            implementation="scaling",  # same EM as "log", about 10x faster
+        )
+        self.hmm_.fit(labels.reshape(-1, 1), lengths=[seqs.shape[1]] * len(seqs))
+        return self
+
+    def _project(self, seqs: np.ndarray) -> np.ndarray:
+        return (seqs - self.mean_) @ self.axes_
+
+    def symbols(self, seqs: np.ndarray) -> np.ndarray:
+        """(m, T) nearest-centroid symbols."""
+        z = self._project(seqs)
+        d = ((z[:, :, None, :] - self.kmeans_.cluster_centers_[None, None]) ** 2).sum(axis=-1)
+        return np.argmin(d, axis=-1)
+
+    def score(self, seqs: np.ndarray) -> np.ndarray:
+        """(m,) log-likelihood of each resampled sequence."""
+        h = self.hmm_
+        return forward_loglik(h.startprob_, h.transmat_, h.emissionprob_, self.symbols(seqs))
+
+
+def _candidates(grid: dict[str, tuple[int, ...]]) -> list[tuple[int, int, int]]:
+    """(N, T, K) triples; the first is the fallback when nothing can be held out."""
+    return [(n, t, k) for t in grid["length"] for k in grid["symbols"] for n in grid["n_states"]]
+
+
+class DynamicFeatures:
+    """Per adjective: 16 chains fitted on training positives; features = 16 log-likelihoods."""
+
+    def __init__(
+        self,
+        grid: str = "small",
+        leak_test_positives: bool = False,
+        holdout: float = 0.2,
+        n_init: int = 10,
+        seed: int = 0,
+    ) -> None:
+        if grid not in GRIDS:
+            raise KeyError(f"unknown HMM grid {grid!r}; known grids: {', '.join(GRIDS)}")
+        self.grid = grid
+        self.leak_test_positives = leak_test_positives
+        self.holdout = holdout
+        self.n_init = n_init
+        self.seed = seed
+
+    @staticmethod
+    def lengths(grid: str) -> tuple[int, ...]:
+        return GRIDS[grid]["length"]
+
+    @property
+    def feature_names(self) -> list[str]:
+        return [f"dyn/{ep}/{sensor}" for ep, sensor in CHAINS]
+
+    def _chain(self, table: SequenceTable, c: int, idx: np.ndarray, cand) -> HMMChain:
+        n, T, k = cand
+        chain = HMMChain(n, k, self.seed, self.n_init)
+        return chain.fit(
+            table.count[idx, c], table.mean[c][idx], table.scatter[c][idx], table.seqs[T][c][idx]
+        )
+
+    def _selection_sets(self, split: Split, positives: list[str]) -> tuple[list[str], list[str]]:
+        """(fit trials, scoring trials) for choosing N, T, K; scoring empty = no choice."""
+        if self.leak_test_positives:
+            return positives, [t for t in split.test if split.labels[t] == 1]
+        objects = sorted({TrialName.parse(t).object_id for t in positives})  # type: ignore[union-attr]
+        if len(objects) < 2:
+            return positives, []
+        rng = np.random.default_rng(self.seed)
+        n_hold = max(1, round(self.holdout * len(objects)))
+        held = set(rng.choice(objects, n_hold, replace=False).tolist())
+        is_held = [TrialName.parse(t).object_id in held for t in positives]  # type: ignore[union-attr]
+        return (
+            [t for t, h in zip(positives, is_held, strict=True) if not h],
+            [t for t, h in zip(positives, is_held, strict=True) if h],
+        )
+
+    def fit(self, table: SequenceTable, split: Split) -> DynamicFeatures:
+        """Fit the 16 chains of ``split.adjective`` on its training positives only."""
+        positives = [t for t in split.train if split.labels[t] == 1]
+        if not positives:
+            raise ValueError(f"adjective {split.adjective!r}: no positive training trial")
+        fit_set, score_set = self._selection_sets(split, positives)
+        final = positives + (score_set if self.leak_test_positives else [])
+        candidates = _candidates(GRIDS[self.grid])
+        if not score_set and len(candidates) > 1:
+            warnings.warn(
+                f"adjective {split.adjective!r}: fewer than 2 positive training objects; "
+                f"HMM settings not chosen, using (N, T, K) = {candidates[0]}",
+                DynamicWarning,
+                2,
+            )
+        self.fit_trials_ = final
+        self.params_: list[tuple[int, int, int]] = []
+        self.chains_: list[HMMChain] = []
+        fit_idx, score_idx, final_idx = map(table.index, (fit_set, score_set, final))
+        for c in range(len(CHAINS)):
+            best = candidates[0]
+            if len(score_idx) and len(candidates) > 1:
+                scores = []
+                for cand in candidates:
+                    chain = self._chain(table, c, fit_idx, cand)
+                    scores.append(chain.score(table.seqs[cand[1]][c][score_idx]).mean())
+                best = candidates[int(np.argmax(scores))]
+            self.params_.append(best)
+            self.chains_.append(self._chain(table, c, final_idx, best))
+        return self
+
+    def transform(self, table: SequenceTable, trials: Sequence[str]) -> np.ndarray:
+        idx = table.index(trials)
+        cols = [
+            chain.score(table.seqs[T][c][idx])
+            for c, (chain, (_, T, _)) in enumerate(zip(self.chains_, self.params_, strict=True))
+        ]
+        return np.column_stack(cols)

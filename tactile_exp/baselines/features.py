@@ -1,0 +1,223 @@
+"""Per-split baseline features, what the engine calls per adjective (Table I rows A-F).
+
+Rows: A = static, 1 trial; B = static, 10 trials (the engine pools per object); C = dynamic,
+1 trial; D = dynamic, 10 trials (engine pooling); E = A + C (features static + dynamic);
+F = A + D (static + dynamic with ``dynamic_pool="object"``: each trial's static vector followed by
+the mean dynamic vector of its object's trials on the same side of the split).
+
+The data file is read once per data set and settings (one trial at a time); the reduced tables
+are memoised in-process and, with ``cache_dir``, saved on disk (atomic write).
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tactile_exp.baselines.dynamic import GRIDS, DynamicFeatures, SequenceTable
+from tactile_exp.baselines.static import (
+    AUTHORS_F_MAX,
+    GRIPPER_NAMES,
+    TRANSFORM_NAMES,
+    FeatureWarning,
+    StaticFeatures,
+    StaticTable,
+    trial_static,
+    warn_fills,
+)
+from tactile_exp.data.layout import Split, TrialName
+from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
+
+FEATURE_KINDS = ("static", "dynamic")
+POOLS = ("trial", "object")
+CODE_VERSION = 1  # bump when a feature definition changes, so old caches are not reused
+OPTIONAL_NAMES = (*GRIPPER_NAMES, *TRANSFORM_NAMES)
+_MEMO: dict[str, Any] = {}
+
+
+def _trials(dataset: Any) -> list[str]:
+    return [t.name if isinstance(t, TrialName) else str(t) for t in dataset.trials]
+
+
+def _read(dataset: Any, names: list[str]):
+    """Yield the trials one at a time with a progress line every 10%."""
+    step = max(1, len(names) // 10)
+    source = (
+        dataset.iter_trials(names)
+        if hasattr(dataset, "iter_trials")
+        else map(dataset.read_trial, names)
+    )
+    for i, trial in enumerate(source, 1):
+        if i % step == 0 or i == len(names):
+            print(f"baseline features: read {i}/{len(names)} trials", file=sys.stderr, flush=True)
+        yield trial
+
+
+def build_tables(
+    dataset: Any,
+    static_f_max: float | None | bool = False,
+    lengths: Sequence[int] = (),
+    cache_dir: Path | None = None,
+) -> tuple[StaticTable | None, SequenceTable | None]:
+    """Static table (when ``static_f_max`` is not False) and sequence table (when ``lengths``).
+
+    Cached in-process and under ``cache_dir``; the file is read once for whatever is missing.
+    """
+    identity = dataset.identity()
+    keys = {
+        "static": cache_key(kind="static", data=identity, f_max=static_f_max, v=CODE_VERSION),
+        "dynamic": cache_key(kind="dynamic", data=identity, lengths=list(lengths), v=CODE_VERSION),
+    }
+    want = {"static": static_f_max is not False, "dynamic": bool(lengths)}
+    out: dict[str, Any] = {}
+    for kind, needed in want.items():
+        if not needed:
+            continue
+        if keys[kind] in _MEMO:
+            out[kind] = _MEMO[keys[kind]]
+        elif cache_dir is not None:
+            path = Path(cache_dir) / f"baseline_{kind}_{keys[kind]}.npz"
+            if kind == "static":
+                arrays = load_arrays(path, StaticTable.KEYS)
+                out[kind] = None if arrays is None else StaticTable.from_arrays(arrays)
+            else:
+                arrays = load_arrays(path, SequenceTable.keys(lengths))
+                out[kind] = None if arrays is None else SequenceTable.from_arrays(arrays, lengths)
+    missing = [k for k, needed in want.items() if needed and out.get(k) is None]
+    if missing:
+        names = _trials(dataset)
+        records, trials, fills = [], [], []
+        for trial in _read(dataset, names):
+            if "static" in missing:
+                records.append(trial_static(trial, static_f_max, fills))  # type: ignore[arg-type]
+            if "dynamic" in missing:
+                trials.append(SequenceTable.from_trials([trial], lengths))
+        if "static" in missing:
+            warn_fills(fills)
+            out["static"] = StaticTable.from_records(names, records)
+            absent = [n for n in OPTIONAL_NAMES if n not in out["static"].names]
+            if absent:
+                warnings.warn(
+                    f"{dataset!r}: no {absent} in every trial (gripper or transforms channel "
+                    "missing); those static features are left out",
+                    FeatureWarning,
+                    2,
+                )
+        if "dynamic" in missing:
+            out["dynamic"] = _concat_sequences(trials, lengths)
+        for kind in missing:
+            if cache_dir is not None:
+                path = Path(cache_dir) / f"baseline_{kind}_{keys[kind]}.npz"
+                save_arrays(path, out[kind].arrays())
+    for kind in out:
+        _MEMO[keys[kind]] = out[kind]
+    return out.get("static"), out.get("dynamic")
+
+
+def _concat_sequences(parts: list[SequenceTable], lengths: Sequence[int]) -> SequenceTable:
+    n = len(parts[0].mean)
+    return SequenceTable(
+        [t for p in parts for t in p.trials],
+        np.concatenate([p.count for p in parts]),
+        [np.concatenate([p.mean[c] for p in parts]) for c in range(n)],
+        [np.concatenate([p.scatter[c] for p in parts]) for c in range(n)],
+        {T: [np.concatenate([p.seqs[T][c] for p in parts]) for c in range(n)] for T in lengths},
+    )
+
+
+class BaselineFeatures:
+    """Chu et al.'s static and/or dynamic features of trials, fitted on one adjective's split."""
+
+    def __init__(
+        self,
+        dataset: Any,
+        features: Sequence[str] = ("static",),
+        faithful: bool = True,
+        dynamic_pool: str = "trial",
+        hmm_grid: str = "small",
+        leak_test_positives: bool = False,
+        cache_dir: Path | None = None,
+        seed: int = 0,
+    ) -> None:
+        unknown = sorted(set(features) - set(FEATURE_KINDS))
+        if unknown or not features:
+            raise ValueError(
+                f"features {list(features)}: expected a non-empty subset of {FEATURE_KINDS}"
+            )
+        if dynamic_pool not in POOLS:
+            raise ValueError(f"dynamic_pool {dynamic_pool!r}: expected one of {POOLS}")
+        if hmm_grid not in GRIDS:
+            raise ValueError(f"hmm_grid {hmm_grid!r}: expected one of {tuple(GRIDS)}")
+        self.dataset = dataset
+        self.features = tuple(k for k in FEATURE_KINDS if k in features)
+        self.faithful = faithful
+        self.dynamic_pool = dynamic_pool
+        self.hmm_grid = hmm_grid
+        self.leak_test_positives = leak_test_positives
+        self.cache_dir = cache_dir
+        self.seed = seed
+        self.feature_names: list[str] = []
+
+    def fit(self, split: Split) -> BaselineFeatures:
+        """Fit what depends on the split on ``split.train`` only (HMMs: training positives)."""
+        self.static_table_, self.sequence_table_ = build_tables(
+            self.dataset,
+            static_f_max=(AUTHORS_F_MAX if self.faithful else None)
+            if "static" in self.features
+            else False,
+            lengths=DynamicFeatures.lengths(self.hmm_grid) if "dynamic" in self.features else (),
+            cache_dir=self.cache_dir,
+        )
+        self.split_ = split
+        self.feature_names = []
+        if self.static_table_ is not None:
+            self.static_ = StaticFeatures(per_trial_pca=self.faithful, interleave=self.faithful)
+            self.static_.fit(self.static_table_, split.train)
+            self.feature_names += self.static_.feature_names(self.static_table_)
+        if self.sequence_table_ is not None:
+            self.dynamic_ = DynamicFeatures(
+                self.hmm_grid, self.leak_test_positives, seed=self.seed
+            ).fit(self.sequence_table_, split)
+            suffix = "@object" if self.dynamic_pool == "object" else ""
+            self.feature_names += [n + suffix for n in self.dynamic_.feature_names]
+        return self
+
+    def _dynamic(self, trials: Sequence[str]) -> np.ndarray:
+        table = self.sequence_table_
+        if self.dynamic_pool == "trial":
+            return self.dynamic_.transform(table, trials)
+        sides = {t: "train" for t in self.split_.train} | {t: "test" for t in self.split_.test}
+        outside = [t for t in trials if t not in sides]
+        if outside:
+            raise ValueError(
+                f"dynamic_pool='object' pools within one side of the split; trial(s) "
+                f"{outside[:5]} are in neither side of the {self.split_.adjective!r} split"
+            )
+
+        def obj(t: str) -> int:
+            return TrialName.parse(t).object_id  # type: ignore[union-attr]
+
+        groups = {(sides[t], obj(t)) for t in trials}
+        members = {g: [t for t, s in sides.items() if (s, obj(t)) == g] for g in groups}
+        pooled = {g: self.dynamic_.transform(table, m).mean(axis=0) for g, m in members.items()}
+        return np.array([pooled[(sides[t], obj(t))] for t in trials])
+
+    def transform(self, trials: Sequence[str]) -> np.ndarray:
+        """(n, D) float features of ``trials`` in ``feature_names`` order; never NaN."""
+        if not hasattr(self, "split_"):
+            raise RuntimeError("BaselineFeatures.transform called before fit")
+        trials = list(trials)
+        blocks = []
+        if self.static_table_ is not None:
+            blocks.append(self.static_.transform(self.static_table_, trials))
+        if self.sequence_table_ is not None:
+            blocks.append(self._dynamic(trials))
+        X = np.hstack(blocks).astype(float)
+        if not np.isfinite(X).all():
+            raise FloatingPointError("baseline features: non-finite values (a bug, please report)")
+        return X

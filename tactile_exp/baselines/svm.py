@@ -1,0 +1,142 @@
+"""The baselines' classifier: StandardScaler -> linear SVM, C chosen by leave-3-objects-out CV.
+
+The authors (BASELINES.md §1.3) drew 100 random sets of 3 training objects, held out all their
+trials, skipped draws whose training part had one class, and scored F1. Gao et al. report AUC, so
+here C is scored by ROC AUC of the held-out decision values, pooled over the draws (a single
+draw's 3 objects rarely hold both classes).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator, Sequence
+
+import numpy as np
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.metrics import roc_auc_score
+from sklearn.pipeline import Pipeline, make_pipeline
+from sklearn.preprocessing import StandardScaler
+from sklearn.svm import LinearSVC
+
+from tactile_exp.models import MODELS
+from tactile_exp.models.base import EpochCallback, History, Instances, Model
+
+DEFAULT_CS: tuple[float, ...] = tuple(np.logspace(-4, 2, 7))
+AUTHORS_CS: tuple[float, ...] = tuple(np.linspace(1e2, 1e6, 100))  # nearly hard-margin
+
+
+class LeavePObjectsOut:
+    """Up to ``n_draws`` distinct random draws of ``p`` whole objects held out.
+
+    Draws whose training part has a single class are skipped; objects are never split.
+    """
+
+    def __init__(self, p: int = 3, n_draws: int = 20, seed: int = 0) -> None:
+        self.p = p
+        self.n_draws = n_draws
+        self.seed = seed
+
+    def split(
+        self, X: np.ndarray, y: np.ndarray, groups: np.ndarray
+    ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        objects = np.unique(groups)
+        if len(objects) <= self.p:
+            raise ValueError(f"leave-{self.p}-objects-out needs more than {self.p} objects")
+        rng = np.random.default_rng(self.seed)
+        seen: set[tuple[int, ...]] = set()
+        for _ in range(20 * self.n_draws):
+            if len(seen) == self.n_draws:
+                return
+            draw = tuple(sorted(rng.choice(objects, self.p, replace=False).tolist()))
+            if draw in seen:
+                continue
+            seen.add(draw)
+            held = np.isin(groups, draw)
+            if len(np.unique(y[~held])) < 2:
+                continue
+            yield np.flatnonzero(~held), np.flatnonzero(held)
+
+
+class ObjectCVLinearSVM:
+    """scikit-learn style estimator: ``fit(X, y, groups)``, ``decision_function(X)``."""
+
+    def __init__(
+        self, Cs: Sequence[float] = DEFAULT_CS, n_draws: int = 20, p_out: int = 3, seed: int = 0
+    ) -> None:
+        self.Cs = tuple(float(c) for c in Cs)
+        self.n_draws = n_draws
+        self.p_out = p_out
+        self.seed = seed
+
+    @staticmethod
+    def _pipeline(C: float) -> Pipeline:
+        svc = LinearSVC(C=C, penalty="l2", dual=False, class_weight="balanced", max_iter=10000)
+        return make_pipeline(StandardScaler(), svc)
+
+    def cv_scores(self, X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> np.ndarray | None:
+        """Pooled held-out AUC per C; ``None`` when the pooled held-out part has one class."""
+        splitter = LeavePObjectsOut(self.p_out, self.n_draws, self.seed)
+        draws = list(splitter.split(X, y, groups))
+        if not draws:
+            return None
+        held = np.concatenate([te for _, te in draws])
+        if len(np.unique(y[held])) < 2:
+            return None
+        scores = []
+        for C in self.Cs:
+            decisions = []
+            for tr, te in draws:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", ConvergenceWarning)
+                    decisions.append(self._pipeline(C).fit(X[tr], y[tr]).decision_function(X[te]))
+            scores.append(roc_auc_score(y[held], np.concatenate(decisions)))
+        return np.array(scores)
+
+    def fit(self, X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> ObjectCVLinearSVM:
+        X, y, groups = np.asarray(X, dtype=float), np.asarray(y), np.asarray(groups)
+        if not np.isfinite(X).all():
+            raise ValueError("ObjectCVLinearSVM.fit: X has NaN or infinite values")
+        if len(np.unique(y)) < 2:
+            raise ValueError("ObjectCVLinearSVM.fit: y needs both classes")
+        self.cv_scores_ = self.cv_scores(X, y, groups) if len(self.Cs) > 1 else None
+        if self.cv_scores_ is None:
+            self.C_ = self.Cs[len(self.Cs) // 2]
+            if len(self.Cs) > 1:
+                warnings.warn(
+                    f"no leave-{self.p_out}-objects-out draw gives both classes; C={self.C_:g}",
+                    UserWarning,
+                    2,
+                )
+        else:
+            self.C_ = self.Cs[int(np.argmax(self.cv_scores_))]
+        self.pipeline_ = self._pipeline(self.C_).fit(X, y)
+        return self
+
+    def decision_function(self, X: np.ndarray) -> np.ndarray:
+        return self.pipeline_.decision_function(np.asarray(X, dtype=float))
+
+
+@MODELS.register("linear_svm")
+class LinearSVMModel(Model):
+    """The `Model` face of `ObjectCVLinearSVM` (Table I rows A-F); groups = object ids."""
+
+    learns_representation = False
+
+    def __init__(
+        self, Cs: Sequence[float] | None = None, n_draws: int = 20, p_out: int = 3, seed: int = 0
+    ) -> None:
+        self.Cs = list(DEFAULT_CS if Cs is None else Cs)
+        self.n_draws = n_draws
+        self.p_out = p_out
+        self.seed = seed
+        self.svm = ObjectCVLinearSVM(self.Cs, n_draws, p_out, seed)
+
+    def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
+        self.svm.fit(train.X.reshape(len(train), -1), train.y, train.object_id)
+        return {}
+
+    def decision_function(self, X: np.ndarray) -> np.ndarray:
+        return self.svm.decision_function(X.reshape(len(X), -1))
+
+    def head(self) -> LinearSVMModel:
+        return LinearSVMModel(self.Cs, self.n_draws, self.p_out, self.seed)

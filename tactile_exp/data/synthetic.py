@@ -1,0 +1,618 @@
+"""Synthetic PHAC-2: the embedded default data set, written in the real file layout (D5).
+
+The real release cannot be downloaded here, so every code path runs on a file this module writes.
+It uses the 60 real objects, their labels and the published split (``layout``), and the exact
+layout of PHAC2_FORMAT.md §1: datasets, shapes, dtypes, S30 state strings, hard links.
+
+Generative model
+----------------
+Labels never enter a signal directly. Each object first gets latent physical properties in [0, 1],
+drawn (seeded) from a per-material base, plus label effects, plus object noise (``_NOISE``):
+stiffness, roughness, thermal effusivity, friction, thickness, hairiness, porosity, springiness,
+stickiness, crinkliness, bumpiness, and visual ones (hue, saturation, value, gloss, texture
+contrast, size). Two derived quantities set the mechanics: ``indent_500`` (indentation in m at
+which the firmer finger reads +500 counts; 25 mm soft ... 1.2 mm stiff) and ``grip_width``
+(object width between the fingers; mostly object shape, only weakly thickness).
+Every signal then follows from the properties through simple physics:
+
+- gripper: the controller of §1.4 (tap, squeeze, hold, two slides, every detail state). The
+  squeeze closes at 2.5 mm/s until max PDC over the fingers reaches baseline + 500, then reopens
+  until it falls to +10; hold closes to 50 % of that travel, slides to 20 % / 10 %. Stiff objects
+  therefore give a steep PDC rise and little travel; thick ones a slightly wider aperture.
+- PDC: 500 * (indentation / indent_500) ** 1.1 per finger (per-trial finger share), then porous
+  creep (slow decay under load and a dip after release), sticky slow release, hysteresis of
+  non-springy soft objects and a damped rebound ringing for springy ones.
+- PAC (2200 Hz, 22 per row, column offsets of §1.5): rest noise, contact noise, make/break
+  transients and rare full-scale spikes; while sliding, texture noise (roughness, hairiness),
+  bump impulses (bumpiness, spaced along the slide) and stick-slip bursts (stickiness,
+  friction); crackle while squeezing crinkly objects. Impulses ring through a 250 Hz resonator.
+- TAC: contact-onset heat-flux transient, +60 ... +160 counts by effusivity, negative at release.
+  TDC: drift over the run from +8 (insulating) to -13 (metal, glass), plus sensor random walk.
+- electrodes: per-finger baseline pattern of §5, a pressure-driven pattern (E7-E10, E17 down;
+  E1, E4, E6, E11, E14, E16 up) and a large local drop at the contact edge, mirrored between the
+  fingers (E1..E6 <-> E11..E16); shear by friction and a bump pattern while sliding.
+- photographs (``render``): size/height from thickness (strongly), colour, gloss, texture, bumps
+  and hair strands from the visual properties.
+
+Per-trial noise: finger shares and contact position, stiffness (+-10 %), grip width, speeds and
+durations, sensor baselines and drift. Absorbent, squishy and springy act only through touch;
+thick and thin mostly through sight (the gripper sees thickness weakly and noisily); nice and
+unpleasant only through the weak label effects below.
+
+Difficulty (``bench/bench_difficulty.py``, seed 0, full default file): see DIFFICULTY below.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import logging
+import math
+import multiprocessing
+import os
+import shutil
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+from scipy.signal import lfilter
+
+from tactile_exp.data import render
+from tactile_exp.data.layout import (
+    ADC_MAX,
+    ADJECTIVES,
+    NEGATIVE_SPLIT_GROUP,
+    PAC_PER_ROW,
+    POSITIVE_SPLIT_GROUP,
+    ROW_RATE_HZ,
+    ObjectInfo,
+    objects,
+    published_test_split,
+)
+
+GENERATOR_VERSION = 1
+DIFFICULTY = "(not measured yet)"
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SyntheticSpec:
+    """What to generate. Small specs (duration_scale ~0.1, trials 2) keep tests fast."""
+
+    seed: int = 0
+    object_ids: tuple[int, ...] | None = None  # None = all 60 real objects
+    trials: int = 10  # trials per object
+    duration_scale: float = 1.0  # scales EP and other state lengths
+    views: int = 8  # photographs per object
+    image_width: int = 480
+    image_height: int = 320
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.trials <= 99:
+            raise ValueError(f"SyntheticSpec.trials={self.trials}: expected 1..99")
+        if not 0.01 <= self.duration_scale <= 10:
+            raise ValueError(
+                f"SyntheticSpec.duration_scale={self.duration_scale}: expected 0.01..10"
+            )
+        if self.views < 0:
+            raise ValueError(f"SyntheticSpec.views={self.views}: expected >= 0")
+        if min(self.image_width, self.image_height) < 32:
+            raise ValueError(
+                f"SyntheticSpec image {self.image_width}x{self.image_height}: expected >= 32x32"
+            )
+        if self.object_ids is not None:
+            known = {o.object_id for o in objects()}
+            unknown = sorted(set(self.object_ids) - known)
+            if unknown or not self.object_ids:
+                raise ValueError(
+                    f"SyntheticSpec.object_ids: unknown ids {unknown} (expected a non-empty "
+                    "subset of the 60 PHAC-2 object ids)"
+                )
+
+
+def _objects(spec: SyntheticSpec) -> list[ObjectInfo]:
+    wanted = None if spec.object_ids is None else set(spec.object_ids)
+    return [o for o in objects() if wanted is None or o.object_id in wanted]
+
+
+# ------------------------------------------------------------------------- latent object model
+_PROPS = (
+    "stiffness", "roughness", "effusivity", "friction", "thickness", "hairiness", "porosity",
+    "springiness", "stickiness", "crinkliness", "bumpiness",
+    "saturation", "value", "gloss", "texture_contrast", "size",
+)  # fmt: skip
+_MATERIAL_BASE: dict[str, tuple[float, ...]] = {  # in the order of _PROPS
+    "foam":    (.12, .30, .05, .50, .55, .05, .50, .40, .05, .02, .20, .60, .70, .05, .35, .60),
+    "plastic": (.75, .20, .40, .35, .45, .00, .05, .20, .05, .10, .10, .55, .60, .50, .15, .55),
+    "paper":   (.60, .25, .20, .40, .35, .02, .20, .15, .00, .15, .05, .50, .70, .25, .20, .60),
+    "fabric":  (.25, .40, .15, .55, .30, .35, .40, .20, .05, .05, .15, .45, .60, .05, .40, .55),
+    "organic": (.60, .55, .25, .60, .50, .30, .40, .15, .05, .10, .30, .50, .50, .05, .60, .55),
+    "stone":   (.97, .70, .60, .60, .60, .00, .35, .00, .00, .00, .35, .35, .50, .05, .60, .60),
+    "glass":   (.97, .02, .80, .20, .45, .00, .00, .00, .05, .00, .00, .30, .70, .90, .05, .50),
+    "metal":   (1.0, .10, 1.0, .25, .50, .00, .00, .00, .00, .00, .05, .10, .60, .85, .10, .55),
+}  # fmt: skip
+_LABEL_EFFECTS: dict[str, dict[str, float]] = {
+    "absorbent": {"porosity": 0.25},
+    "bumpy": {"bumpiness": 0.5, "texture_contrast": 0.15},
+    "compressible": {"stiffness": -0.15},
+    "cool": {"effusivity": 0.3},
+    "crinkly": {"crinkliness": 0.6},
+    "fuzzy": {"hairiness": 0.3, "roughness": 0.05},
+    "hairy": {"hairiness": 0.45},
+    "hard": {"stiffness": 0.15},
+    "metallic": {"effusivity": 0.15, "gloss": 0.3, "saturation": -0.2},
+    "nice": {"friction": -0.05, "roughness": -0.05},  # subjective: weak
+    "porous": {"porosity": 0.3, "texture_contrast": 0.05},
+    "rough": {"roughness": 0.35, "friction": 0.1, "texture_contrast": 0.2},
+    "scratchy": {"roughness": 0.25, "hairiness": 0.1},
+    "slippery": {"friction": -0.3, "gloss": 0.2},
+    "smooth": {"roughness": -0.2, "texture_contrast": -0.15, "gloss": 0.1},
+    "soft": {"stiffness": -0.12},
+    "solid": {"stiffness": 0.1},
+    "springy": {"springiness": 0.5},
+    "squishy": {"stiffness": -0.15, "springiness": 0.1},
+    "sticky": {"stickiness": 0.7, "friction": 0.3},
+    "textured": {"roughness": 0.15, "bumpiness": 0.2, "texture_contrast": 0.25},
+    "thick": {"thickness": 0.35, "size": 0.2},
+    "thin": {"thickness": -0.35},
+    "unpleasant": {"roughness": 0.05, "hairiness": 0.05},  # subjective: weak
+}
+_NOISE = 0.1  # object-level property noise (sigma, in property units)
+
+
+def object_properties(spec: SyntheticSpec) -> dict[int, dict[str, float]]:
+    """Latent properties of each object of ``spec`` (the only input of every signal and image)."""
+    out = {}
+    for obj in _objects(spec):
+        rng = np.random.default_rng([spec.seed, obj.object_id, 0])
+        base = dict(zip(_PROPS, _MATERIAL_BASE[obj.material], strict=True))
+        for adj in obj.positives:
+            for prop, delta in _LABEL_EFFECTS[adj].items():
+                base[prop] += delta
+        props = {k: float(np.clip(v + rng.normal(0, _NOISE), 0, 1)) for k, v in base.items()}
+        props["hue"] = float(rng.uniform(0, 1))
+        soft, hard = math.log(20e-3), math.log(1.2e-3)
+        props["indent_500"] = math.exp(soft + (hard - soft) * props["stiffness"])
+        shape = float(rng.uniform(0, 0.04))  # object width between the fingers, not thickness
+        width = 0.012 + 0.012 * props["thickness"] + shape
+        props["grip_width"] = max(width, props["indent_500"] + 0.004)
+        out[obj.object_id] = props
+    return out
+
+
+# ------------------------------------------------------------------------------ trial signals
+_SLOW, _FAST, _POSITION_SPEED = 2.5e-3, 25e-3, 5e-3  # gripper speeds, m/s (PB:ctrl)
+_OPEN_MAX = 0.08
+_E_BASE = np.array(
+    [
+        [3236, 3664, 3660, 3549, 3647, 3465, 3274, 3400, 3374, 3475,
+         3078, 3614, 3642, 3478, 3629, 3507, 3602, 3659, 3626],
+        [3187, 3660, 3672, 3548, 3654, 3479, 3322, 3422, 3432, 3516,
+         3156, 3659, 3683, 3546, 3650, 3519, 3621, 3677, 3556],
+    ],
+    dtype=float,
+)  # fmt: skip
+_MIRROR = np.array([10, 11, 12, 13, 14, 15, 6, 7, 8, 9, 0, 1, 2, 3, 4, 5, 16, 17, 18])
+_E_PRESS = np.zeros(19)  # finger_0 response per +150 counts of PDC
+_E_PRESS[[6, 7, 8, 9, 16]] = -45.0
+_E_PRESS[[0, 3, 5, 10, 13, 15]] = 35.0
+_E_EDGE = np.zeros(19)  # finger_0 local drop at +500 (E11, E12); finger_1 gets E1, E2
+_E_EDGE[[10, 11]] = [-700.0, -220.0]
+_E_SHEAR = np.zeros(19)
+_E_SHEAR[[1, 2, 4, 11, 12, 14]] = [20.0, 12.0, -12.0, -20.0, -12.0, 12.0]
+_PAC_BASE = (2054.5, 2030.5)
+_PAC_COL_OFFSET = np.zeros(PAC_PER_ROW)
+_PAC_COL_OFFSET[:4] = [-2.0, -1.5, -1.0, -0.5]
+_PAC_COL_OFFSET[19:] = [2.0, 3.0, 4.0]
+_PAC_RATE = ROW_RATE_HZ * PAC_PER_ROW
+
+
+def _lowpass(x: np.ndarray, tau_rows: float) -> np.ndarray:
+    a = math.exp(-1.0 / max(tau_rows, 1e-3))
+    return lfilter([1 - a], [1, -a], x, axis=0)
+
+
+def _resonator(x: np.ndarray, freq: float, zeta: float, rate: float) -> np.ndarray:
+    """Damped ringing at ``freq`` Hz excited by ``x`` (impulse response peaks near 1)."""
+    w0 = 2 * math.pi * freq / rate
+    r = math.exp(-zeta * w0)
+    w = w0 * math.sqrt(1 - zeta**2)
+    return lfilter([math.sin(w)], [1, -2 * r * math.cos(w), r * r], x, axis=0)
+
+
+def _pressure(delta: np.ndarray, p: dict[str, float], shares: np.ndarray, rows_s: float):
+    """Noise-free PDC above baseline, (n, 2), for an indentation trajectory (m per row)."""
+    el = 500 * (np.clip(delta, 0, None) / p["indent_500"]) ** 1.1
+    el = el[:, None] * shares[None, :]
+    slow = _lowpass(el, 3.0 * rows_s)
+    lag = _lowpass(el, 1.0 * rows_s) - el
+    unload = np.clip(lag, 0, None)
+    soft = 1 - p["stiffness"]
+    rebound = _resonator(np.diff(el, axis=0, prepend=0), 1.5 / rows_s, 0.15, 1.0)
+    return (
+        el
+        - 0.35 * p["porosity"] * slow
+        + 0.8 * p["stickiness"] * unload
+        - 0.5 * (1 - p["springiness"]) * soft * unload
+        + 2.0 * p["springiness"] * soft * rebound
+    )
+
+
+class _Timeline:
+    """Accumulates controller states with the gripper aperture and arm height of every row."""
+
+    def __init__(self, scale: float, rng: np.random.Generator) -> None:
+        self.rows_s = ROW_RATE_HZ * scale  # rows per (unscaled) second
+        self.rng = rng
+        self.detail: list[tuple[str, int]] = []
+        self.code: list[np.ndarray] = []
+        self.g: list[np.ndarray] = [np.array([_OPEN_MAX])]
+        self.z: list[np.ndarray] = [np.array([0.25])]
+
+    @property
+    def gripper(self) -> float:
+        return float(self.g[-1][-1])
+
+    @property
+    def height(self) -> float:
+        return float(self.z[-1][-1])
+
+    def rows(self, seconds: float, jitter: float = 0.08) -> int:
+        return max(2, round(seconds * self.rows_s * self.rng.uniform(1 - jitter, 1 + jitter)))
+
+    def add(self, state: str, code: int, g: np.ndarray, z: np.ndarray | None = None) -> None:
+        n = len(g)
+        self.detail.append((state, n))
+        self.code.append(np.full(n, code))
+        self.g.append(g)
+        self.z.append(np.full(n, self.height) if z is None else z)
+
+    def move(self, state: str, code: int, target: float, speed: float, wait_s: float = 0.0):
+        n = max(2, math.ceil(abs(target - self.gripper) / (speed / self.rows_s)))
+        g = np.linspace(self.gripper, target, n + 1)[1:]
+        if wait_s:
+            g = np.concatenate([g, np.full(self.rows(wait_s), target)])
+        self.add(state, code, g)
+
+    def wait(self, state: str, code: int, seconds: float, dz: float = 0.0, jitter: float = 0.08):
+        n = self.rows(seconds, jitter)
+        z = np.linspace(self.height, self.height + dz, n + 1)[1:]
+        self.add(state, code, np.full(n, self.gripper), z)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return np.concatenate(self.g[1:]), np.concatenate(self.z[1:]), np.concatenate(self.code)
+
+
+def _controller(p: dict[str, float], w: float, shares: np.ndarray, tl: _Timeline) -> float:
+    """Run the controller of §1.4 into ``tl``; returns the squeeze travel (m)."""
+    tl.wait("DISABLED", 0, 0.5)
+    tl.wait("OPEN_GRIPPER_MAX", 0, 2.0)
+    n = tl.rows(4.0)
+    z = np.linspace(tl.height, 0.05, n + 1)[1:]
+    tl.add("MOVE_ARM_START_POSITION", 0, np.full(n, _OPEN_MAX), z)
+    tl.code[-1][n // 2 :] = 7
+    tl.move("MOVE_GRIPPER_FAST_CLOSE", 5, w - 0.3 * p["indent_500"], _FAST)
+    tl.move("OPEN_GRIPPER_BY_2CM_FAST", 5, tl.gripper + 0.02, _FAST, wait_s=0.3)
+    tl.move("FIND_CONTACT_CLOSE_GRIPPER_SLO", 3, w, _SLOW)
+
+    step = _SLOW / tl.rows_s
+    g_prefix = tl.arrays()[0]
+    close = w - step * np.arange(1, math.ceil(3.0 * p["indent_500"] / step) + 2)
+    pdc = _pressure(w - np.concatenate([g_prefix, close]), p, shares, tl.rows_s)
+    above = np.flatnonzero(pdc[len(g_prefix) :].max(axis=1) >= 500)
+    close = close[: (above[0] + 1 if above.size else len(close))]
+    travel = w - float(close[-1])
+    reopen = close[-1] + step * np.arange(1, math.ceil(travel / step) + int(8 * tl.rows_s))
+    traj = np.concatenate([g_prefix, close, reopen])
+    pdc = _pressure(w - traj, p, shares, tl.rows_s)[len(g_prefix) + len(close) :]
+    below = np.flatnonzero(pdc.max(axis=1) <= 10)
+    reopen = reopen[: (below[0] + 1 if below.size else len(reopen))]
+    tl.add("SQUEEZE_SET_PRESSURE_SLOW", 3, np.concatenate([close, reopen]))
+
+    tl.move("OPEN_GRIPPER_BY_2CM_FAST", 3, tl.gripper + 0.02, _FAST, wait_s=1.0)
+    tl.move("CLOSE_GRIPPER_SLOW_TO_POSITION", 1, w - 0.5 * travel, _POSITION_SPEED)
+    tl.wait("HOLD_FOR_10_SECONDS", 1, 10.0, jitter=0.01)
+    tl.move("OPEN_GRIPPER_BY_2CM_FAST", 1, tl.gripper + 0.02, _FAST)
+    tl.wait("MOVE_UP_START_HEIGHT", 1, 3.0, dz=0.05)
+    for code, fraction, slide, slide_s in ((2, 0.2, "SLIDE_5CM", 5.0), (6, 0.1, "MOVE_DOWN_5CM", 2.0)):
+        tl.move("CLOSE_GRIPPER_SLOW_TO_POSITION", code, w - fraction * travel, _POSITION_SPEED)
+        tl.wait(slide, code, slide_s, dz=-0.05, jitter=0.05)
+        tl.wait("SLIDE_DONE_WAIT_5", code, 5.0)
+        tl.move("OPEN_GRIPPER_FAST_2CM", code, tl.gripper + 0.02, _FAST)
+        if code == 2:
+            tl.wait("MOVE_UP_5CM", code, 3.0, dz=0.05)
+    tl.move("OPEN_GRIPPER_FAST_MAX", 6, _OPEN_MAX, _FAST, wait_s=1.0)
+    return travel
+
+
+def _pac(
+    p: dict[str, float],
+    finger: int,
+    pdc: np.ndarray,
+    slide_pos: np.ndarray,
+    squeezing: np.ndarray,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """(N, 22) PAC counts of one finger."""
+    n = len(pdc)
+    contact = np.clip(pdc / 40.0, 0, 1)
+    c22 = np.repeat(contact, PAC_PER_ROW)
+    pos = np.interp(np.arange(n * PAC_PER_ROW) / PAC_PER_ROW, np.arange(n), slide_pos)
+    speed = np.abs(np.diff(pos, prepend=pos[0])) * _PAC_RATE  # m/s
+    sliding = c22 * np.clip(speed / 0.01, 0, 3)
+    press = np.sqrt(np.clip(np.repeat(pdc, PAC_PER_ROW) / 100.0, 0, 1.5))
+    texture = (4 + 120 * p["roughness"] ** 1.5 + 30 * p["hairiness"]) * np.sqrt(sliding) * press
+    sigma = rng.uniform(3.0, 4.5) + 2.5 * c22 + texture
+    x = rng.standard_normal(len(c22), dtype=np.float32) * sigma
+
+    kicks = np.zeros(len(c22))
+    edges = np.flatnonzero(np.diff((contact > 0.5).astype(int))) + 1
+    kicks[edges * PAC_PER_ROW] = (150 + 250 * p["stiffness"]) * rng.uniform(0.6, 1.4, len(edges))
+    bump = np.flatnonzero(np.diff(np.floor(pos / 0.004)) != 0) + 1
+    bump = bump[sliding[bump] > 0.1]
+    kicks[bump] += 300 * p["bumpiness"] * press[bump] * rng.choice([-1, 1], len(bump))
+    slip_rate = (6 * p["stickiness"] + 1.5 * p["friction"]) / _PAC_RATE
+    slips = np.flatnonzero(rng.random(len(c22)) < slip_rate * np.clip(sliding, 0, 1))
+    kicks[slips] += (100 + 700 * p["stickiness"]) * rng.normal(0, 1, len(slips))
+    crackle_rate = 80 * p["crinkliness"] ** 2 / _PAC_RATE
+    crack = np.flatnonzero(rng.random(len(c22)) < crackle_rate * np.repeat(squeezing, PAC_PER_ROW))
+    kicks[crack] += 500 * p["crinkliness"] * rng.normal(0, 1, len(crack))
+    pac = _PAC_BASE[finger] + x + _resonator(kicks, 250.0, 0.08, _PAC_RATE)
+    spikes = np.flatnonzero(rng.random(len(c22)) < 0.002 * c22)
+    pac[spikes] = rng.choice([0, ADC_MAX], len(spikes))
+    pac = pac.reshape(n, PAC_PER_ROW) + _PAC_COL_OFFSET
+    return np.clip(np.rint(pac), 0, ADC_MAX).astype(np.int64)
+
+
+def _trial(p: dict[str, float], scale: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """All datasets of one trial group, keyed by their path inside the group."""
+    shares = np.clip(1 + rng.normal(0, 0.12, 2), 0.6, 1.4)
+    shares /= shares.max()
+    q = dict(p, indent_500=p["indent_500"] * rng.uniform(0.9, 1.1))
+    w = max(p["grip_width"] + rng.normal(0, 0.003), q["indent_500"] + 0.003)
+    tl = _Timeline(scale, rng)
+    _controller(q, w, shares, tl)
+    g, z, code = tl.arrays()
+    n = len(g)
+    rows_s = tl.rows_s
+    pdc = _pressure(w - g, q, shares, rows_s)  # (n, 2)
+    detail = np.concatenate([np.full(k, s.encode(), dtype="S30") for s, k in tl.detail])
+    squeezing = (detail == b"SQUEEZE_SET_PRESSURE_SLOW") & (np.diff(g, prepend=g[0]) < 0)
+    slide_pos = -z
+
+    out: dict[str, np.ndarray] = {}
+    contact_time = np.cumsum(np.clip(pdc / 40.0, 0, 1), axis=0)
+    heat = contact_time / max(contact_time[-1].max(), 1.0)
+    pos = np.cumsum(np.abs(np.diff(slide_pos, prepend=slide_pos[0])))
+    sliding = np.abs(np.diff(slide_pos, prepend=slide_pos[0])) * rows_s > 1e-3
+    edge = np.clip(0.6 + rng.normal(0, 0.25), 0.1, 1.3)
+    for f in range(2):
+        pf = pdc[:, f]
+        contact = np.clip(pf / 40.0, 0, 1)
+        base_pdc = rng.normal((857, 797)[f], (3, 8)[f])
+        drift = np.cumsum(rng.normal(0, 0.02, n))
+        out[f"biotacs/finger_{f}/pdc"] = base_pdc + pf + 0.2 * drift + rng.normal(0, 0.3, n)
+        tac_amp = (60 + 100 * p["effusivity"]) * rng.uniform(0.85, 1.15)
+        tac = tac_amp * (contact - _lowpass(contact, 1.5 * rows_s))
+        out[f"biotacs/finger_{f}/tac"] = rng.normal(2040, 15) + tac + rng.normal(0, 1.25, n)
+        tdc = (8 - 21 * p["effusivity"]) * _lowpass(heat[:, f], 3 * rows_s)
+        tdc += 4 * (0.3 - p["effusivity"]) * _lowpass(contact, 2 * rows_s)
+        out[f"biotacs/finger_{f}/tdc"] = (
+            rng.uniform(1850, 2080) + tdc + drift + rng.normal(0, 0.35, n)
+        )
+        mirror = _MIRROR if f else np.arange(19)
+        gain = rng.normal(1, 0.15, 19)
+        e = _E_BASE[f] + rng.normal(0, 15, 19)
+        e = e + np.outer(pf / 150, (_E_PRESS * gain)[mirror])
+        e += np.outer(edge * (np.clip(pf, 0, None) / 500) ** 2, _E_EDGE[mirror])
+        shear = p["friction"] * contact * sliding * np.clip(pf / 100, 0, 1.5)
+        e += np.outer(shear, _E_SHEAR[mirror])
+        bumps = p["bumpiness"] * contact * np.sin(2 * np.pi * pos / 0.006 + rng.uniform(0, 6.3))
+        e += np.outer(25 * bumps, gain[mirror])
+        out[f"biotacs/finger_{f}/electrodes"] = e + rng.normal(0, 0.45, (n, 19))
+        out[f"biotacs/finger_{f}/pac"] = _pac(p, f, pf, slide_pos, squeezing, rng)
+    for key in list(out):
+        if not key.endswith("pac"):
+            out[key] = np.clip(np.rint(out[key]), 0, ADC_MAX).astype(np.int64)
+
+    total = pdc.sum(axis=1)
+    vel = np.diff(g, prepend=g[0]) * rows_s
+    vib = np.sqrt(np.clip(total / 200, 0, 1)) * sliding * (0.05 + 0.5 * p["roughness"])
+    out["accelerometer"] = (
+        np.array([0.3, -0.5, -9.7]) + rng.normal(0, 1, (n, 3)) * (0.03 + vib)[:, None]
+    )
+    out["gripper_aperture/joint_position"] = g + rng.normal(0, 2e-5, n)
+    out["gripper_aperture/joint_velocity"] = vel + rng.normal(0, 1e-4, n)
+    out["gripper_aperture/joint_effort"] = -0.012 * total - 2.0 * vel + rng.normal(0, 0.05, n)
+    out["state/controller_state"] = code.astype(np.int64)
+    out["state/controller_detail_state"] = detail
+
+    valid = np.arange(n) >= tl.rows(0.3)
+    xyz = np.array([0.62, 0.18, 0.0]) + rng.normal(0, 0.002, 3)
+    translation = np.column_stack([np.full(n, xyz[0]), np.full(n, xyz[1]), xyz[2] + z])
+    rotation = np.tile([0.0, 0.7071, 0.0, 0.7071], (n, 1)) + rng.normal(0, 1e-4, (n, 4))
+    translation[~valid] = 0.0
+    rotation[~valid] = 0.0
+    out["transforms/translation"] = translation
+    out["transforms/rotation"] = rotation
+    out["transforms/child_frame_id"] = np.where(valid, b"/l_gripper_tool", b"NOT_VALID").astype(
+        "S15"
+    )
+    out["transforms/parent_frame_id"] = np.where(valid, b"/torso_lift_lin", b"NOT_VALID").astype(
+        "S15"
+    )
+    t0 = 1_358_000_000 + int(rng.integers(0, 10_000_000))
+    m = int(n * rng.uniform(2.4, 2.8))
+    out["timestamps"] = np.sort(t0 + np.floor(rng.uniform(0, n / ROW_RATE_HZ, m))).astype(np.int64)
+    return out
+
+
+# ------------------------------------------------------------------------------- split groups
+def _split_members(
+    objs: list[ObjectInfo], trials: int
+) -> dict[str, dict[tuple[str, str], list[str]]]:
+    """Published split restricted to what exists: adjective -> (group, part) -> trial names.
+
+    Adjectives that would lack a positive or a negative on either side are left out (and logged).
+    """
+    table: dict[tuple[str, int], tuple[int, ...] | None] = {
+        (r.adjective, r.object_id): r.trials for r in published_test_split()
+    }
+    names = {o.object_id: [f"{o.group_stem}_{t:02d}" for t in range(1, trials + 1)] for o in objs}
+    out = {}
+    for adj in ADJECTIVES:
+        parts: dict[tuple[str, str], list[str]] = {}
+        for group, label in ((POSITIVE_SPLIT_GROUP, 1), (NEGATIVE_SPLIT_GROUP, 0)):
+            train, test = [], []
+            for o in (o for o in objs if o.labels[adj] == label):
+                oid, listed = o.object_id, (adj, o.object_id)
+                if listed not in table:
+                    train += names[oid]
+                elif table[listed] is None:
+                    test += names[oid]
+                else:
+                    chosen = {t for t in table[listed] if t <= trials} or set(
+                        range(trials // 2 + 1, trials + 1)
+                    )
+                    for t, name in enumerate(names[oid], start=1):
+                        (test if t in chosen else train).append(name)
+            parts[(group, "train")], parts[(group, "test")] = train, test
+        if all(parts.values()):
+            out[adj] = parts
+        else:
+            empty = ", ".join(f"{g}/{adj}/{part}" for (g, part), v in parts.items() if not v)
+            log.info("synthetic PHAC-2: no split groups for %s (%s would be empty)", adj, empty)
+    return out
+
+
+# ------------------------------------------------------------------------------------ writing
+def _write_trial(f: h5py.File, name: str, data: dict[str, np.ndarray], obj: ObjectInfo) -> None:
+    grp = f.create_group(name)
+    for key, arr in data.items():
+        grp.create_dataset(
+            key, data=arr, compression="gzip", compression_opts=4, shuffle=True
+        )
+    pos = [a.encode() for a in ADJECTIVES if obj.labels[a]]
+    neg = [a.encode() for a in ADJECTIVES if not obj.labels[a]]
+    grp.create_dataset("adjectives", data=np.array(pos, dtype="S12"))
+    grp.create_dataset("adjectives_neg", data=np.array(neg, dtype="S12"))
+
+
+def _write_links(f: h5py.File, objs: list[ObjectInfo], trials: int) -> None:
+    for adj in ADJECTIVES:
+        for group, label in (("adjectives", 1), ("adjectives_neg", 0)):
+            g = f.require_group(f"{group}/{adj}")
+            for o in objs:
+                if o.labels[adj] == label:
+                    for t in range(1, trials + 1):
+                        g[f"{o.group_stem}_{t:02d}"] = f[f"{o.group_stem}_{t:02d}"]
+    for adj, parts in _split_members(objs, trials).items():
+        for (group, part), names in parts.items():
+            g = f.require_group(f"{group}/{adj}/{part}")
+            for name in names:
+                g[name] = f[name]
+
+
+def _write_part(part: Path, photos: Path, spec: SyntheticSpec, object_ids: list[int]) -> None:
+    """Trials (and photographs) of some objects into their own file: one worker's share."""
+    props = object_properties(spec)
+    by_id = {o.object_id: o for o in objects()}
+    with h5py.File(part, "w") as f:
+        for i, oid in enumerate(object_ids):
+            if i % 10 == 0:
+                log.info("synthetic PHAC-2: part %s, object %d/%d", part.name, i + 1, len(object_ids))
+            obj = by_id[oid]
+            for t in range(1, spec.trials + 1):
+                rng = np.random.default_rng([spec.seed, oid, t])
+                data = _trial(props[oid], spec.duration_scale, rng)
+                _write_trial(f, f"{obj.group_stem}_{t:02d}", data, obj)
+            for view in range(spec.views):
+                shot = render.render_view(
+                    props[oid], view, spec.image_width, spec.image_height, seed=(spec.seed, oid)
+                )
+                render.write_jpeg(photos / f"{obj.group_stem}_{view:02d}.jpg", shot.image)
+
+
+def _workers(spec: SyntheticSpec, n_objects: int) -> int:
+    work = n_objects * spec.trials * spec.duration_scale + n_objects * spec.views / 20
+    return 1 if work < 60 else max(1, min(os.cpu_count() or 1, 8, n_objects))
+
+
+def generate(path: Path, spec: SyntheticSpec = SyntheticSpec()) -> Path:
+    """Write the synthetic file at ``path`` and its JPEGs to ``path.parent / "photographs"``.
+
+    Atomic: both are written under temporary names in the same folder and moved into place at
+    the end, so a failure leaves neither a partial file nor a partial photo folder. Objects are
+    spread over worker processes (one part file each, copied in without recompression).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tag = f".tmp-{os.getpid()}"
+    tmp_h5 = path.with_name(f".{path.name}{tag}")
+    photos = path.parent / "photographs"
+    tmp_photos = path.parent / f".photographs{tag}"
+    objs = _objects(spec)
+    n_workers = _workers(spec, len(objs))
+    ids = [o.object_id for o in objs]
+    shares = [ids[i::n_workers] for i in range(n_workers)]
+    parts = [path.with_name(f".{path.name}{tag}.part{i}") for i in range(n_workers)]
+    try:
+        tmp_photos.mkdir()
+        if n_workers == 1:
+            _write_part(parts[0], tmp_photos, spec, ids)
+        else:
+            ctx = multiprocessing.get_context("fork")
+            with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
+                jobs = [
+                    pool.submit(_write_part, part, tmp_photos, spec, share)
+                    for part, share in zip(parts, shares, strict=True)
+                ]
+                for job in jobs:
+                    job.result()
+        with h5py.File(tmp_h5, "w") as f:
+            f.attrs["TITLE"] = "Aggregated BOLT Data (synthetic)"
+            f.attrs["GENERATOR_VERSION"] = GENERATOR_VERSION
+            f.attrs["spec"] = json.dumps(asdict(spec))
+            for part in parts:
+                with h5py.File(part, "r") as src:
+                    for name in src:
+                        src.copy(src[name], f, name=name)
+                part.unlink()
+            _write_links(f, objs, spec.trials)
+        old = path.parent / f".photographs-old{tag}"
+        if photos.exists():
+            os.replace(photos, old)
+        os.replace(tmp_photos, photos)
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(tmp_h5, path)
+    finally:
+        for tmp in (tmp_h5, *parts):
+            tmp.unlink(missing_ok=True)
+        shutil.rmtree(tmp_photos, ignore_errors=True)
+    return path
+
+
+def spec_hash(spec: SyntheticSpec) -> str:
+    """Short stable hash of a spec (part of the cache folder name)."""
+    return hashlib.sha256(json.dumps(asdict(spec), sort_keys=True).encode()).hexdigest()[:10]
+
+
+def default_file(cache_dir: Path, spec: SyntheticSpec = SyntheticSpec()) -> Path:
+    """The cached file for ``spec`` under ``cache_dir``; generated on first use, reused after."""
+    folder = Path(cache_dir) / f"synthetic-v{GENERATOR_VERSION}-{spec_hash(spec)}"
+    path = folder / "phac_synthetic.h5"
+    if path.exists():
+        return path
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # concurrent jobs: one generates, the others wait
+        if not path.exists():
+            log.info("generating synthetic PHAC-2 data at %s (first use)", path)
+            start = time.perf_counter()
+            generate(path, spec)
+            log.info("generated %s in %.1f s", path, time.perf_counter() - start)
+    return path

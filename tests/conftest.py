@@ -1,0 +1,72 @@
+"""Shared fixtures: a tiny generated data set, a temporary MLflow store, config composition."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
+
+os.environ["MLFLOW_DISABLE_TELEMETRY"] = "true"
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+# A tiny PHAC-2 stand-in: all 60 objects (so every published split exists), 2 trials, short EPs.
+TINY_DATA = [
+    "data.trials=2",
+    "data.duration_scale=0.1",
+    "data.views=1",
+    "data.image_width=96",
+    "data.image_height=64",
+]
+# Few epochs: these tests check the plumbing, not the paper's numbers.
+FAST_MODELS = {
+    "haptic_cnn": ["model.epochs=2", "model.finetune_epochs=1", "model.batch_size=256"],
+    "haptic_lstm": ["model.epochs=2", "model.finetune_epochs=1", "model.batch_size=256"],
+    "linear_svm": [],
+    "random": [],
+}
+
+
+@pytest.fixture(scope="session")
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="session")
+def mlflow_uri(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """One sqlite store per session: creating the schema costs ~2 s."""
+    return f"sqlite:///{tmp_path_factory.mktemp('mlflow') / 'mlflow.db'}"
+
+
+@pytest.fixture(scope="session")
+def compose_config():
+    """compose(overrides) -> resolved-ready DictConfig, as Hydra would build it."""
+
+    def _compose(overrides: list[str] | None = None) -> DictConfig:
+        with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+            return compose("config", overrides=list(overrides or []), return_hydra_config=False)
+
+    return _compose
+
+
+@pytest.fixture(scope="session")
+def tiny_config(compose_config, cache_dir: Path, mlflow_uri: str):
+    """compose with tiny data, a temporary cache and MLflow store, and few epochs."""
+
+    def _tiny(overrides: list[str] | None = None, adjectives: str = "[hard,soft,smooth]"):
+        real_file = "data=phac2" in (overrides or [])
+        base = [
+            *([] if real_file else TINY_DATA),
+            f"cache_dir={cache_dir}",
+            f"tracking.uri={mlflow_uri}",
+            f"adjectives={adjectives}",
+            *(overrides or []),
+        ]
+        model = compose_config(base).model.name
+        given = {o.split("=")[0] for o in overrides or []}
+        fast = [o for o in FAST_MODELS[model] if o.split("=")[0] not in given]
+        return compose_config([*fast, *base])
+
+    return _tiny

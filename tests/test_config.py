@@ -1,0 +1,107 @@
+"""Every YAML composes and builds; option names are registry names; bad values fail early."""
+
+import inspect
+from pathlib import Path
+
+import pytest
+
+from tactile_exp.combine import COMBINERS
+from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.data.sources import DATA_SOURCES
+from tactile_exp.data.splits import SPLITS
+from tactile_exp.modalities import MODALITIES
+from tactile_exp.models import MODELS
+from tactile_exp.models.losses import LOSSES
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+REGISTRIES = {
+    "data": DATA_SOURCES,
+    "modality": MODALITIES,
+    "model": MODELS,
+    "loss": LOSSES,
+    "combine_instances": COMBINERS,
+    "split": SPLITS,
+}
+
+
+def _options(group: str) -> list[str]:
+    return sorted(p.stem for p in (CONF / group).glob("*.yaml"))
+
+
+@pytest.mark.parametrize("group", sorted(REGISTRIES))
+def test_option_names_equal_registry_names(group):
+    assert _options(group) == REGISTRIES[group].names()
+
+
+@pytest.mark.parametrize(
+    "group,option",
+    [(g, o) for g in sorted(REGISTRIES) for o in _options(g)]
+    + [("experiment", o) for o in _options("experiment")]
+    + [("sweep", o) for o in _options("sweep")],
+)
+def test_every_option_composes_and_builds(compose_config, group, option):
+    overrides = [f"{group}={option}"]
+    if group == "data" and option == "phac2":
+        overrides.append("data.path=/nonexistent/phac.h5")
+    cfg = compose_config(overrides)
+    settings = settings_from_config(cfg)  # builds the model through its registry
+    assert settings.choices.get(group, option) == option or group in ("experiment", "sweep")
+    for component, registry in (
+        (settings.data, DATA_SOURCES),
+        (settings.modality, MODALITIES),
+    ):
+        extra = {"dataset": None, "cache_dir": None} if registry is MODALITIES else {}
+        inspect.signature(registry[component.name]).bind(**extra, **component.params)
+    assert cfg.loss.name in LOSSES
+
+
+def test_experiments_read_like_table1(compose_config):
+    rows = {p.stem.split("_")[1] for p in (CONF / "experiment").glob("table1_*.yaml")}
+    assert rows == set("abcdefghijo")
+    j = settings_from_config(compose_config(["experiment=table1_j_haptic_cnn_10trials"]))
+    assert (j.model.name, j.combiner, j.combine) == ("haptic_cnn", "concat", 10)
+    a = settings_from_config(compose_config(["experiment=table1_a_haptic_static_1trial"]))
+    assert (a.model.name, a.modality.params["features"]) == ("linear_svm", ["static"])
+
+
+def test_defaults_are_the_paper_settings(compose_config):
+    s = settings_from_config(compose_config())
+    p = s.model.params
+    assert (p["epochs"], p["batch_size"], p["lr"], p["momentum"]) == (200, 1000, 0.01, 0.9)
+    assert (p["loss"], p["pretrain_loss"]) == ("hinge", "logistic")
+    assert len(s.adjectives) == 24
+    assert s.run_name == "haptic_cnn-concat-c1-s0"
+
+
+def test_config_hash_ignores_tracking_only(compose_config):
+    base = settings_from_config(compose_config()).config_hash
+    assert settings_from_config(compose_config(["tracking.uri=sqlite:///x.db"])).config_hash == base
+    assert settings_from_config(compose_config(["seed=1"])).config_hash != base
+
+
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        ("model=nope", "Could not find 'model/nope'"),
+        ("combine=0", "combine: must be a whole number of trials >= 1"),
+        ("combine=1.5", "combine: must be a whole number"),
+        ("adjectives=[]", "adjectives: must list at least one"),
+        ("adjectives=[hard,fluffy]", "adjectives: unknown ['fluffy']"),
+        ("device=tpu", "device: must be one of"),
+        ("model.lr=0", "model.params (haptic_cnn)"),
+        ("model.lr=-1", "lr"),
+        ("model.epochs=0", "epochs"),
+    ],
+)
+def test_impossible_values_fail_naming_the_key(compose_config, override, message):
+    with pytest.raises(Exception) as err:
+        settings_from_config(compose_config([override]))
+    assert message in str(err.value)
+
+
+def test_separate_takes_one_trial(compose_config):
+    with pytest.raises(ConfigError, match="combine_instances=separate"):
+        settings_from_config(
+            compose_config(["experiment=table1_h_haptic_cnn_separate", "combine=10"])
+        )

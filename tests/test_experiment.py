@@ -1,0 +1,160 @@
+"""One job end to end on tiny generated data into a temporary MLflow store."""
+
+from __future__ import annotations
+
+import csv
+import io
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from mlflow.tracking import MlflowClient
+from sklearn.metrics import roc_auc_score
+
+from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.experiment import run
+from tactile_exp.models import MODELS
+
+
+def _runs(uri: str, config_hash: str | None = None):
+    client = MlflowClient(uri)
+    exp = client.get_experiment_by_name("tactile_exp")
+    query = f"tags.config_hash = '{config_hash}'" if config_hash else ""
+    return client, client.search_runs([exp.experiment_id], filter_string=query, max_results=1000)
+
+
+def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri):
+    settings = settings_from_config(tiny_config(["seed=11"]))
+    result = run(settings)
+    client, runs = _runs(mlflow_uri, settings.config_hash)
+    parents = [r for r in runs if r.data.tags["run_level"] == "parent"]
+    children = [r for r in runs if r.data.tags["run_level"] == "child"]
+    assert len(parents) == 1 and len(children) == 3
+    parent = parents[0]
+    assert parent.info.status == "FINISHED" and parent.info.run_name == "haptic_cnn-concat-c1-s11"
+    assert parent.data.params["model.epochs"] == "2"
+    assert parent.data.params["choice.model"] == "haptic_cnn"
+    assert {c.data.tags["mlflow.parentRunId"] for c in children} == {parent.info.run_id}
+    assert {c.info.run_name for c in children} == {"adj=hard", "adj=soft", "adj=smooth"}
+    for child in children:
+        assert child.info.status == "FINISHED"
+        rows = list(csv.DictReader(io.StringIO(_artifact(client, child, "scores.csv"))))
+        y = [int(r["label"]) for r in rows]
+        s = [float(r["score"]) for r in rows]
+        assert child.data.metrics["auc"] == pytest.approx(roc_auc_score(y, s), abs=1e-12)
+        assert child.data.metrics["n_test_units"] == len(rows)
+        assert len(client.get_metric_history(child.info.run_id, "train_loss")) == 2
+    aucs = [c.data.metrics["auc"] for c in children]
+    assert parent.data.metrics["mean_auc"] == pytest.approx(np.mean(aucs))
+    assert result.mean_auc == pytest.approx(np.mean(aucs))
+    listed = {a.path for a in client.list_artifacts(parent.info.run_id)}
+    assert {"config.yaml", "auc_per_adjective.csv", "roc.png"} <= listed
+
+
+def _artifact(client: MlflowClient, run, path: str) -> str:
+    local = client.download_artifacts(run.info.run_id, path)
+    with open(local) as f:
+        return f.read()
+
+
+def test_finished_job_is_skipped_on_rerun(tiny_config, mlflow_uri):
+    cfg = tiny_config(["model=random", "combine_instances=separate", "seed=3"])
+    first = run(settings_from_config(cfg))
+    again = run(settings_from_config(cfg))
+    assert again.skipped and again.run_id == first.run_id
+    _, runs = _runs(mlflow_uri, settings_from_config(cfg).config_hash)
+    assert sum(r.data.tags["run_level"] == "parent" for r in runs) == 1
+
+
+def test_same_seed_same_aucs(tiny_config):
+    cfg = tiny_config(["seed=5", "tracking.skip_finished=false"], adjectives="[hard,squishy]")
+    a, b = run(settings_from_config(cfg)), run(settings_from_config(cfg))
+    for adj in ("hard", "squishy"):
+        np.testing.assert_array_equal(a.results[adj].scores, b.results[adj].scores)
+        assert a.results[adj].auc == b.results[adj].auc
+
+
+def test_a_failing_job_is_marked_failed_and_nothing_stays_running(
+    tiny_config, mlflow_uri, monkeypatch
+):
+    calls = {"n": 0}
+    original = MODELS["random"]
+
+    class Exploding(original):  # type: ignore[misc, valid-type]
+        def fit(self, train, on_epoch=None):
+            calls["n"] += 1
+            if calls["n"] == 2:
+                raise RuntimeError("boom in the second adjective")
+            return super().fit(train, on_epoch)
+
+    monkeypatch.setitem(MODELS._entries, "random", Exploding)
+    settings = settings_from_config(
+        tiny_config(["model=random", "combine_instances=separate", "seed=99"])
+    )
+    with pytest.raises(RuntimeError, match="boom"):
+        run(settings)
+    _, runs = _runs(mlflow_uri, settings.config_hash)
+    status = {r.info.run_name: r.info.status for r in runs}
+    assert status == {
+        "random-separate-c1-s99": "FAILED",
+        "adj=hard": "FINISHED",
+        "adj=soft": "FAILED",
+    }
+    parent = next(r for r in runs if r.data.tags["run_level"] == "parent")
+    assert "boom in the second adjective" in parent.data.tags["error"]
+    _, everything = _runs(mlflow_uri)
+    assert not [r for r in everything if r.info.status == "RUNNING"]
+
+
+def test_bad_data_fails_before_training_and_marks_the_run(tiny_config, mlflow_uri, tmp_path):
+    broken = tmp_path / "broken.h5"
+    broken.write_bytes(b"not an hdf5 file at all")
+    settings = settings_from_config(
+        tiny_config(["data=phac2", f"data.path={broken}", "model=random", "seed=7"])
+    )
+    with pytest.raises(ValueError, match="broken.h5"):
+        run(settings)
+    _, runs = _runs(mlflow_uri, settings.config_hash)
+    assert [r.info.status for r in runs] == ["FAILED"]
+
+
+def test_combine_more_trials_than_objects_have_is_rejected(tiny_config):
+    settings = settings_from_config(tiny_config(["combine=3", "model=random"]))
+    with pytest.raises(ConfigError, match="combine: 3 trials per unit"):
+        run(settings)
+
+
+def test_ten_trial_units_are_objects(tiny_config):
+    settings = settings_from_config(
+        tiny_config(["experiment=table1_j_haptic_cnn_10trials", "combine=2"], adjectives="[hard]")
+    )
+    result = run(settings).results["hard"]
+    assert len(result.units) == len(set(result.objects)) == result.sizes["n_test_objects"]
+
+
+def test_sweep_runs_every_job_under_multirun(tiny_config, cache_dir, mlflow_uri, tmp_path):
+    args = [
+        "data.trials=2",
+        "data.duration_scale=0.1",
+        "data.views=1",
+        "data.image_width=96",
+        "data.image_height=64",
+        f"cache_dir={cache_dir}",
+        f"tracking.uri={mlflow_uri}",
+        "adjectives=[hard]",
+        "model=random",
+        "combine_instances=separate",
+        "seed=21,22",
+        f"hydra.sweep.dir={tmp_path}/multirun",
+    ]
+    subprocess.run([sys.executable, "-m", "tactile_exp", "-m", *args], check=True, timeout=300)
+    client, runs = _runs(mlflow_uri)
+    parents = [
+        r for r in runs if r.info.run_name in ("random-separate-c1-s21", "random-separate-c1-s22")
+    ]
+    assert len(parents) == 2 and all(r.info.status == "FINISHED" for r in parents)
+    assert len({r.data.tags["sweep_id"] for r in parents}) == 1
+    assert (tmp_path / "multirun" / "0" / ".hydra" / "config.yaml").exists()
+    listed = {a.path for a in client.list_artifacts(parents[0].info.run_id, ".hydra")}
+    assert ".hydra/overrides.yaml" in listed

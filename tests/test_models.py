@@ -1,0 +1,208 @@
+"""Haptic CNN, LSTM, linear head and random guess: shapes, grouping, schedule, learning."""
+
+import numpy as np
+import pytest
+import torch
+from sklearn.metrics import roc_auc_score
+
+from tactile_exp.models import MODELS, Instances
+from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
+from tactile_exp.models.linear import LinearModel
+from tactile_exp.models.random_guess import RandomGuess
+
+FAST = dict(epochs=3, finetune_epochs=2, batch_size=50, device="cpu")
+
+
+def easy_case(n: int, channels: int = 32, steps: int = 150, seed: int = 0):
+    """Noise; positives carry a level shift of one signal (channel 3) in one EP window."""
+    rng = np.random.default_rng(seed)
+    X = rng.standard_normal((n, channels, steps)).astype(np.float32)
+    y = (np.arange(n) % 2).astype(int)
+    rng.shuffle(y)
+    X[y == 1, 3, 40:80] += 1.0
+    return Instances(X, y, np.array([f"t{i}" for i in range(n)]), np.arange(n) // 10)
+
+
+def test_all_models_registered():
+    assert {"haptic_cnn", "haptic_lstm", "linear", "random"} <= set(MODELS.names())
+
+
+@pytest.mark.parametrize("channels", [32, 64])
+def test_cnn_shapes(channels):
+    train = easy_case(40, channels)
+    model = MODELS.build("haptic_cnn", epochs=1, finetune_epochs=1, batch_size=20, device="cpu")
+    model.fit(train)
+    assert model.conv3_shape_ == (128, 19)
+    assert model.transform(train.X[:7]).shape == (7, 128 * 19)
+    scores = model.decision_function(train.X[:7])
+    assert scores.shape == (7,) and np.isfinite(scores).all()
+
+
+def test_lstm_shapes_and_transform_is_relu_fc10():
+    train = easy_case(30, steps=20)
+    model = MODELS.build("haptic_lstm", epochs=1, finetune_epochs=1, batch_size=10, device="cpu")
+    model.fit(train)
+    features = model.transform(train.X)
+    assert features.shape == (30, 10) and (features >= 0).all()
+    assert model.decision_function(train.X).shape == (30,)
+
+
+@pytest.mark.parametrize(("channels", "perturbed", "group"), [(32, 5, 5), (64, 37, 5)])
+def test_grouping_keeps_signals_separate(channels, perturbed, group):
+    torch.manual_seed(0)
+    net = GroupedTemporalConvNet(channels, 150)
+    x = torch.randn(4, channels, 150)
+    x2 = x.clone()
+    x2[:, perturbed] += torch.randn(4, 150)
+    with torch.no_grad():
+        changed = (net(x2) - net(x)).abs().view(4, 32, 4 * 19).amax(dim=(0, 2)) > 0
+    assert changed.tolist() == [g == group for g in range(32)]
+
+
+@pytest.mark.parametrize("channels", [32, 64])
+def test_fast_forward_and_gradients_equal_reference(channels):
+    torch.manual_seed(1)
+    net = GroupedTemporalConvNet(channels, 150, kernel_sizes=(7, 5, 3), strides=(2, 1, 2))
+    x = torch.randn(6, channels, 150)
+    outputs, grads = [], []
+    for impl in ("fast", "reference"):
+        net.impl = impl
+        net.zero_grad()
+        out = net(x)
+        (out**2).sum().backward()
+        outputs.append(out.detach())
+        grads.append(torch.cat([p.grad.flatten() for p in net.parameters()]))
+    torch.testing.assert_close(outputs[0], outputs[1], rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(grads[0], grads[1], rtol=1e-4, atol=1e-4)
+
+
+def test_fast_and_reference_training_give_the_same_auc():
+    train, test = easy_case(200), easy_case(100, seed=1)
+    scores = {}
+    for impl in ("fast", "reference"):
+        model = MODELS.build("haptic_cnn", impl=impl, seed=3, **FAST)
+        model.fit(train)
+        scores[impl] = model.decision_function(test.X)
+    np.testing.assert_allclose(scores["fast"], scores["reference"], rtol=1e-3, atol=1e-4)
+    auc = {k: roc_auc_score(test.y, v) for k, v in scores.items()}
+    assert abs(auc["fast"] - auc["reference"]) < 1e-4
+
+
+def test_logistic_then_hinge_schedule_reports_every_epoch_and_lowers_loss():
+    calls = []
+    model = MODELS.build("haptic_cnn", **{**FAST, "epochs": 6, "finetune_epochs": 4})
+    history = model.fit(easy_case(200), lambda e, n, m: calls.append((e, n, *m)))
+    assert [c[:2] for c in calls] == [(e, 10) for e in range(1, 11)]
+    assert [c[2] for c in calls] == ["train_loss"] * 6 + ["finetune_loss"] * 4
+    assert len(history["train_loss"]) == 6 and len(history["finetune_loss"]) == 4
+    assert history["train_loss"][-1] < history["train_loss"][0]
+    assert history["finetune_loss"][-1] < history["finetune_loss"][0]
+
+
+def test_finetune_moves_only_the_classifier():
+    model = MODELS.build("haptic_cnn", **{**FAST, "epochs": 1, "finetune_epochs": 0})
+    model.fit(easy_case(60))
+    body_after_stage1 = [p.detach().clone() for p in model.body_.parameters()]
+    tuned = MODELS.build("haptic_cnn", **{**FAST, "epochs": 1, "finetune_epochs": 3})
+    tuned.fit(easy_case(60))
+    for a, b in zip(body_after_stage1, tuned.body_.parameters(), strict=True):
+        assert torch.equal(a, b)
+
+
+def test_no_pretrain_loss_trains_one_stage():
+    model = MODELS.build("haptic_cnn", **{**FAST, "pretrain_loss": None})
+    assert list(model.fit(easy_case(60))) == ["train_loss"]
+
+
+@pytest.mark.parametrize("name", ["haptic_cnn", "haptic_lstm", "linear"])
+def test_same_seed_same_scores(name):
+    train = easy_case(60, steps=40)
+    runs = []
+    for seed in (7, 7, 8):
+        model = MODELS.build(name, seed=seed, **FAST)
+        model.fit(train)
+        runs.append(model.decision_function(train.X))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert not np.array_equal(runs[0], runs[2])
+
+
+@pytest.mark.parametrize(
+    ("name", "kwargs"),
+    [
+        ("haptic_cnn", dict(epochs=10, finetune_epochs=5, batch_size=50)),
+        ("haptic_lstm", dict(epochs=25, finetune_epochs=5, batch_size=25)),
+        ("linear", dict(epochs=10, finetune_epochs=5, batch_size=50)),
+    ],
+)
+def test_learns_easy_case_well_above_chance(name, kwargs):
+    train, test = easy_case(300), easy_case(200, seed=1)
+    model = MODELS.build(name, device="cpu", **kwargs)
+    model.fit(train)
+    assert roc_auc_score(test.y, model.decision_function(test.X)) > 0.9
+
+
+def test_linear_standardises_so_feature_scale_does_not_matter():
+    train, test = easy_case(200), easy_case(100, seed=1)
+    aucs = []
+    for scale in (1.0, 1000.0):
+        model = LinearModel(epochs=5, finetune_epochs=2, batch_size=50, device="cpu")
+        model.fit(Instances(train.X * scale, train.y, train.trial, train.object_id))
+        aucs.append(roc_auc_score(test.y, model.decision_function(test.X * scale)))
+    assert min(aucs) > 0.9
+    assert aucs[0] == pytest.approx(aucs[1], abs=0.02)
+
+
+def test_head_is_a_linear_model_with_the_same_settings():
+    model = MODELS.build("haptic_cnn", lr=0.05, seed=4, loss="logistic", **FAST)
+    head = model.head()
+    assert isinstance(head, LinearModel)
+    assert (head.lr, head.seed, head.loss, head.epochs) == (0.05, 4, "logistic", 3)
+    features = easy_case(40).X.reshape(40, -1)[:, :200]
+    head.fit(Instances(features, easy_case(40).y, np.zeros(40), np.zeros(40)))
+    assert head.decision_function(features).shape == (40,)
+
+
+def test_random_guess_is_chance_and_seeded():
+    y = np.arange(100) % 2
+    X = np.zeros((100, 32, 150), dtype=np.float32)
+    aucs = [roc_auc_score(y, RandomGuess(seed=s).decision_function(X)) for s in range(300)]
+    assert abs(np.mean(aucs) - 0.5) < 0.01
+    np.testing.assert_array_equal(
+        RandomGuess(seed=1).decision_function(X), RandomGuess(seed=1).decision_function(X)
+    )
+    model = MODELS.build("random", seed=1)
+    assert model.fit(Instances(X, y, y, y)) == {} and not model.learns_representation
+    assert isinstance(model.head(), RandomGuess)
+
+
+@pytest.mark.parametrize(
+    ("name", "kwargs", "argument"),
+    [
+        ("haptic_cnn", dict(lr=0), "lr"),
+        ("haptic_cnn", dict(epochs=0), "epochs"),
+        ("haptic_cnn", dict(batch_size=0), "batch_size"),
+        ("haptic_cnn", dict(loss="squared"), "loss"),
+        ("haptic_cnn", dict(pretrain_loss="squared"), "pretrain_loss"),
+        ("haptic_cnn", dict(impl="cuda_magic"), "impl"),
+        ("haptic_cnn", dict(widths=(4, 0, 4)), "widths"),
+        ("haptic_cnn", dict(kernel_sizes=(5, 5)), "kernel_sizes"),
+        ("haptic_lstm", dict(hidden=0), "hidden"),
+        ("linear", dict(momentum=-0.1), "momentum"),
+        ("linear", dict(device="tpu"), "device"),
+    ],
+)
+def test_bad_arguments_raise_naming_the_argument(name, kwargs, argument):
+    with pytest.raises(ValueError, match=argument):
+        MODELS.build(name, **kwargs)
+
+
+def test_bad_inputs_raise_clear_errors():
+    model = MODELS.build("haptic_cnn", **FAST)
+    with pytest.raises(RuntimeError, match="not fitted"):
+        model.decision_function(np.zeros((2, 32, 150), dtype=np.float32))
+    bad = easy_case(10)
+    with pytest.raises(ValueError, match="multiple of 32"):
+        model.fit(Instances(bad.X[:, :30], bad.y, bad.trial, bad.object_id))
+    model.fit(easy_case(20))
+    with pytest.raises(ValueError, match=r"fitted on rows of shape \(32, 150\)"):
+        model.decision_function(np.zeros((2, 64, 150), dtype=np.float32))

@@ -1,0 +1,135 @@
+"""Visual preprocessing (METHOD.md V1-V2): plate detection, crop geometry, network input, cache."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tactile_exp.data.layout import TrialName
+from tactile_exp.preprocess import visual
+from tactile_exp.preprocess.visual import (
+    IMAGENET_MEAN_RGB,
+    Plate,
+    crop_plate,
+    find_plate,
+    load_visual_arrays,
+    prepare_image,
+)
+
+GREY = (175, 178, 182)  # brushed aluminium: light grey, low saturation
+
+
+def scene(w: int, h: int, cx: int, cy: int, r: int, object_colour=(200, 40, 30)) -> np.ndarray:
+    """White-ish backdrop, a grey plate, a coloured object standing on the plate."""
+    image = np.full((h, w, 3), (245, 243, 240), dtype=np.uint8)
+    cv2.rectangle(image, (0, cy), (w, h), (90, 70, 50), -1)  # dark table under the plate
+    cv2.circle(image, (cx, cy), r, GREY, -1, lineType=cv2.LINE_AA)
+    if object_colour is not None:  # covers the plate's top middle, as the object would
+        cv2.rectangle(image, (cx - r // 2, cy - int(1.6 * r)), (cx + r // 2, cy), object_colour, -1)
+    return image
+
+
+@pytest.mark.parametrize(
+    ("w", "h", "cx", "cy", "r"), [(400, 300, 210, 190, 70), (1500, 1000, 700, 640, 260)]
+)
+def test_find_plate_on_drawn_circle(w, h, cx, cy, r):
+    plate = find_plate(scene(w, h, cx, cy, r))
+    assert isinstance(plate, tuple) and len(plate) == 3
+    assert abs(plate.cx - cx) < 0.03 * r and abs(plate.cy - cy) < 0.03 * r
+    assert abs(plate.r - r) < 0.05 * r
+
+
+def test_crop_geometry():
+    image = np.arange(300 * 400 * 3, dtype=np.uint32).reshape(300, 400, 3).astype(np.uint8)
+    crop = crop_plate(image, Plate(200.0, 220.0, 60.0))
+    assert crop.shape == (60, 120, 3)  # height R, width 2R
+    np.testing.assert_array_equal(crop, image[130:190, 140:260])  # centre R above the plate
+    clipped = crop_plate(image, Plate(30.0, 70.0, 60.0))  # near the top-left corner
+    np.testing.assert_array_equal(clipped, image[0:40, 0:90])
+    with pytest.raises(ValueError, match="outside"):
+        crop_plate(image, Plate(200.0, -100.0, 50.0))
+
+
+def test_crop_holds_the_object():
+    image = scene(400, 300, 200, 220, 60, object_colour=(20, 200, 40))
+    crop = crop_plate(image, find_plate(image))
+    assert crop.shape[0] == pytest.approx(60, abs=3) and crop.shape[1] == pytest.approx(120, abs=5)
+    green = (crop[..., 1] > 150) & (crop[..., 0] < 60)
+    assert green[:, crop.shape[1] // 2].mean() > 0.9  # the object fills the crop's centre column
+
+
+def test_no_plate_raises_clear_error():
+    red = np.zeros((200, 300, 3), np.uint8)
+    red[..., 0] = 220
+    with pytest.raises(ValueError, match="no plate found"):
+        find_plate(red)
+    with pytest.raises(ValueError, match="no plate found"):
+        find_plate(np.full((200, 300, 3), 250, np.uint8))  # white is not aluminium
+    with pytest.raises(ValueError, match=r"\(H, W, 3\) uint8"):
+        find_plate(np.zeros((20, 30), np.uint8))
+
+
+def test_prepare_image_shape_and_mean():
+    image = np.empty((90, 130, 3), np.uint8)
+    image[:] = (200, 100, 50)
+    out = prepare_image(image)
+    assert out.shape == (3, 224, 224) and out.dtype == np.float32
+    expected = np.array((200, 100, 50)) - IMAGENET_MEAN_RGB
+    np.testing.assert_allclose(out[:, 0, 0], expected, atol=1e-4)
+    np.testing.assert_allclose(out.mean(axis=(1, 2)), out[:, 5, 7], atol=1e-4)  # flat image
+    fitted = prepare_image(image, size=32, mean=(200, 100, 50))
+    assert fitted.shape == (3, 32, 32) and np.abs(fitted).max() == 0
+    gradient = np.tile(np.arange(256, dtype=np.uint8)[None, :, None], (64, 1, 3))
+    small = prepare_image(gradient, size=16, mean=(0, 0, 0))
+    assert np.all(np.diff(small[0, 0]) > 0)  # left-right order kept (no transposed axes)
+    with pytest.raises(ValueError, match="3 values"):
+        prepare_image(image, mean=(1, 2))
+
+
+class PhotoDataset:
+    def __init__(self, folder: Path, photos: dict[int, list[Path]], objects: list[int]) -> None:
+        self.trials = tuple(TrialName(f"thing_{o}_01", f"thing_{o}", o, 1) for o in objects)
+        self._photos = photos
+        self.folder = folder
+
+    def photographs(self) -> dict[int, list[Path]]:
+        return self._photos
+
+    def identity(self) -> str:
+        return "photos-1"
+
+
+def test_visual_arrays_cached_and_missing_listed(tmp_path, monkeypatch):
+    photos: dict[int, list[Path]] = {}
+    for obj, views in ((101, 2), (508, 1)):
+        for v in range(views):
+            path = tmp_path / f"obj_{obj}_{v}.jpg"
+            image = scene(320, 240, 150 + 10 * v, 170, 50, object_colour=(obj % 256, 30, 200))
+            cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+            photos.setdefault(obj, []).append(path)
+    ds = PhotoDataset(tmp_path, photos, [101, 508, 703])
+    reads = []
+    real_load = visual.load_photograph
+    monkeypatch.setattr(visual, "load_photograph", lambda p: reads.append(p) or real_load(p))
+    first = load_visual_arrays(ds, size=32, cache_dir=tmp_path / "cache")
+    assert len(reads) == 3
+    assert first.images.shape == (3, 3, 32, 32) and first.images.dtype == np.uint8
+    np.testing.assert_array_equal(first.object_id, [101, 101, 508])
+    np.testing.assert_array_equal(first.view, [0, 1, 0])
+    np.testing.assert_array_equal(first.missing, [703])
+    np.testing.assert_allclose(first.plate[:, 2], 50, rtol=0.05)
+    np.testing.assert_allclose(first.plate[:, 0], [150, 160, 150], atol=2)
+
+    second = load_visual_arrays(ds, size=32, cache_dir=tmp_path / "cache")
+    assert len(reads) == 3  # served from the cache
+    np.testing.assert_array_equal(second.images, first.images)
+    np.testing.assert_array_equal(second.name, first.name)
+
+    mean = second.channel_mean(np.array([0, 1]))
+    assert mean.shape == (3,)
+    batch = second.prepared(np.array([0, 1]), mean=mean)
+    assert batch.shape == (2, 3, 32, 32) and batch.dtype == np.float32
+    np.testing.assert_allclose(batch.mean(axis=(0, 2, 3)), 0, atol=1e-3)

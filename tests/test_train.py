@@ -1,0 +1,122 @@
+"""The SGD loop, device resolution, seeding and the losses."""
+
+import math
+
+import pytest
+import torch
+
+from tactile_exp.models.losses import LOSSES
+from tactile_exp.train import resolve_device, seed_everything, sgd_epochs, validate_sgd_args
+
+GOOD = dict(
+    epochs=2,
+    finetune_epochs=0,
+    batch_size=10,
+    lr=0.01,
+    momentum=0.9,
+    loss="hinge",
+    pretrain_loss="logistic",
+    known_losses=("hinge", "logistic"),
+)
+
+
+def test_resolve_device_auto_follows_cuda_availability(monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert resolve_device("auto") == torch.device("cpu")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    assert resolve_device("auto") == torch.device("cuda")
+    assert resolve_device("cpu") == torch.device("cpu")
+
+
+def test_resolve_device_rejects_unknown_and_missing_cuda(monkeypatch):
+    with pytest.raises(ValueError, match="device='gpu0'"):
+        resolve_device("gpu0")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with pytest.raises(ValueError, match="CUDA is not available"):
+        resolve_device("cuda")
+
+
+def test_seed_everything_repeats_init_and_shuffling():
+    first = seed_everything(3)
+    a = torch.rand(5), torch.randperm(20, generator=first)
+    second = seed_everything(3)
+    b = torch.rand(5), torch.randperm(20, generator=second)
+    assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+    assert not torch.equal(torch.randperm(20, generator=seed_everything(4)), a[1])
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("epochs", 0),
+        ("epochs", 2.5),
+        ("finetune_epochs", -1),
+        ("batch_size", 0),
+        ("lr", 0.0),
+        ("lr", -0.1),
+        ("momentum", 1.0),
+        ("loss", "squared"),
+        ("pretrain_loss", "squared"),
+    ],
+)
+def test_validate_sgd_args_names_the_bad_argument(key, value):
+    with pytest.raises(ValueError, match=rf"^{key} must"):
+        validate_sgd_args(**{**GOOD, key: value})
+
+
+def test_validate_sgd_args_lists_allowed_losses():
+    with pytest.raises(ValueError, match="one of hinge, logistic"):
+        validate_sgd_args(**{**GOOD, "loss": "l2"})
+    validate_sgd_args(**{**GOOD, "pretrain_loss": None})
+
+
+def test_losses_on_known_margins():
+    scores = torch.tensor([0.0, 2.0, -0.5])
+    y = torch.tensor([1, 1, 1])
+    assert LOSSES["logistic"](scores[:1], y[:1]).item() == pytest.approx(math.log(2))
+    # y = 1: margins 0, 2, -0.5 -> hinge 1, 0, 1.5
+    assert LOSSES["hinge"](scores, y).item() == pytest.approx(2.5 / 3)
+    # y = 0 flips the sign of the margin
+    assert LOSSES["hinge"](torch.tensor([2.0]), torch.tensor([0])).item() == pytest.approx(3.0)
+    assert LOSSES.names() == ["hinge", "logistic"]
+
+
+def test_sgd_epochs_lowers_the_loss_and_reports_each_epoch():
+    gen = seed_everything(0)
+    X = torch.randn(200, 5)
+    y = (X[:, 0] > 0).float()
+    layer = torch.nn.Linear(5, 1)
+    reported = []
+    curve = sgd_epochs(
+        lambda x: layer(x).squeeze(1),
+        list(layer.parameters()),
+        X,
+        y,
+        loss=LOSSES["logistic"],
+        epochs=15,
+        batch_size=64,
+        lr=0.1,
+        momentum=0.9,
+        generator=gen,
+        report=reported.append,
+    )
+    assert reported == curve and len(curve) == 15
+    assert curve[-1] < 0.5 * curve[0]
+
+
+def test_sgd_epochs_batch_larger_than_data_is_one_full_batch():
+    X, y = torch.randn(7, 2), torch.ones(7)
+    layer = torch.nn.Linear(2, 1)
+    curve = sgd_epochs(
+        lambda x: layer(x).squeeze(1),
+        list(layer.parameters()),
+        X,
+        y,
+        loss=LOSSES["hinge"],
+        epochs=1,
+        batch_size=1000,
+        lr=0.01,
+        momentum=0.0,
+        generator=seed_everything(0),
+    )
+    assert len(curve) == 1 and curve[0] > 0
