@@ -79,8 +79,8 @@ def settings_from_config(
     output_dir: Path | None = None,
 ) -> Settings:
     """Resolve ``cfg`` and validate every value a job depends on."""
-    resolved: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
-    resolved.pop("hydra", None)
+    ours = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])  # hydra.* is Hydra's
+    resolved: dict[str, Any] = OmegaConf.to_container(ours, resolve=True)  # type: ignore[assignment]
     choices = dict(choices or {})
     for group in ("data", "modality", "model", "combine_instances", "split"):
         choices.setdefault(group, str(resolved[group]["name"]))

@@ -34,7 +34,7 @@ def project_root() -> Path:
 
 
 def resolve_uri(uri: str | None) -> str:
-    """Config value, else $MLFLOW_TRACKING_URI, else sqlite:///<project>/mlflow.db (not ./mlruns)."""
+    """Config value, else $MLFLOW_TRACKING_URI, else sqlite:///<project>/mlflow.db."""
     if uri:
         return uri
     if os.environ.get("MLFLOW_TRACKING_URI"):
@@ -154,14 +154,13 @@ class Tracker:
 
 
 class PrepareSweep(Callback):
-    """Before a multirun launches parallel jobs: create the MLflow experiment and the default data
-    once, so jobs don't race on the sqlite schema or generate the same file concurrently."""
+    """Before a multirun launches parallel jobs: create the MLflow experiment, the data and the
+    shared preprocessed arrays once, so jobs neither race on the sqlite schema nor repeat work."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         from tactile_exp.config import settings_from_config
-        from tactile_exp.data.sources import DATA_SOURCES
+        from tactile_exp.experiment import load
 
         settings = settings_from_config(config)
         Tracker(settings.tracking.uri, settings.tracking.experiment)
-        if settings.data.name == "synthetic":
-            DATA_SOURCES.build(settings.data.name, **settings.data.params)
+        load(settings)

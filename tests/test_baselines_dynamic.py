@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from baselines_fixture import make_trial
+
 from tactile_exp.baselines import dynamic as dyn
 from tactile_exp.data.layout import Split
 
@@ -74,9 +74,7 @@ def test_chains_see_training_positives_only(tiny_grid):
     trials, split = _trials()
     table = dyn.SequenceTable.from_trials(trials, (8,))
     model = _fit(table, split)
-    assert sorted(model.fit_trials_) == sorted(
-        n for n in split.train if split.labels[n] == 1
-    )
+    assert sorted(model.fit_trials_) == sorted(n for n in split.train if split.labels[n] == 1)
     before = _params(model)
     X = model.transform(table, list(split.test))
     assert X.shape == (4, 16) and np.isfinite(X).all()

@@ -6,8 +6,8 @@ import warnings
 
 import numpy as np
 import pytest
-
 from baselines_fixture import make_trial
+
 from tactile_exp.baselines import static as st
 from tactile_exp.data.layout import PAC_RATE_HZ
 

@@ -133,7 +133,7 @@ def test_ten_trial_units_are_objects(tiny_config):
     assert len(result.units) == len(set(result.objects)) == result.sizes["n_test_objects"]
 
 
-def test_sweep_runs_every_job_under_multirun(tiny_config, cache_dir, mlflow_uri, tmp_path):
+def test_parallel_sweep_runs_every_job(tiny_config, cache_dir, mlflow_uri, tmp_path):
     args = [
         "data.trials=2",
         "data.duration_scale=0.1",
@@ -146,6 +146,8 @@ def test_sweep_runs_every_job_under_multirun(tiny_config, cache_dir, mlflow_uri,
         "model=random",
         "combine_instances=separate",
         "seed=21,22",
+        "hydra/launcher=joblib",  # two jobs at once on one sqlite store
+        "hydra.launcher.n_jobs=2",
         f"hydra.sweep.dir={tmp_path}/multirun",
     ]
     subprocess.run([sys.executable, "-m", "tactile_exp", "-m", *args], check=True, timeout=300)

@@ -13,13 +13,13 @@ from tactile_exp.models.random_guess import RandomGuess
 FAST = dict(epochs=3, finetune_epochs=2, batch_size=50, device="cpu")
 
 
-def easy_case(n: int, channels: int = 32, steps: int = 150, seed: int = 0):
+def easy_case(n: int, channels: int = 32, steps: int = 150, seed: int = 0, noise: float = 1.0):
     """Noise; positives carry a level shift of one signal (channel 3) in one EP window."""
     rng = np.random.default_rng(seed)
-    X = rng.standard_normal((n, channels, steps)).astype(np.float32)
+    X = noise * rng.standard_normal((n, channels, steps)).astype(np.float32)
     y = (np.arange(n) % 2).astype(int)
     rng.shuffle(y)
-    X[y == 1, 3, 40:80] += 1.0
+    X[y == 1, 3, steps * 4 // 15 : steps * 8 // 15] += 2.0  # steps 40:80 of 150
     return Instances(X, y, np.array([f"t{i}" for i in range(n)]), np.arange(n) // 10)
 
 

@@ -261,3 +261,37 @@ def test_bad_trial_raises_naming_it():
     trial.fingers[1].tdc = trial.fingers[1].tdc[:-1]
     with pytest.raises(ValueError, match="brick_508_01 finger_1/tdc"):
         compute_haptic_arrays(FakeDataset([trial]), steps=5, offsets=1)
+
+
+# --------------------------------------------------------------------------- synthetic file
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory):
+    from tactile_exp.data.phac2 import PHAC2
+    from tactile_exp.data.synthetic import SyntheticSpec, generate
+
+    spec = SyntheticSpec(
+        object_ids=(101, 508, 703), trials=2, duration_scale=0.1, views=1,
+        image_width=96, image_height=64,
+    )  # fmt: skip
+    return PHAC2(generate(tmp_path_factory.mktemp("synthetic") / "phac2.h5", spec))
+
+
+def test_synthetic_file_end_to_end(synthetic, tmp_path):
+    arrays = load_haptic_arrays(synthetic, steps=30, offsets=5, cache_dir=tmp_path)
+    names = [t.name for t in synthetic.trials]
+    assert arrays.trials == tuple(names)
+    trial = synthetic.read_trial(names[0])
+    lengths = [s.stop - s.start for s in trial.ep_segments().values()]
+    np.testing.assert_array_equal(arrays.count[0], lengths)
+    again = load_haptic_arrays(synthetic, steps=30, offsets=5, cache_dir=tmp_path)
+    np.testing.assert_array_equal(again.signals, arrays.signals)
+
+    train = [n for n in names if "_703_" not in n]
+    prep = HapticPreprocessor(arrays).fit(train)
+    out = prep.transform(names)
+    assert out.shape == (6, 2, 5, 32, 30) and np.isfinite(out).all()
+    assert np.all(prep.explained_variance_ratio_.sum(axis=1) > 0.5)
+    # EP-major channels: PDC is channel 1 of each EP's 8. The generator presses hardest in the
+    # squeeze, then holds at 50 %, slides at 20 % and 10 % of that travel (PHAC2_FORMAT.md §5).
+    pdc = out.reshape(6, 2, 5, 4, 8, 30)[:, :, :, :, 1].mean(axis=(2, 4))  # (trial, finger, EP)
+    assert np.all(np.diff(pdc, axis=-1) < 0)

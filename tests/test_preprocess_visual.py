@@ -8,7 +8,9 @@ import cv2
 import numpy as np
 import pytest
 
+from tactile_exp.data import render
 from tactile_exp.data.layout import TrialName
+from tactile_exp.data.synthetic import SyntheticSpec, object_properties
 from tactile_exp.preprocess import visual
 from tactile_exp.preprocess.visual import (
     IMAGENET_MEAN_RGB,
@@ -40,6 +42,36 @@ def test_find_plate_on_drawn_circle(w, h, cx, cy, r):
     assert isinstance(plate, tuple) and len(plate) == 3
     assert abs(plate.cx - cx) < 0.03 * r and abs(plate.cy - cy) < 0.03 * r
     assert abs(plate.r - r) < 0.05 * r
+
+
+# metal and glass objects are grey themselves; 503 (loofah) is hairy; 101 a coloured sponge
+RENDERED = (703, 702, 601, 503, 101)
+
+
+@pytest.fixture(scope="module")
+def properties() -> dict[int, dict[str, float]]:
+    return object_properties(SyntheticSpec(object_ids=RENDERED))
+
+
+@pytest.mark.parametrize(("w", "h"), [(480, 320), (1500, 1000)])
+def test_find_plate_on_rendered_views(properties, w, h):
+    for oid in RENDERED:
+        view = render.render_view(properties[oid], oid % 8, w, h, seed=(0, oid))
+        plate = find_plate(cv2.cvtColor(view.image, cv2.COLOR_BGR2RGB))
+        r = view.radius
+        assert np.hypot(plate.cx - view.centre[0], plate.cy - view.centre[1]) < 0.05 * r, oid
+        assert abs(plate.r - r) < 0.1 * r, oid
+
+
+def test_find_plate_on_tiny_rendered_views(properties):
+    """The test data's 96x64 photographs: a radius of ~17 px, so looser bounds."""
+    for oid in RENDERED:
+        for v in range(4):
+            view = render.render_view(properties[oid], v, 96, 64, seed=(0, oid))
+            plate = find_plate(cv2.cvtColor(view.image, cv2.COLOR_BGR2RGB))
+            r = view.radius
+            assert np.hypot(plate.cx - view.centre[0], plate.cy - view.centre[1]) < 0.15 * r
+            assert abs(plate.r - r) < 0.1 * r
 
 
 def test_crop_geometry():
@@ -133,3 +165,22 @@ def test_visual_arrays_cached_and_missing_listed(tmp_path, monkeypatch):
     batch = second.prepared(np.array([0, 1]), mean=mean)
     assert batch.shape == (2, 3, 32, 32) and batch.dtype == np.float32
     np.testing.assert_allclose(batch.mean(axis=(0, 2, 3)), 0, atol=1e-3)
+
+
+def test_visual_arrays_on_synthetic_file(tmp_path):
+    from tactile_exp.data.phac2 import PHAC2
+    from tactile_exp.data.synthetic import SyntheticSpec, generate
+
+    spec = SyntheticSpec(
+        object_ids=(101, 508, 703), trials=1, duration_scale=0.1, views=2,
+        image_width=96, image_height=64,
+    )  # fmt: skip
+    path = generate(tmp_path / "phac2.h5", spec)
+    for photo in (tmp_path / "photographs").glob("brick_508_*.jpg"):
+        photo.unlink()  # an object without photographs still counts for haptics
+    arrays = load_visual_arrays(PHAC2(path), size=48, cache_dir=tmp_path / "cache")
+    np.testing.assert_array_equal(arrays.object_id, [101, 101, 703, 703])
+    np.testing.assert_array_equal(arrays.view, [0, 1, 0, 1])
+    np.testing.assert_array_equal(arrays.missing, [508])
+    assert arrays.images.shape == (4, 3, 48, 48)
+    np.testing.assert_allclose(arrays.plate[:, 2], 0.27 * 64, rtol=0.15)  # render.py's radius

@@ -126,7 +126,8 @@ def render_view(
         thick = max(1, round(w / 1000))
         for i in range(strands):
             p0 = (int(xs[pick[i]] * 2), int(ys[pick[i]] * 2))
-            p1 = (int(p0[0] + length[i] * math.cos(ang[i])), int(p0[1] + length[i] * math.sin(ang[i])))
+            dx, dy = length[i] * math.cos(ang[i]), length[i] * math.sin(ang[i])
+            p1 = (int(p0[0] + dx), int(p0[1] + dy))
             cv2.line(img, p0, p1, tone[i].tolist(), thick, cv2.LINE_AA)
 
     img += rng.normal(0, 2.0, (h, w, 1)).astype(np.float32)

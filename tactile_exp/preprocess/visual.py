@@ -60,8 +60,7 @@ def find_plate(
     """Locate the plate (V1): colour mask, morphological clean-up, largest component, circle.
 
     Works on a copy shrunk to ``work_size`` pixels on its long side (fast on 6 MP photographs).
-    Centre and radius come from an ellipse fitted to the region's lower rim (``_fit_lower_arc``),
-    which the object standing on the plate never hides.
+    Centre and radius come from an ellipse fitted to the region's outline (``_fit_rim``).
     Raises ``ValueError`` when no plate-coloured region covers ``min_area`` of the image.
     """
     image = _check_image(image)
@@ -84,44 +83,42 @@ def find_plate(
             f"expected at least {min_area:.0%}"
         )
     component = labels == 1 + int(areas.argmax())
-    cx, cy, r = _fit_lower_arc(component)
+    cx, cy, r = _fit_rim(component)
     # pixel centres: +0.5 maps the small image's pixel grid back onto the full one
     return Plate((cx + 0.5) / scale - 0.5, (cy + 0.5) / scale - 0.5, r / scale)
 
 
-def _fit_lower_arc(component: np.ndarray) -> tuple[float, float, float]:
-    """(cx, cy, horizontal semi-axis) of the ellipse through the region's lower rim.
+def _fit_rim(component: np.ndarray) -> tuple[float, float, float]:
+    """(cx, cy, horizontal semi-axis) of the ellipse through the region's outline.
 
-    The object stands on the plate and can only hide (or, if it is grey too, extend) its upper
-    half; the lower rim stays visible. Rim points: the lowest pixel of each column and the
-    outermost pixels of each row in the region's lower half. A camera above the plate's plane
-    sees the circle as an axis-aligned ellipse whose horizontal semi-axis is the radius. Points
-    far from the fitted ellipse (the object hanging over the rim) are dropped and the fit repeated.
+    A camera above the plate's plane sees the circle as an axis-aligned ellipse whose horizontal
+    semi-axis is the radius. Outline points: the lowest pixel of each column (the object standing
+    on the plate never hides the lower rim) and the outermost pixels of each row. Points far from
+    the fitted ellipse (a grey object rising above the plate) are dropped and the fit repeated.
     """
     h, w = component.shape
     cols = np.flatnonzero(component.any(axis=0))
     rows = np.flatnonzero(component.any(axis=1))
     bottom = h - 1 - np.argmax(component[::-1, cols], axis=0)
-    lower = rows[rows >= (rows[0] + rows[-1]) / 2]
-    left = np.argmax(component[lower], axis=1)
-    right = w - 1 - np.argmax(component[lower, ::-1], axis=1)
+    left = np.argmax(component[rows], axis=1)
+    right = w - 1 - np.argmax(component[rows, ::-1], axis=1)
     # pixel edges, and no points on the image border (a cut rim says nothing about the ellipse)
     x = np.concatenate([cols, left - 0.5, right + 0.5]).astype(float)
-    y = np.concatenate([bottom + 0.5, lower, lower]).astype(float)
+    y = np.concatenate([bottom + 0.5, rows, rows]).astype(float)
     inside = np.concatenate([bottom < h - 1, left > 0, right < w - 1])
     x, y = x[inside], y[inside]
     for _ in range(4):
         if x.size < 8:
-            raise ValueError(f"no plate found: only {x.size} rim points of the grey region")
+            raise ValueError(f"no plate found: only {x.size} outline points of the grey region")
         # x^2 + c1 y^2 + c2 x + c3 y + c4 = 0: an axis-aligned ellipse, linear in c
         design = np.stack([y**2, x, y, np.ones_like(x)], axis=1)
         c1, c2, c3, c4 = np.linalg.lstsq(design, -(x**2), rcond=None)[0]
         if not c1 > 0:
-            raise ValueError("no plate found: the grey region's lower rim is not elliptical")
+            raise ValueError("no plate found: the grey region's outline is not elliptical")
         cx, cy = -c2 / 2, -c3 / (2 * c1)
         a2 = cx**2 + c1 * cy**2 - c4
         if not a2 > 0:
-            raise ValueError("no plate found: the grey region's lower rim is not elliptical")
+            raise ValueError("no plate found: the grey region's outline is not elliptical")
         value = x**2 + c1 * y**2 + c2 * x + c3 * y + c4
         distance = np.abs(value) / np.hypot(2 * x + c2, 2 * c1 * y + c3)  # Sampson distance
         inliers = distance <= max(1.0, 3 * np.median(distance))

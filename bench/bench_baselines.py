@@ -1,0 +1,82 @@
+"""Bench: static features of every trial and dynamic HMM chains per adjective, first run vs cache.
+
+Targets (full default synthetic file, 600 trials): static features < 2 min; dynamic chains for
+24 adjectives < 10 min. ``--adjectives N`` times N adjectives and extrapolates to 24 (printed as
+such).
+
+    .venv/bin/python bench/bench_baselines.py --cache-dir /tmp/tactile_bench --adjectives 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+from tactile_exp.baselines import features as feat
+from tactile_exp.baselines.dynamic import DynamicFeatures
+from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.synthetic import default_file
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--cache-dir", type=Path, default=Path(tempfile.gettempdir()) / "tactile_bench"
+    )
+    parser.add_argument("--adjectives", type=int, default=24, help="adjectives to fit (<= 24)")
+    parser.add_argument("--grid", default="small")
+    args = parser.parse_args()
+    start = time.perf_counter()
+    data = PHAC2(default_file(args.cache_dir))
+    print(f"data: {data} ready in {time.perf_counter() - start:.1f} s")
+    feature_cache = args.cache_dir / "baseline_features"
+    for path in feature_cache.glob("baseline_*.npz"):
+        path.unlink()  # a true first run
+
+    def tables(**kw) -> float:
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            feat.build_tables(data, cache_dir=feature_cache, **kw)
+        return time.perf_counter() - t0
+
+    n = len(data.trials)
+    lengths = DynamicFeatures.lengths(args.grid)
+    static_first = tables(static_f_max=100.0)
+    seq_first = tables(lengths=lengths)
+    feat._MEMO.clear()
+    static_cached = tables(static_f_max=100.0)
+    seq_cached = tables(lengths=lengths)
+    print(
+        f"static features, {n} trials: first {static_first:.1f} s "
+        f"({1e3 * static_first / n:.0f} ms/trial; target < 120 s), "
+        f"cached {static_cached:.2f} s (x{static_first / static_cached:.0f} faster)"
+    )
+    print(
+        f"HMM input table, {n} trials: first {seq_first:.1f} s, cached {seq_cached:.2f} s "
+        f"(x{seq_first / seq_cached:.0f} faster)"
+    )
+    _, table = feat.build_tables(data, lengths=lengths, cache_dir=feature_cache)
+    k = min(args.adjectives, len(ADJECTIVES))
+    t0 = time.perf_counter()
+    for adj in ADJECTIVES[:k]:
+        t1 = time.perf_counter()
+        model = DynamicFeatures(args.grid).fit(table, data.split(adj))
+        model.transform(table, table.trials)
+        print(
+            f"  {adj}: 16 chains {time.perf_counter() - t1:.1f} s, first (N,T,K) {model.params_[0]}"
+        )
+    per_adj = (time.perf_counter() - t0) / k
+    label = "measured" if k == len(ADJECTIVES) else f"extrapolated from {k}"
+    print(
+        f"dynamic chains ({args.grid} grid): {per_adj:.1f} s/adjective; 24 adjectives "
+        f"{24 * per_adj / 60:.1f} min ({label}; target < 10 min)"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,106 @@
+"""Time and peak memory of haptic and visual preprocessing on the full default synthetic file.
+
+Measures, in one run: the haptic arrays' first (uncached) and cached load, the engine's 24 x
+(fit on an adjective's training trials + transform of its train and test trials), and the visual
+arrays' first and cached load. Targets: cached preprocessing under 5 s, peak memory under 2 GB.
+
+    .venv/bin/python bench/bench_preprocess.py [--data-dir DIR]
+
+The synthetic data is generated once under DIR (default: the reader's cache dir) and timed
+separately; the preprocessed caches go to a fresh temporary folder so "first run" is one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import tempfile
+import time
+import tracemalloc
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.data.phac2 import PHAC2, default_cache_dir
+from tactile_exp.data.synthetic import default_file
+from tactile_exp.preprocess.haptic import HapticPreprocessor, load_haptic_arrays
+from tactile_exp.preprocess.visual import load_visual_arrays
+
+TARGET_CACHED_S = 5.0
+TARGET_PEAK_GB = 2.0
+
+
+def measure(label: str, fn: Callable[[], Any]) -> tuple[Any, float, float]:
+    """Run ``fn``; print and return (result, seconds, peak traced GB)."""
+    tracemalloc.start()
+    start = time.perf_counter()
+    result = fn()
+    seconds = time.perf_counter() - start
+    peak_gb = tracemalloc.get_traced_memory()[1] / 2**30
+    tracemalloc.stop()
+    print(f"{label:<44s} {seconds:8.2f} s   peak {peak_gb:6.3f} GB", flush=True)
+    return result, seconds, peak_gb
+
+
+def engine_loop(dataset: PHAC2, arrays) -> int:
+    """What one job does: fit and transform once per adjective."""
+    instances = 0
+    for adjective in ADJECTIVES:
+        split = dataset.split(adjective)
+        pre = HapticPreprocessor(arrays).fit(split.train)
+        instances += len(pre.transform(split.train)) + len(pre.transform(split.test))
+    return instances
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data-dir", type=Path, default=default_cache_dir())
+    args = parser.parse_args()
+
+    path, gen_s, _ = measure(
+        "synthetic file (generated or found)", lambda: default_file(args.data_dir)
+    )
+    dataset = PHAC2(path)
+    print(
+        f"data: {path} ({len(dataset.trials)} trials, "
+        f"{sum(map(len, dataset.photographs().values()))} photographs)"
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        cache = Path(tmp)
+        _, h_first, h_first_mem = measure(
+            "haptic arrays, first run", lambda: load_haptic_arrays(dataset, cache_dir=cache)
+        )
+        arrays, h_cached, h_cached_mem = measure(
+            "haptic arrays, cached", lambda: load_haptic_arrays(dataset, cache_dir=cache)
+        )
+        n, loop_s, loop_mem = measure(
+            "24 x (fit + transform train and test)", lambda: engine_loop(dataset, arrays)
+        )
+        print(f"  {n} trials transformed, {loop_s / 24 * 1000:.0f} ms per adjective")
+        _, v_first, v_first_mem = measure(
+            "visual arrays, first run", lambda: load_visual_arrays(dataset, cache_dir=cache)
+        )
+        _, v_cached, v_cached_mem = measure(
+            "visual arrays, cached", lambda: load_visual_arrays(dataset, cache_dir=cache)
+        )
+    maxrss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    cached_total = h_cached + loop_s + v_cached
+    peak = max(h_first_mem, h_cached_mem, loop_mem, v_first_mem, v_cached_mem)
+    print()
+    print(f"haptic cached / first run: {h_cached / h_first:.3f} ({h_first / h_cached:.0f}x faster)")
+    print(f"visual cached / first run: {v_cached / v_first:.3f} ({v_first / v_cached:.0f}x faster)")
+    print(
+        f"cached preprocessing of a job (haptic load + 24 fits + visual load): "
+        f"{cached_total:.2f} s (target < {TARGET_CACHED_S:.0f} s: "
+        f"{'met' if cached_total < TARGET_CACHED_S else 'MISSED'})"
+    )
+    print(
+        f"peak traced memory {peak:.3f} GB, process max RSS {maxrss_gb:.3f} GB "
+        f"(target < {TARGET_PEAK_GB:.0f} GB: {'met' if maxrss_gb < TARGET_PEAK_GB else 'MISSED'})"
+    )
+    print(f"(synthetic data step took {gen_s:.1f} s; not part of preprocessing)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,339 @@
+"""The synthetic PHAC-2 generator: layout, physics, splits, determinism, atomicity, caching."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from tactile_exp.data import synthetic
+from tactile_exp.data.layout import (
+    ADJECTIVES,
+    BASELINE_STATE,
+    EPS,
+    TrialName,
+    objects,
+    published_test_split,
+)
+from tactile_exp.data.synthetic import SyntheticSpec, default_file, generate, object_properties
+
+TINY = SyntheticSpec(trials=2, duration_scale=0.1, views=1, image_width=96, image_height=64)
+STATES = [  # (detail state, coarse codes) in trial order (PHAC2_FORMAT §1.4)
+    ("DISABLED", {0}),
+    ("OPEN_GRIPPER_MAX", {0}),
+    ("MOVE_ARM_START_POSITION", {0, 7}),
+    ("MOVE_GRIPPER_FAST_CLOSE", {5}),
+    ("OPEN_GRIPPER_BY_2CM_FAST", {5}),
+    ("FIND_CONTACT_CLOSE_GRIPPER_SLO", {3}),
+    ("SQUEEZE_SET_PRESSURE_SLOW", {3}),
+    ("OPEN_GRIPPER_BY_2CM_FAST", {3}),
+    ("CLOSE_GRIPPER_SLOW_TO_POSITION", {1}),
+    ("HOLD_FOR_10_SECONDS", {1}),
+    ("OPEN_GRIPPER_BY_2CM_FAST", {1}),
+    ("MOVE_UP_START_HEIGHT", {1}),
+    ("CLOSE_GRIPPER_SLOW_TO_POSITION", {2}),
+    ("SLIDE_5CM", {2}),
+    ("SLIDE_DONE_WAIT_5", {2}),
+    ("OPEN_GRIPPER_FAST_2CM", {2}),
+    ("MOVE_UP_5CM", {2}),
+    ("CLOSE_GRIPPER_SLOW_TO_POSITION", {6}),
+    ("MOVE_DOWN_5CM", {6}),
+    ("SLIDE_DONE_WAIT_5", {6}),
+    ("OPEN_GRIPPER_FAST_2CM", {6}),
+    ("OPEN_GRIPPER_FAST_MAX", {6}),
+]
+BIOTAC = {"electrodes": (19,), "pac": (22,), "pdc": (), "tac": (), "tdc": ()}
+FLOATS = {
+    "accelerometer": (3,),
+    "gripper_aperture/joint_position": (),
+    "gripper_aperture/joint_velocity": (),
+    "gripper_aperture/joint_effort": (),
+    "transforms/translation": (3,),
+    "transforms/rotation": (4,),
+}
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory) -> Path:
+    return generate(tmp_path_factory.mktemp("tiny") / "phac.h5", TINY)
+
+
+@pytest.fixture(scope="module")
+def full_length(tmp_path_factory) -> Path:
+    """Two objects (soft sponge, brick) at realistic duration."""
+    spec = SyntheticSpec(object_ids=(101, 508), trials=1, views=0)
+    return generate(tmp_path_factory.mktemp("full") / "phac.h5", spec)
+
+
+def runs(states: np.ndarray) -> list[tuple[bytes, int, int]]:
+    """(state, start, stop) of each run of equal consecutive values."""
+    cut = np.flatnonzero(states[1:] != states[:-1]) + 1
+    starts = np.concatenate([[0], cut])
+    stops = np.concatenate([cut, [len(states)]])
+    return [(states[a], int(a), int(b)) for a, b in zip(starts, stops, strict=True)]
+
+
+def baseline(g: h5py.Group, finger: int, channel: str) -> float:
+    rest = g["state/controller_detail_state"][:] == BASELINE_STATE
+    return float(g[f"biotacs/finger_{finger}/{channel}"][:][rest].mean())
+
+
+def test_trial_groups_datasets_shapes_and_dtypes(tiny):
+    with h5py.File(tiny, "r") as f:
+        trials = [TrialName.parse(n) for n in f if TrialName.parse(n)]
+        assert len(trials) == 120
+        assert {(t.object_id, t.trial) for t in trials} == {
+            (o.object_id, t) for o in objects() for t in (1, 2)
+        }
+        assert {n for n in f if not TrialName.parse(n)} == {
+            "adjectives", "adjectives_neg", "train_test_sets", "train_test_negative_sets"
+        }  # fmt: skip
+        for t in trials[::17]:
+            g = f[t.name]
+            n = g["state/controller_detail_state"].shape[0]
+            for finger in ("finger_0", "finger_1"):
+                for ch, tail in BIOTAC.items():
+                    ds = g[f"biotacs/{finger}/{ch}"]
+                    assert ds.shape == (n, *tail) and ds.dtype == np.int64, (t.name, ch)
+                    assert ds.compression == "gzip" and ds.shuffle
+                    values = ds[:]
+                    assert values.min() >= 0 and values.max() <= 4095
+            for key, tail in FLOATS.items():
+                assert g[key].shape == (n, *tail) and g[key].dtype == np.float64, key
+            assert g["state/controller_state"].dtype == np.int64
+            assert g["state/controller_detail_state"].dtype == np.dtype("S30")
+            for key in ("child_frame_id", "parent_frame_id"):
+                assert g[f"transforms/{key}"].dtype == np.dtype("S15")
+            assert g["transforms/child_frame_id"][-1] == b"/l_gripper_tool"
+            assert g["transforms/child_frame_id"][0] == b"NOT_VALID"
+            assert not g["transforms/rotation"][0].any()
+            stamps = g["timestamps"][:]
+            assert stamps.dtype == np.int64 and stamps.shape[0] != n
+            assert np.all(np.diff(stamps) >= 0)
+            obj = next(o for o in objects() if o.object_id == t.object_id)
+            assert g["adjectives"].dtype == np.dtype("S12")
+            assert [a.decode() for a in g["adjectives"][:]] == list(obj.positives)
+            neg = [a for a in ADJECTIVES if a not in obj.positives]
+            assert [a.decode() for a in g["adjectives_neg"][:]] == neg
+
+
+def test_full_state_sequence_with_contiguous_eps(tiny):
+    with h5py.File(tiny, "r") as f:
+        for name in ("car_sponge_101_01", "brick_508_02", "cologne_container__602_01"):
+            g = f[name]
+            detail = g["state/controller_detail_state"][:]
+            code = g["state/controller_state"][:]
+            seq = runs(detail)
+            assert [s.decode() for s, _, _ in seq] == [s for s, _ in STATES]
+            for (_, a, b), (state, codes) in zip(seq, STATES, strict=True):
+                assert set(np.unique(code[a:b]).tolist()) == codes, state
+            for ep in EPS.values():
+                assert sum(s == ep for s, _, _ in seq) == 1  # one contiguous block
+
+
+def test_realistic_ep_lengths_at_full_duration(full_length):
+    with h5py.File(full_length, "r") as f:
+        lengths = {}
+        for name in ("car_sponge_101_01", "brick_508_01"):
+            detail = f[name]["state/controller_detail_state"][:]
+            ep = {k: int((detail == v).sum()) for k, v in EPS.items()}
+            assert 5000 <= len(detail) <= 9000, name
+            assert 950 <= ep["hold"] <= 1050
+            assert 430 <= ep["slow_slide"] <= 570
+            assert 170 <= ep["fast_slide"] <= 230
+            assert 60 <= ep["squeeze"] <= 2200
+            lengths[name] = ep["squeeze"]
+        # stiff brick: steep rise, short squeeze; soft sponge: long travel
+        assert lengths["car_sponge_101_01"] > 5 * lengths["brick_508_01"]
+
+
+def test_squeeze_stops_at_baseline_plus_500(tiny, full_length):
+    # at duration_scale 0.1 one row closes 0.25 mm, so stiff objects overshoot by a step
+    for path, top in ((tiny, 600), (full_length, 515)):
+        with h5py.File(path, "r") as f:
+            for name in [n for n in f if TrialName.parse(n)][::7]:
+                g = f[name]
+                sq = g["state/controller_detail_state"][:] == EPS["squeeze"]
+                rise = [g[f"biotacs/finger_{i}/pdc"][:][sq] - baseline(g, i, "pdc") for i in (0, 1)]
+                peak = np.max(np.maximum(*rise))
+                assert 495 <= peak <= top, (name, peak)
+                hold = g["state/controller_detail_state"][:] == EPS["hold"]
+                hold_rise = max(
+                    (g[f"biotacs/finger_{i}/pdc"][:][hold] - baseline(g, i, "pdc")).mean()
+                    for i in (0, 1)
+                )
+                assert 100 <= hold_rise <= 300, (name, hold_rise)  # 50 % of the travel
+
+
+def test_baselines_and_electrode_mirror(full_length):
+    with h5py.File(full_length, "r") as f:
+        g = f["brick_508_01"]
+        assert 840 <= baseline(g, 0, "pdc") <= 875 and 765 <= baseline(g, 1, "pdc") <= 830
+        assert 2045 <= baseline(g, 0, "pac") <= 2065 and 2020 <= baseline(g, 1, "pac") <= 2040
+        sq = g["state/controller_detail_state"][:] == EPS["squeeze"]
+        rest = g["state/controller_detail_state"][:] == BASELINE_STATE
+        drops = []
+        for i in (0, 1):
+            e = g[f"biotacs/finger_{i}/electrodes"][:]
+            drops.append(e[sq].min(axis=0) - e[rest].mean(axis=0))
+        assert np.argmin(drops[0]) == 10 and np.argmin(drops[1]) == 0  # E11 vs E1: mirrored
+
+
+def test_hard_links_resolve_to_trial_groups(tiny):
+    labels = {o.object_id: o.labels for o in objects()}
+    with h5py.File(tiny, "r") as f:
+        for group, label in (("adjectives", 1), ("adjectives_neg", 0)):
+            for adj in ADJECTIVES:
+                names = list(f[f"{group}/{adj}"])
+                expected = sum(labels[o][adj] == label for o in labels) * 2
+                assert len(names) == expected, (group, adj)
+                for name in names:
+                    assert f[f"{group}/{adj}/{name}"] == f[name]  # the same HDF5 object
+                    assert labels[TrialName.parse(name).object_id][adj] == label
+        link = f["train_test_sets/soft/train"]
+        assert all(link[n] == f[n] for n in link)
+
+
+def test_split_groups_equal_published_table(tiny):
+    table = published_test_split()
+    labels = {o.object_id: o.labels for o in objects()}
+    with h5py.File(tiny, "r") as f:
+        assert set(f["train_test_sets"]) == set(ADJECTIVES) - {"sticky", "unpleasant"}
+        for adj in f["train_test_sets"]:
+            for group, label in (("train_test_sets", 1), ("train_test_negative_sets", 0)):
+                test = {TrialName.parse(n) for n in f[f"{group}/{adj}/test"]}
+                train = {TrialName.parse(n) for n in f[f"{group}/{adj}/train"]}
+                rows = [r for r in table if r.adjective == adj and r.label == label]
+                want = {(r.object_id, t) for r in rows for t in (r.trials or (1, 2)) if t <= 2}
+                assert {(t.object_id, t.trial) for t in test} == want, (adj, group)
+                everything = {(o, t) for o in labels if labels[o][adj] == label for t in (1, 2)}
+                assert {(t.object_id, t.trial) for t in train} == everything - want
+    nice_test = {n for n in h5py.File(tiny, "r")["train_test_sets/nice/test"]}
+    assert nice_test == {"microfiber_applicator_pad_111_02"}
+
+
+def test_split_restricted_to_subsets(caplog):
+    objs = list(objects())
+    with caplog.at_level(logging.INFO, logger="tactile_exp.data.synthetic"):
+        one = synthetic._split_members(objs, trials=1)
+    assert "nice" not in one and "sticky" not in one  # single trial: no positive left to train
+    assert "no split groups for nice" in caplog.text
+    three = synthetic._split_members(objs, trials=3)
+    nice = three["nice"]
+    assert nice[("train_test_sets", "test")] == ["microfiber_applicator_pad_111_02"]
+    assert nice[("train_test_sets", "train")] == [
+        "microfiber_applicator_pad_111_01",
+        "microfiber_applicator_pad_111_03",
+    ]
+    assert "sticky" not in three  # listed trials 01-03 cover all: no train positive
+    subset = [o for o in objs if o.object_id in (101, 119, 410, 508, 507, 509, 503, 120, 703)]
+    part = synthetic._split_members(subset, trials=2)
+    assert set(part) == {"absorbent"}
+    test_pos = {n[:-3] for n in part["absorbent"][("train_test_sets", "test")]}
+    assert test_pos == {"non_bumpy_foam_119", "flour_sack_410"}
+
+
+def test_same_seed_same_arrays_other_seed_differs(tmp_path):
+    spec = SyntheticSpec(object_ids=(101, 703), trials=1, duration_scale=0.1, views=1,
+                         image_width=96, image_height=64)  # fmt: skip
+    a = generate(tmp_path / "a" / "x.h5", spec)
+    b = generate(tmp_path / "b" / "x.h5", spec)
+    c = generate(tmp_path / "c" / "x.h5", SyntheticSpec(**{**spec.__dict__, "seed": 1}))
+
+    def arrays(path: Path) -> dict[str, np.ndarray]:
+        out = {}
+        with h5py.File(path, "r") as f:
+            f["car_sponge_101_01"].visititems(
+                lambda k, v: out.__setitem__(k, v[:]) if isinstance(v, h5py.Dataset) else None
+            )
+        return out
+
+    xa, xb, xc = arrays(a), arrays(b), arrays(c)
+    assert xa.keys() == xb.keys() and len(xa) == 22
+    assert all(np.array_equal(xa[k], xb[k]) for k in xa)
+    assert not np.array_equal(xa["biotacs/finger_0/pac"][:100], xc["biotacs/finger_0/pac"][:100])
+    jpg = "pinball_launcher_703_00.jpg"
+    assert (a.parent / "photographs" / jpg).read_bytes() == (b.parent / "photographs" / jpg).read_bytes()
+
+
+def test_generation_failure_leaves_nothing(tmp_path, monkeypatch):
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(synthetic, "_write_links", boom)
+    spec = SyntheticSpec(object_ids=(101,), trials=1, duration_scale=0.1, views=1,
+                         image_width=96, image_height=64)  # fmt: skip
+    with pytest.raises(RuntimeError, match="disk full"):
+        generate(tmp_path / "x.h5", spec)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_default_file_generates_once(tmp_path, monkeypatch, caplog):
+    spec = SyntheticSpec(object_ids=(508,), trials=1, duration_scale=0.1, views=1,
+                         image_width=96, image_height=64)  # fmt: skip
+    with caplog.at_level(logging.INFO, logger="tactile_exp.data.synthetic"):
+        path = default_file(tmp_path, spec)
+    assert path.name == "phac_synthetic.h5" and path.is_file()
+    assert path.parent.name.startswith(f"synthetic-v{synthetic.GENERATOR_VERSION}-")
+    assert "generated" in caplog.text
+    assert (path.parent / "photographs" / "brick_508_00.jpg").is_file()
+
+    def fail(*args, **kwargs):
+        raise AssertionError("regenerated")
+
+    monkeypatch.setattr(synthetic, "generate", fail)
+    assert default_file(tmp_path, spec) == path
+    other = SyntheticSpec(object_ids=(508,), trials=1, duration_scale=0.1, views=0, seed=3)
+    with pytest.raises(AssertionError, match="regenerated"):
+        default_file(tmp_path, other)
+
+
+def test_properties_follow_labels_and_material():
+    props = object_properties(SyntheticSpec())
+    info = {o.object_id: o for o in objects()}
+
+    def mean(prop: str, adj: str, label: int) -> float:
+        return np.mean([p[prop] for o, p in props.items() if info[o].labels[adj] == label])
+
+    assert mean("stiffness", "hard", 1) > mean("stiffness", "hard", 0) + 0.3
+    assert mean("effusivity", "cool", 1) > mean("effusivity", "cool", 0) + 0.3
+    assert mean("thickness", "thick", 1) > mean("thickness", "thin", 1) + 0.3
+    assert mean("springiness", "springy", 1) > mean("springiness", "springy", 0) + 0.3
+    assert object_properties(SyntheticSpec()) == props
+    assert object_properties(SyntheticSpec(seed=1))[101] != props[101]
+    assert set(object_properties(SyntheticSpec(object_ids=(101, 508)))) == {101, 508}
+
+
+def test_signals_follow_physics(tiny):
+    with h5py.File(tiny, "r") as f:
+
+        def stat(name: str, fn) -> float:
+            return float(np.mean([fn(f[f"{name}_{t:02d}"]) for t in (1, 2)]))
+
+        def tac_peak(g):
+            return g["biotacs/finger_0/tac"][:].max() - baseline(g, 0, "tac")
+
+        def tdc_change(g):
+            return g["biotacs/finger_0/tdc"][-20:].mean() - baseline(g, 0, "tdc")
+
+        def slide_pac(g):
+            slide = g["state/controller_detail_state"][:] == EPS["slow_slide"]
+            return g["biotacs/finger_0/pac"][:][slide].std()
+
+        metal, foam = "pinball_launcher_703", "car_sponge_101"
+        assert stat(metal, tac_peak) > stat(foam, tac_peak) + 40  # cool: large TAC transient
+        assert stat(metal, tdc_change) < stat(foam, tdc_change) - 8  # and a TDC drop
+        assert stat("brick_508", slide_pac) > 2 * stat("oil_bottle_601", slide_pac)  # rough
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "key"),
+    [({"trials": 0}, "trials"), ({"duration_scale": 0}, "duration_scale"),
+     ({"object_ids": (999,)}, "object_ids"), ({"image_width": 8}, "image")],
+)  # fmt: skip
+def test_bad_spec_is_rejected(kwargs, key):
+    with pytest.raises(ValueError, match=key):
+        SyntheticSpec(**kwargs)
