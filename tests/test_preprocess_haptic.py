@@ -292,6 +292,18 @@ def test_synthetic_file_end_to_end(synthetic, tmp_path):
     assert out.shape == (6, 2, 5, 32, 30) and np.isfinite(out).all()
     assert np.all(prep.explained_variance_ratio_.sum(axis=1) > 0.5)
     # EP-major channels: PDC is channel 1 of each EP's 8. The generator presses hardest in the
-    # squeeze, then holds at 50 %, slides at 20 % and 10 % of that travel (PHAC2_FORMAT.md §5).
-    pdc = out.reshape(6, 2, 5, 4, 8, 30)[:, :, :, :, 1].mean(axis=(2, 4))  # (trial, finger, EP)
-    assert np.all(np.diff(pdc, axis=-1) < 0)
+    # squeeze, holds at 50 %, slides at 20 % and 10 % of that travel (PHAC2_FORMAT.md §5).
+    pdc = out.reshape(6, 2, 5, 4, 8, 30)[:, :, :, :, 1]  # (trial, finger, copy, EP, step)
+    plateau = pdc.mean(axis=(2, 4))
+    assert np.all(np.diff(plateau[..., 1:], axis=-1) < 0)  # hold > slow slide > fast slide
+    assert np.all(pdc[:, :, :, 0].max(axis=(2, 3)) > plateau[..., 1])  # squeeze peak > hold
+
+
+def test_short_dataset_raises():
+    class Short(FakeDataset):
+        def iter_trials(self, names=None):
+            yield from list(super().iter_trials(names))[:-1]
+
+    trials = [make_trial(n, seed=i) for i, n in enumerate(trial_names(1))]
+    with pytest.raises(ValueError, match="yielded 2 trials, expected 3"):
+        compute_haptic_arrays(Short(trials), steps=5, offsets=1)

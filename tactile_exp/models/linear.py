@@ -27,8 +27,13 @@ from torch import nn
 from tactile_exp.models import MODELS
 from tactile_exp.models.base import EpochCallback, History, Instances, Model
 from tactile_exp.models.losses import LOSSES
-from tactile_exp.train import caffe_xavier_, resolve_device, seed_everything, sgd_epochs
-from tactile_exp.train import validate_sgd_args
+from tactile_exp.train import (
+    caffe_xavier_,
+    resolve_device,
+    seed_everything,
+    sgd_epochs,
+    validate_sgd_args,
+)
 
 INFERENCE_BATCH = 4096
 

@@ -177,9 +177,11 @@ def compute_haptic_arrays(
     mean = np.empty((n, 2, len(EPS), c))
     scatter = np.empty((n, 2, len(EPS), c, c))
     report = max(1, n // 10)
+    done = 0
     for i, trial in enumerate(dataset.iter_trials(names)):
-        if trial.name.name != names[i].name:
-            raise ValueError(f"dataset yielded trial {trial.name.name}, expected {names[i].name}")
+        if i >= n or trial.name.name != names[i].name:
+            expected = names[i].name if i < n else "no more trials"
+            raise ValueError(f"dataset yielded trial {trial.name.name}, expected {expected}")
         x = trial_signals(trial, pac_downsample)
         segments = trial.ep_segments()
         rows = [x[:, segments[ep]] for ep in EP_NAMES]
@@ -192,8 +194,11 @@ def compute_haptic_arrays(
             for f in range(2):
                 copies = resample(r[f] - centre[i, f], steps, offsets)  # (offsets, steps, 23)
                 signals[i, f, :, e] = copies.transpose(0, 2, 1)
-        if n >= 20 and ((i + 1) % report == 0 or i + 1 == n):
-            print(f"haptic preprocessing: {i + 1}/{n} trials", file=sys.stderr, flush=True)
+        done = i + 1
+        if n >= 20 and (done % report == 0 or done == n):
+            print(f"haptic preprocessing: {done}/{n} trials", file=sys.stderr, flush=True)
+    if done != n:
+        raise ValueError(f"dataset yielded {done} trials, expected {n}")
     return HapticArrays(tuple(t.name for t in names), signals, centre, count, mean, scatter)
 
 
@@ -264,22 +269,25 @@ class HapticPreprocessor:
         idx = self.arrays.index(trials)
         if idx.size == 0:
             raise ValueError("HapticPreprocessor.fit needs at least one trial")
-        count = np.broadcast_to(self.arrays.count[idx, None, :], (idx.size, 2, len(EPS)))
-        mean, scatter = self.arrays.mean[idx], self.arrays.scatter[idx]
+        # Pool the trials first (per finger and EP): later steps work on (2, 4, ...) arrays.
+        count, mean = self.arrays.count[idx], self.arrays.mean[idx]
+        n_fe = np.broadcast_to(count.sum(axis=0), (2, len(EPS)))
+        mu_fe = np.einsum("ne,nfec->fec", count, mean) / n_fe[..., None]
+        dev = mean - mu_fe
+        sc_fe = self.arrays.scatter[idx].sum(axis=0)
+        sc_fe += np.einsum("ne,nfei,nfej->feij", count, dev, dev)
 
-        axes = (0, 2) if self.per_finger else (0, 1, 2)
-        n, mu, sc = _pool(count, mean, scatter, axes)
-        var = np.diagonal(sc, axis1=-2, axis2=-1) / n[..., None]
-        sd = np.sqrt(var)
+        n, mu, sc = _pool(n_fe, mu_fe, sc_fe, (1,) if self.per_finger else (0, 1))
+        sd = np.sqrt(np.diagonal(sc, axis1=-2, axis2=-1) / n[..., None])
         sd[sd == 0] = 1.0  # a constant signal stays centred at 0 instead of dividing by zero
         self.mean_ = np.broadcast_to(mu, (2, len(SIGNALS))).copy()
         self.scale_ = np.broadcast_to(sd, (2, len(SIGNALS))).copy()
 
         el = slice(N_SCALAR, None)
-        sd_e = self.scale_[None, :, None, el]  # (1, 2, 1, 19)
-        z_mean = (mean[..., el] - self.mean_[None, :, None, el]) / sd_e
-        z_scatter = scatter[..., el, el] / (sd_e[..., :, None] * sd_e[..., None, :])
-        n_ep, self.pca_mean_, z_sc = _pool(count, z_mean, z_scatter, (0, 1))  # per EP
+        sd_e = self.scale_[:, None, el]  # (2, 1, 19)
+        z_mean = (mu_fe[..., el] - self.mean_[:, None, el]) / sd_e
+        z_scatter = sc_fe[..., el, el] / (sd_e[..., :, None] * sd_e[..., None, :])
+        n_ep, self.pca_mean_, z_sc = _pool(n_fe, z_mean, z_scatter, (0,))  # per EP
         cov = z_sc / np.maximum(n_ep - 1, 1)[:, None, None]
         eigval, eigvec = np.linalg.eigh(cov)  # ascending
         eigval, eigvec = eigval[:, ::-1], eigvec[:, :, ::-1]

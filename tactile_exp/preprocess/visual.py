@@ -164,11 +164,15 @@ def prepare_image(
     """
     if size < 1:
         raise ValueError(f"size must be >= 1, got {size}")
+    resized = resize_square(image, size).astype(np.float32)
+    return (resized - _rgb_mean(mean)).transpose(2, 0, 1).copy()
+
+
+def _rgb_mean(mean: Sequence[float]) -> np.ndarray:
     mean_arr = np.asarray(mean, dtype=np.float32)
     if mean_arr.shape != (3,):
         raise ValueError(f"mean must hold 3 values (R, G, B), got shape {mean_arr.shape}")
-    resized = resize_square(image, size).astype(np.float32)
-    return (resized - mean_arr).transpose(2, 0, 1).copy()
+    return mean_arr
 
 
 class PhotoSource(Protocol):
@@ -204,8 +208,7 @@ class VisualArrays:
     ) -> np.ndarray:
         """Mean-subtracted float32 network input (V2): (n, 3, size, size)."""
         images = self.images if index is None else self.images[index]
-        mean_arr = np.asarray(mean, dtype=np.float32).reshape(1, 3, 1, 1)
-        return images.astype(np.float32) - mean_arr
+        return images.astype(np.float32) - _rgb_mean(mean).reshape(1, 3, 1, 1)
 
 
 def _photo_list(dataset: PhotoSource) -> list[tuple[int, int, Path]]:
