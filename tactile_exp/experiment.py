@@ -79,9 +79,9 @@ def _epoch_logger(adjective: str) -> EpochCallback:
     """A compact line at ~5 points per run instead of one per epoch."""
 
     def on_epoch(epoch: int, n_epochs: int, metrics: dict[str, float]) -> None:
-        if epoch == 0 or (epoch + 1) % max(1, n_epochs // 5) == 0 or epoch + 1 == n_epochs:
+        if epoch == 1 or epoch % max(1, n_epochs // 5) == 0 or epoch == n_epochs:
             shown = " ".join(f"{k}={v:.4f}" for k, v in metrics.items())
-            log.info("  %s epoch %d/%d %s", adjective, epoch + 1, n_epochs, shown)
+            log.info("  %s epoch %d/%d %s", adjective, epoch, n_epochs, shown)
 
     return on_epoch
 

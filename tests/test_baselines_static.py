@@ -7,6 +7,8 @@ import warnings
 import numpy as np
 import pytest
 from baselines_fixture import make_trial
+from scipy import signal
+from threadpoolctl import threadpool_info
 
 from tactile_exp.baselines import static as st
 from tactile_exp.data.layout import PAC_RATE_HZ
@@ -47,6 +49,54 @@ def test_the_100hz_cut_hides_a_300hz_tone():
     assert full[1] == pytest.approx(300.0, abs=1.0)
     assert cut[1] < 100.0
     assert cut[0] < 1e-3 * full[0]  # almost no energy left below 100 Hz
+
+
+def _reference_spectrum(stream: np.ndarray, f_max: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """The definition step by step: full complex FFT, filtfilt over all L bins, then the cut."""
+    filtered = signal.lfilter(st.PAC_FIR, 1.0, stream)
+    filtered = filtered - filtered.mean()
+    n = len(filtered)
+    power = np.abs(np.fft.fft(filtered) / n) ** 2
+    window = st.SPECTRUM_WINDOW / st.SPECTRUM_WINDOW.sum()
+    smooth = signal.filtfilt(window, [1.0], power)
+    freq = PAC_RATE_HZ / 2 * np.linspace(0.0, 1.0, round(n / 2) + 1)
+    keep = len(freq) if f_max is None else int(np.searchsorted(freq, f_max, side="right"))
+    return freq[:keep], smooth[:keep]
+
+
+@pytest.mark.parametrize("length", [151, 152, 3001, 22 * 517])
+@pytest.mark.parametrize("f_max", [st.AUTHORS_F_MAX, None])
+def test_spectrum_matches_the_full_length_definition(length, f_max):
+    stream = np.random.default_rng(length).normal(0.0, 40.0, length).cumsum()
+    freq, spec = st.pac_spectrum(stream, f_max)
+    ref_freq, ref_spec = _reference_spectrum(stream, f_max)
+    np.testing.assert_array_equal(freq, ref_freq)
+    np.testing.assert_allclose(spec, ref_spec, rtol=1e-10, atol=1e-12 * ref_spec.max())
+
+
+def test_exp_fit_sse_is_the_least_squares_residual():
+    rng = np.random.default_rng(3)
+    t = np.arange(1.0, 301)
+    x = 2.0 + 4.0 * np.exp(-t / 25.0) + rng.normal(0.0, 0.1, len(t))
+    log_tau = np.log([0.1, 3.0, 25.0, 400.0, 3e5])
+    expected = []
+    for g in log_tau:
+        basis = np.column_stack([np.ones_like(t), np.exp(-t / np.exp(g))])
+        coef = np.linalg.lstsq(basis, x, rcond=None)[0]
+        expected.append(np.sum((basis @ coef - x) ** 2))
+    np.testing.assert_allclose(st.exp_fit_sse(log_tau, t, x), expected, rtol=1e-9)
+    assert st.exp_fit_sse(log_tau[2], t, x) == pytest.approx(expected[2], rel=1e-9)
+
+
+def test_noisy_time_constant_is_the_least_squares_optimum():
+    rng = np.random.default_rng(4)
+    t = np.arange(1.0, 801)
+    x = -1.0 + 6.0 * np.exp(-t / 90.0) + rng.normal(0.0, 0.5, len(t))
+    tau = st.tdc_time_constant(x)
+    dense = np.linspace(np.log(tau) - 0.05, np.log(tau) + 0.05, 2001)
+    best = np.exp(dense[np.argmin(st.exp_fit_sse(dense, t, x))])
+    assert tau == pytest.approx(best, rel=1e-4)
+    assert tau == pytest.approx(90.0, rel=0.2)
 
 
 def test_exponential_time_constant():
@@ -145,3 +195,10 @@ def test_shared_pca_is_fitted_on_training_trials_only():
         st.StaticFeatures(per_trial_pca=False).transform(table, ["a"])
     with pytest.raises(KeyError, match="unknown trial"):
         features.transform(table, ["zzz"])
+
+
+def test_trial_static_restores_the_blas_threads():
+    before = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+    st.trial_static(make_trial())
+    after = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+    assert after == before

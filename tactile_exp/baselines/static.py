@@ -12,6 +12,10 @@ electrode PCA is fitted per trial-EP, and the polyfit coefficients are interleav
 solved to the optimum of the authors' objectives (exact least squares for the polynomial,
 bounded search over the time constant for the exponential) where the authors ran Nelder-Mead
 from a fixed start, which stops before convergence on the t^5 terms.
+
+Speed: a trial's linear algebra is small (EPs of ~100-3000 rows), where multi-threaded BLAS
+only adds synchronisation (tens of ms per call on a loaded 2-core machine), so `trial_static`
+runs with one BLAS thread.
 """
 
 from __future__ import annotations
@@ -19,10 +23,12 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 from scipy import optimize, signal
+from threadpoolctl import ThreadpoolController
 
 from tactile_exp.data.layout import BASELINE_STATE, EPS, PAC_RATE_HZ, TrialData
 
@@ -30,6 +36,8 @@ PHASES: tuple[str, ...] = tuple(EPS)  # squeeze, hold, slow_slide, fast_slide (c
 RISE_WINDOW = 50  # Hanning taps for the pdc smoothing
 PAC_FIR = signal.firwin(67, [20.0, 700.0], pass_zero=False, fs=PAC_RATE_HZ)  # = the authors' taps
 SPECTRUM_WINDOW = signal.get_window("barthann", 50, fftbins=False)
+# filtfilt with this FIR: output bin k depends on bins <= k + 2 (taps - 1) (and the start padding)
+SMOOTH_MARGIN = 2 * len(SPECTRUM_WINDOW)
 AUTHORS_F_MAX = 100.0  # Hz: the authors keep only spectrum bins up to here
 POLY_DEGREE = 5
 N_ELECTRODE_PCS = 4
@@ -40,6 +48,12 @@ PAC_NAMES = ("pac_energy", "pac_sc", "pac_sv", "pac_ss", "pac_sk")
 FINGER_FEATURES = ("pdc_rise", "pdc_area", "pdc_max", *PAC_NAMES, "tac_area", "tdc_tau")
 GRIPPER_NAMES = ("gripper_min", "gripper_mean")
 TRANSFORM_NAMES = ("transform_distance",)
+
+
+@cache
+def _blas() -> ThreadpoolController:
+    """numpy's and scipy's BLAS, found once (a lookup costs ~5 ms; limiting it costs ~20 us)."""
+    return ThreadpoolController()
 
 
 class FeatureWarning(UserWarning):
@@ -78,17 +92,22 @@ def pac_spectrum(stream: np.ndarray, f_max: float | None) -> tuple[np.ndarray, n
     """(freq, smoothed power) of a 2200 Hz PAC stream: FIR, FFT/L, Bartlett-Hann filtfilt.
 
     ``f_max`` keeps bins up to that frequency (the authors: 100 Hz); ``None`` keeps 0..1100 Hz.
+    The full two-sided power spectrum is smoothed, as the authors; because the smoothing is a
+    short FIR, only the bins up to the kept ones plus `SMOOTH_MARGIN` are needed (same values),
+    and those come from a real FFT (the upper half mirrors the lower).
     """
     min_len = 3 * len(SPECTRUM_WINDOW) + 1  # filtfilt's default padding
     if len(stream) < min_len:
         raise TooShort(f"needs {min_len} PAC samples for the spectrum smoothing, has {len(stream)}")
     filtered = signal.lfilter(PAC_FIR, 1.0, stream)
-    filtered = filtered - filtered.mean()
+    filtered -= filtered.mean()
     n = len(filtered)
-    power = np.abs(np.fft.fft(filtered) / n) ** 2
-    smooth = signal.filtfilt(SPECTRUM_WINDOW / SPECTRUM_WINDOW.sum(), [1.0], power)
     freq = PAC_RATE_HZ / 2 * np.linspace(0.0, 1.0, round(n / 2) + 1)
     keep = len(freq) if f_max is None else int(np.searchsorted(freq, f_max, side="right"))
+    half = np.abs(np.fft.rfft(filtered) / n) ** 2  # bins 0..n//2; bin n-k equals bin k
+    stop = max(keep + SMOOTH_MARGIN, min_len)  # filtfilt needs min_len too
+    power = np.concatenate([half, half[1 : n - len(half) + 1][::-1]])[:stop]
+    smooth = signal.filtfilt(SPECTRUM_WINDOW / SPECTRUM_WINDOW.sum(), [1.0], power)
     return freq[:keep], smooth[:keep]
 
 
@@ -107,10 +126,19 @@ def spectral_features(freq: np.ndarray, spectrum: np.ndarray) -> tuple[float, ..
     return float(energy), float(sc), float(sv), float(ss), float(sk)
 
 
-def _exp_sse(log_tau: float, t: np.ndarray, x: np.ndarray) -> float:
-    basis = np.column_stack([np.ones_like(t), np.exp(-t / np.exp(log_tau))])
-    coef = np.linalg.lstsq(basis, x, rcond=None)[0]
-    return float(np.sum((basis @ coef - x) ** 2))
+def exp_fit_sse(log_tau: np.ndarray | float, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Residual sum of squares of the least-squares a + b exp(-t/tau), for each tau = e^log_tau.
+
+    Given tau the fit is the projection of x on span{1, e}: with centred e_c and x_c, b is
+    <e_c, x_c>/<e_c, e_c> and the residual is x_c - b e_c (a closed form, vectorised over tau).
+    """
+    e = np.exp(-t / np.exp(np.asarray(log_tau, dtype=float))[..., None])
+    e -= e.mean(axis=-1, keepdims=True)
+    xc = x - x.mean()
+    norm = np.einsum("...n,...n->...", e, e)
+    b = np.divide(e @ xc, norm, out=np.zeros_like(norm), where=norm > 0)
+    r = xc - b[..., None] * e
+    return np.einsum("...n,...n->...", r, r)
 
 
 def tdc_time_constant(x: np.ndarray) -> float:
@@ -124,10 +152,12 @@ def tdc_time_constant(x: np.ndarray) -> float:
         raise TooShort(f"needs 4 rows for a 3-parameter fit, has {n}")
     t = np.arange(1.0, n + 1)
     grid = np.linspace(np.log(0.1), np.log(1000.0 * n), 41)
-    sse = [_exp_sse(g, t, x) for g in grid]
+    sse = exp_fit_sse(grid, t, x)
     i = int(np.argmin(sse))
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    best = optimize.minimize_scalar(_exp_sse, bounds=(lo, hi), args=(t, x), method="bounded")
+    best = optimize.minimize_scalar(
+        lambda g: float(exp_fit_sse(g, t, x)), bounds=(lo, hi), method="bounded"
+    )
     return float(np.exp(best.x if best.fun <= sse[i] else grid[i]))
 
 
@@ -276,66 +306,64 @@ def trial_static(
     baseline-subtracted with the mean of the trial's MOVE_ARM_START_POSITION rows (gripper
     and transform signals are not, as the authors).
     """
-    rest = trial.segment(BASELINE_STATE)
-    fingers = []
-    for f in trial.fingers:
-        pac = f.pac.reshape(trial.n_rows, -1).astype(float)
-        fingers.append(
-            {
-                "pdc": f.pdc - f.pdc[rest].mean(),
-                "pac": pac - pac[rest].mean(axis=0),
-                "tac": f.tac - f.tac[rest].mean(),
-                "tdc": f.tdc - f.tdc[rest].mean(),
-            }
-        )
-    electrodes = np.hstack([f.electrodes for f in trial.fingers]).astype(float)
-    electrodes -= electrodes[rest].mean(axis=0)
-    grip = trial.gripper.get("joint_position")
-    names: list[str] | None = None
-    rows, stats = [], []
-    for ep, rows_slice in trial.ep_segments().items():
-        where = f"trial {trial.name.name}, EP {ep} ({rows_slice.stop - rows_slice.start} rows)"
-        values: dict[str, float] = {}
-        for i, fd in enumerate(fingers):
-            pdc, tac, tdc = fd["pdc"][rows_slice], fd["tac"][rows_slice], fd["tdc"][rows_slice]
-            stream = fd["pac"][rows_slice].reshape(-1)
-            f = f"_f{i}"
-            _guarded(values, ["pdc_rise" + f], lambda x=pdc: pdc_steepest_rise(x), where, fills)
-            _guarded(values, ["pdc_area" + f], lambda x=pdc: area(x), where, fills)
-            _guarded(values, ["pdc_max" + f], lambda x=pdc: maximum(x), where, fills)
-            _guarded(
-                values,
-                [n + f for n in PAC_NAMES],
-                lambda s=stream: spectral_features(*pac_spectrum(s, f_max)),
-                where,
-                fills,
+    with _blas().limit(limits=1, user_api="blas"):  # see the module docstring
+        rest = trial.segment(BASELINE_STATE)
+        fingers = []
+        for f in trial.fingers:
+            pac = f.pac.reshape(trial.n_rows, -1).astype(float)
+            fingers.append(
+                {
+                    "pdc": f.pdc - f.pdc[rest].mean(),
+                    "pac": pac - pac[rest].mean(axis=0),
+                    "tac": f.tac - f.tac[rest].mean(),
+                    "tdc": f.tdc - f.tdc[rest].mean(),
+                }
             )
-            _guarded(values, ["tac_area" + f], lambda x=tac: area(x), where, fills)
-            _guarded(values, ["tdc_tau" + f], lambda x=tdc: tdc_time_constant(x), where, fills)
-        if grip is not None:
-            g = grip[rows_slice]
-            _guarded(values, GRIPPER_NAMES, lambda g=g: gripper_stats(g), where, fills)
-        if trial.translation is not None:
-            tr = trial.translation[rows_slice]
-            _guarded(values, TRANSFORM_NAMES, lambda x=tr: hand_descent(x), where, fills)
-        order = [f"{n}_f{i}" for n in FINGER_FEATURES for i in (0, 1)]
-        order += [n for n in (*GRIPPER_NAMES, *TRANSFORM_NAMES) if n in values]
-        names = order
-        rows.append([values[n] for n in order])
-        stats.append(electrode_stats(electrodes[rows_slice], where, fills))
-    missing = [
-        label
-        for label, absent in (("gripper", grip is None), ("transforms", trial.translation is None))
-        if absent
-    ]
-    if missing and fills is None:
-        warnings.warn(
-            f"trial {trial.name.name}: no {' or '.join(missing)} channel; "
-            f"those static features are left out",
-            FeatureWarning,
-            2,
-        )
-    return TrialStatic(names or [], np.asarray(rows, dtype=float), stats)
+        electrodes = np.hstack([f.electrodes for f in trial.fingers]).astype(float)
+        electrodes -= electrodes[rest].mean(axis=0)
+        grip = trial.gripper.get("joint_position")
+        names: list[str] | None = None
+        rows, stats = [], []
+        for ep, rows_slice in trial.ep_segments().items():
+            where = f"trial {trial.name.name}, EP {ep} ({rows_slice.stop - rows_slice.start} rows)"
+            values: dict[str, float] = {}
+            for i, fd in enumerate(fingers):
+                pdc, tac, tdc = fd["pdc"][rows_slice], fd["tac"][rows_slice], fd["tdc"][rows_slice]
+                stream = fd["pac"][rows_slice].reshape(-1)
+                f = f"_f{i}"
+                _guarded(values, ["pdc_rise" + f], lambda x=pdc: pdc_steepest_rise(x), where, fills)
+                _guarded(values, ["pdc_area" + f], lambda x=pdc: area(x), where, fills)
+                _guarded(values, ["pdc_max" + f], lambda x=pdc: maximum(x), where, fills)
+                _guarded(
+                    values,
+                    [n + f for n in PAC_NAMES],
+                    lambda s=stream: spectral_features(*pac_spectrum(s, f_max)),
+                    where,
+                    fills,
+                )
+                _guarded(values, ["tac_area" + f], lambda x=tac: area(x), where, fills)
+                _guarded(values, ["tdc_tau" + f], lambda x=tdc: tdc_time_constant(x), where, fills)
+            if grip is not None:
+                g = grip[rows_slice]
+                _guarded(values, GRIPPER_NAMES, lambda g=g: gripper_stats(g), where, fills)
+            if trial.translation is not None:
+                tr = trial.translation[rows_slice]
+                _guarded(values, TRANSFORM_NAMES, lambda x=tr: hand_descent(x), where, fills)
+            order = [f"{n}_f{i}" for n in FINGER_FEATURES for i in (0, 1)]
+            order += [n for n in (*GRIPPER_NAMES, *TRANSFORM_NAMES) if n in values]
+            names = order
+            rows.append([values[n] for n in order])
+            stats.append(electrode_stats(electrodes[rows_slice], where, fills))
+        absent = {"gripper": grip is None, "transforms": trial.translation is None}
+        missing = [label for label, gone in absent.items() if gone]
+        if missing and fills is None:
+            warnings.warn(
+                f"trial {trial.name.name}: no {' or '.join(missing)} channel; "
+                f"those static features are left out",
+                FeatureWarning,
+                2,
+            )
+        return TrialStatic(names or [], np.asarray(rows, dtype=float), stats)
 
 
 # ------------------------------------------------------------------ the data set and a split

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# on_epoch(epoch, n_epochs, metrics): called once per epoch so the engine can show progress.
+# on_epoch(epoch, n_epochs, metrics): called after each epoch (1-based) to show progress.
 EpochCallback = Callable[[int, int, dict[str, float]], None]
 History = dict[str, list[float]]  # metric name -> one value per epoch
 
