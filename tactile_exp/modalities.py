@@ -10,6 +10,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -89,30 +90,12 @@ class Haptic(Modality):
 class HapticFeatures(Modality):
     """Chu et al.'s hand-designed features (M5): one vector per trial."""
 
-    def __init__(
-        self,
-        dataset: PHAC2,
-        cache_dir: Path,
-        features: Sequence[str] = ("static",),
-        faithful: bool = True,
-        dynamic_pool: str = "trial",
-        hmm_grid: str = "small",
-        leak_test_positives: bool = False,
-        seed: int = 0,
-    ) -> None:
+    def __init__(self, dataset: PHAC2, cache_dir: Path, **settings: Any) -> None:
+        """``settings``: BaselineFeatures' (features, faithful, dynamic_pool, hmm_grid, ...)."""
         super().__init__(dataset, cache_dir)
         from tactile_exp.baselines.features import BaselineFeatures
 
-        self.features = BaselineFeatures(
-            dataset,
-            features=tuple(features),
-            faithful=faithful,
-            dynamic_pool=dynamic_pool,
-            hmm_grid=hmm_grid,
-            leak_test_positives=leak_test_positives,
-            cache_dir=cache_dir,
-            seed=seed,
-        )
+        self.features = BaselineFeatures(dataset, cache_dir=cache_dir, **settings)
 
     def prepare(self) -> None:
         self.features.prepare()

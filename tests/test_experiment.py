@@ -160,3 +160,23 @@ def test_parallel_sweep_runs_every_job(tiny_config, cache_dir, mlflow_uri, tmp_p
     assert (tmp_path / "multirun" / "0" / ".hydra" / "config.yaml").exists()
     listed = {a.path for a in client.list_artifacts(parents[0].info.run_id, ".hydra")}
     assert ".hydra/overrides.yaml" in listed
+
+
+@pytest.mark.parametrize(
+    "row,extra",
+    [
+        ("table1_a_haptic_static_1trial", []),
+        ("table1_b_haptic_static_10trials", ["combine=2"]),  # tiny data: 2 trials per object
+        ("table1_c_haptic_dynamic_1trial", []),
+        ("table1_f_haptic_static_1trial_dynamic_10trials", []),
+    ],
+)
+def test_baseline_rows_run_from_their_experiment_configs(tiny_config, row, extra):
+    overrides = [f"experiment={row}", *extra]
+    settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
+    result = run(settings)
+    assert set(result.results) == {"hard", "soft"}
+    for r in result.results.values():
+        assert 0.0 <= r.auc <= 1.0 and np.all(np.isfinite(r.scores))
+    pooled = settings.combine > 1
+    assert all((len(set(r.objects)) == len(r.units)) == pooled for r in result.results.values())

@@ -163,8 +163,9 @@ class BaselineFeatures:
         self.seed = seed
         self.feature_names: list[str] = []
 
-    def fit(self, split: Split) -> BaselineFeatures:
-        """Fit what depends on the split on ``split.train`` only (HMMs: training positives)."""
+    def prepare(self) -> None:
+        """Read the file once into the per-trial tables every adjective shares (cached on disk);
+        bad input fails here, before any fitting."""
         self.static_table_, self.sequence_table_ = build_tables(
             self.dataset,
             static_f_max=(AUTHORS_F_MAX if self.faithful else None)
@@ -173,6 +174,11 @@ class BaselineFeatures:
             lengths=DynamicFeatures.lengths(self.hmm_grid) if "dynamic" in self.features else (),
             cache_dir=self.cache_dir,
         )
+
+    def fit(self, split: Split) -> BaselineFeatures:
+        """Fit what depends on the split on ``split.train`` only (HMMs: training positives)."""
+        if not hasattr(self, "static_table_"):
+            self.prepare()
         self.split_ = split
         self.feature_names = []
         if self.static_table_ is not None:

@@ -12,6 +12,7 @@ to float rounding, which the tests and ``bench/bench_haptic_cnn.py`` check.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -132,27 +133,9 @@ class HapticCNN(SGDModel):
         strides: Sequence[int] = (2, 2, 2),
         groups: int = 32,
         impl: str = "fast",
-        epochs: int = 200,
-        finetune_epochs: int = 100,
-        batch_size: int = 1000,
-        lr: float = 0.01,
-        momentum: float = 0.9,
-        loss: str = "hinge",
-        pretrain_loss: str | None = "logistic",
-        seed: int = 0,
-        device: str = "auto",
+        **training: Any,  # SGDModel's: epochs, finetune_epochs, batch_size, lr, momentum, ...
     ) -> None:
-        super().__init__(
-            epochs=epochs,
-            finetune_epochs=finetune_epochs,
-            batch_size=batch_size,
-            lr=lr,
-            momentum=momentum,
-            loss=loss,
-            pretrain_loss=pretrain_loss,
-            seed=seed,
-            device=device,
-        )
+        super().__init__(**training)
         self.net_args = dict(
             groups=groups,
             kernel_sizes=tuple(kernel_sizes),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 from torch import nn
@@ -45,27 +47,9 @@ class HapticLSTM(SGDModel):
         *,
         hidden: int = 10,
         fc_width: int = 10,
-        epochs: int = 200,
-        finetune_epochs: int = 100,
-        batch_size: int = 1000,
-        lr: float = 0.01,
-        momentum: float = 0.9,
-        loss: str = "hinge",
-        pretrain_loss: str | None = "logistic",
-        seed: int = 0,
-        device: str = "auto",
+        **training: Any,  # SGDModel's: epochs, finetune_epochs, batch_size, lr, momentum, ...
     ) -> None:
-        super().__init__(
-            epochs=epochs,
-            finetune_epochs=finetune_epochs,
-            batch_size=batch_size,
-            lr=lr,
-            momentum=momentum,
-            loss=loss,
-            pretrain_loss=pretrain_loss,
-            seed=seed,
-            device=device,
-        )
+        super().__init__(**training)
         for name, value in (("hidden", hidden), ("fc_width", fc_width)):
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name} must be an int >= 1, got {value!r}")
