@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import signal
 from pathlib import Path
 
 import hydra
@@ -13,8 +14,14 @@ from omegaconf import DictConfig
 log = logging.getLogger("tactile_exp")
 
 
+def _terminate(signum: int, frame: object) -> None:
+    # SLURM and `kill` send SIGTERM: unwind like an error so MLflow runs end FAILED, not RUNNING.
+    raise SystemExit(f"terminated by signal {signum}")
+
+
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg: DictConfig) -> float:
+    signal.signal(signal.SIGTERM, _terminate)
     from tactile_exp.config import settings_from_config
     from tactile_exp.experiment import run
 

@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 from sklearn.metrics import roc_auc_score
 
@@ -135,11 +136,7 @@ def test_ten_trial_units_are_objects(tiny_config):
 
 def test_parallel_sweep_runs_every_job(tiny_config, cache_dir, mlflow_uri, tmp_path):
     args = [
-        "data.trials=2",
-        "data.duration_scale=0.1",
-        "data.views=1",
-        "data.image_width=96",
-        "data.image_height=64",
+        *TINY_DATA,
         f"cache_dir={cache_dir}",
         f"tracking.uri={mlflow_uri}",
         "adjectives=[hard]",
@@ -180,3 +177,40 @@ def test_baseline_rows_run_from_their_experiment_configs(tiny_config, row, extra
         assert 0.0 <= r.auc <= 1.0 and np.all(np.isfinite(r.scores))
     pooled = settings.combine > 1
     assert all((len(set(r.objects)) == len(r.units)) == pooled for r in result.results.values())
+
+
+def test_sigterm_marks_the_runs_failed(cache_dir, mlflow_uri):
+    """SLURM and `kill` send SIGTERM: the job must not leave its runs RUNNING."""
+    import signal
+    import time
+
+    args = [
+        *TINY_DATA,
+        f"cache_dir={cache_dir}",
+        f"tracking.uri={mlflow_uri}",
+        "adjectives=[hard]",
+        "model.epochs=100000",
+        "seed=31",
+        f"hydra.run.dir={cache_dir / 'sigterm_run'}",
+    ]
+    job = subprocess.Popen([sys.executable, "-m", "tactile_exp", *args])
+    client = MlflowClient(mlflow_uri)
+    try:
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline:  # wait until the child run is training
+            _, runs = _runs(mlflow_uri)
+            if any(r.info.run_name == "adj=hard" and r.info.status == "RUNNING" for r in runs):
+                break
+            time.sleep(0.5)
+        else:
+            pytest.fail("the job never started its child run")
+        job.send_signal(signal.SIGTERM)
+        assert job.wait(timeout=60) != 0
+    finally:
+        job.kill()
+    _, runs = _runs(mlflow_uri)
+    parent = next(r for r in runs if r.info.run_name == "haptic_cnn-concat-c1-s31")
+    child = next(r for r in runs if r.data.tags.get("mlflow.parentRunId") == parent.info.run_id)
+    assert (parent.info.status, child.info.status) == ("FAILED", "FAILED")
+    assert "signal 15" in parent.data.tags["error"]
+    assert client.get_run(child.info.run_id).info.end_time is not None
