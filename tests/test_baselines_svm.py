@@ -80,3 +80,11 @@ def test_model_adapter_is_registered_and_heads_are_fresh_copies():
     head = model.head()
     assert head is not model and (head.Cs, head.n_draws, head.seed) == ([0.1, 1.0], 4, 3)
     assert not hasattr(head.svm, "pipeline_")
+
+
+def test_authors_c_grid_is_selectable_by_name():
+    from tactile_exp.baselines.svm import AUTHORS_CS, LinearSVMModel
+
+    assert LinearSVMModel(Cs="authors").Cs == list(AUTHORS_CS)
+    with pytest.raises(ValueError, match="'authors'"):
+        LinearSVMModel(Cs="author")

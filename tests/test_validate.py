@@ -118,7 +118,6 @@ def test_cli_rejects_bad_image_size() -> None:
 # ---------------------------------------------------------------- generator -> reader
 @pytest.fixture(scope="module")
 def generated(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    pytest.importorskip("tactile_exp.data.synthetic")
     out = tmp_path_factory.mktemp("synthetic") / "tiny.h5"
     args = ["generate", "--out", str(out), "--trials", "2", "--duration-scale", "0.1"]
     assert main([*args, "--views", "1", "--image-size", "96x64"]) == 0

@@ -124,9 +124,16 @@ class LinearSVMModel(Model):
     learns_representation = False
 
     def __init__(
-        self, Cs: Sequence[float] | None = None, n_draws: int = 20, p_out: int = 3, seed: int = 0
+        self,
+        Cs: Sequence[float] | str | None = None,
+        n_draws: int = 20,
+        p_out: int = 3,
+        seed: int = 0,
     ) -> None:
-        self.Cs = list(DEFAULT_CS if Cs is None else Cs)
+        """``Cs``: a list of C values, None for DEFAULT_CS, or "authors" for AUTHORS_CS."""
+        if isinstance(Cs, str) and Cs != "authors":
+            raise ValueError(f"Cs must be a list of numbers, null or 'authors', got {Cs!r}")
+        self.Cs = list(AUTHORS_CS if Cs == "authors" else DEFAULT_CS if Cs is None else Cs)
         self.n_draws = n_draws
         self.p_out = p_out
         self.seed = seed

@@ -7,7 +7,6 @@ Each rule is a function ``(dataset, adjective, seed) -> Split`` in `SPLITS`. Eve
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import h5py
@@ -29,8 +28,7 @@ if TYPE_CHECKING:
 
 TRAIN_RATIO = 0.9  # the authors' 90/10 (the "90_10" in the file name)
 
-SplitRule = Callable[["PHAC2", str, int], Split]
-SPLITS: Registry[Split] = Registry("split")
+SPLITS: Registry[Split] = Registry("split")  # rule(dataset, adjective, seed) -> Split
 
 
 def check_split(split: Split, where: str = "") -> Split:

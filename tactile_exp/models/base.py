@@ -37,9 +37,6 @@ class Instances:
     def __len__(self) -> int:
         return len(self.X)
 
-    def subset(self, index: np.ndarray) -> Instances:
-        return Instances(self.X[index], self.y[index], self.trial[index], self.object_id[index])
-
 
 class Model(ABC):
     """A binary classifier for one adjective."""
