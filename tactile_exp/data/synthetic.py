@@ -604,7 +604,7 @@ def generate(path: Path, spec: SyntheticSpec = SyntheticSpec()) -> Path:
         if n_workers == 1:
             _write_part(parts[0], tmp_photos, spec, ids)
         else:
-            ctx = multiprocessing.get_context("fork")
+            ctx = multiprocessing.get_context("forkserver")  # safe when the parent has threads
             with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
                 jobs = [
                     pool.submit(_write_part, part, tmp_photos, spec, share)
