@@ -89,19 +89,19 @@ def _epoch_logger(adjective: str) -> EpochCallback:
 def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
     """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
-    n_trials = max(np.bincount([t.object_id for t in dataset.trials]))
-    if settings.combine > n_trials:
-        raise ConfigError(
-            f"combine: {settings.combine} trials per unit, but objects in {dataset.path} have at "
-            f"most {n_trials} trials; allowed 1..{n_trials}"
-        )
-    splits = {a: SPLITS[settings.split](dataset, a, settings.seed) for a in settings.adjectives}
     modality = MODALITIES.build(
         settings.modality.name,
         dataset=dataset,
         cache_dir=settings.cache_dir / "preprocessed",
         **settings.modality.params,
     )
+    limit, unit = modality.max_combine()
+    if settings.combine > limit:
+        raise ConfigError(
+            f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
+            f"most {limit} {unit}; allowed 1..{limit}"
+        )
+    splits = {a: SPLITS[settings.split](dataset, a, settings.seed) for a in settings.adjectives}
     modality.prepare()
     return dataset, modality, splits
 

@@ -25,6 +25,10 @@ class Modality(ABC):
         self.dataset = dataset
         self.cache_dir = cache_dir
 
+    def max_combine(self) -> tuple[int, str]:
+        """The largest ``combine`` (instances of one object grouped as a unit) and its unit name."""
+        return int(max(np.bincount([t.object_id for t in self.dataset.trials]))), "trials"
+
     @abstractmethod
     def prepare(self) -> None:
         """Read and cache what all adjectives share; raises on bad input before any training."""
@@ -107,3 +111,160 @@ class HapticFeatures(Modality):
             X = self.features.transform(trials).astype(np.float32)
             out.append(Instances(X, *_bookkeeping(trials, split, 1)))
         return out[0], out[1]
+
+
+@MODALITIES.register("visual")
+class Visual(Modality):
+    """V1-V2 and M3's frozen trunk: one instance per photograph, its pooled, L2-normalised
+    inception (5a) activations (832 values), labelled with its object's label.
+
+    The trunk runs once per data set, weights file and channel mean (``prepare``), cached on disk
+    under ``cache_dir`` and shared by every adjective and job; see ``models/googlenet.py`` for why
+    it lives here rather than in the model. ``mean="train"`` fits the V2 channel mean on each
+    split's training photographs instead of using ImageNet's (what torchvision-layout weights
+    expect); that costs one trunk pass per adjective.
+
+    An object's photographs follow its trials: all on the side that holds its trials. An object
+    split by trial (the only object of its class for an adjective, see ``Split``) has its
+    photographs split in the same proportion (first views to train, at least one per side), so
+    the adjective keeps a positive on both sides, as in the haptic split. Instances are named
+    ``<group stem>_v<VV>``: the combiner's ``combine=k`` then groups ``k`` views of one object.
+    Objects without photographs are left out (a warning gives their count).
+    """
+
+    def __init__(
+        self,
+        dataset: PHAC2,
+        cache_dir: Path,
+        size: int = 224,
+        mean: str = "imagenet",
+        weights: str | None = None,
+        seed: int = 0,
+        batch_size: int = 32,
+        device: str = "auto",
+    ) -> None:
+        from tactile_exp.train import resolve_device
+
+        super().__init__(dataset, cache_dir)
+        if mean not in ("imagenet", "train"):
+            raise ValueError(f"modality.mean must be 'imagenet' or 'train', got {mean!r}")
+        if weights is not None and not Path(weights).is_file():
+            raise FileNotFoundError(f"modality.weights: GoogLeNet weights file {weights} not found")
+        if batch_size < 1:
+            raise ValueError(f"modality.batch_size must be >= 1, got {batch_size}")
+        self.size = size
+        self.mean = mean
+        self.weights = None if weights is None else Path(weights)
+        self.seed = seed
+        self.batch_size = batch_size
+        self.device = resolve_device(device)
+
+    def max_combine(self) -> tuple[int, str]:
+        """The most views of one object: the largest ``combine`` that groups distinct views."""
+        photos = self.dataset.photographs()
+        return max((len(p) for p in photos.values()), default=0), "views"
+
+    def prepare(self) -> None:
+        import logging
+
+        from tactile_exp.preprocess.visual import IMAGENET_MEAN_RGB, load_visual_arrays
+
+        log = logging.getLogger(__name__)
+        self.arrays = load_visual_arrays(self.dataset, self.size, self.cache_dir)
+        if len(self.arrays.images) == 0:
+            raise ValueError(f"{self.dataset.path}: no photographs found for any object")
+        if len(self.arrays.missing):
+            log.warning(
+                "visual: %d of %d objects have no photographs and are left out: %s",
+                len(self.arrays.missing),
+                len(self.dataset.object_ids()),
+                self.arrays.missing.tolist(),
+            )
+        if self.weights is None:
+            log.warning(
+                "visual: modality.weights is null: GoogLeNet has random (Xavier) weights, so its "
+                "features are random projections, not transferred MINC/ImageNet features"
+            )
+        self._stems = {t.object_id: t.stem for t in self.dataset.trials}
+        self._fixed = self._features_for(IMAGENET_MEAN_RGB) if self.mean == "imagenet" else None
+
+    def _features_for(self, mean: Sequence[float]) -> np.ndarray:
+        """The trunk's features of every photograph with channel ``mean`` subtracted, (n, 832);
+        cached on disk by the images' bytes, the weights file's bytes (or seed) and the mean."""
+        import hashlib
+
+        from tactile_exp.models.googlenet import (
+            IMAGENET_STD_RGB,
+            build_trunk,
+            file_digest,
+            pooled_features,
+        )
+        from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
+
+        mean = tuple(round(float(m), 4) for m in mean)
+        key = cache_key(
+            kind="googlenet_5a",
+            images=hashlib.sha1(self.arrays.images.tobytes()).hexdigest(),
+            weights=file_digest(self.weights) if self.weights else f"xavier-seed{self.seed}",
+            mean=mean,
+            version=1,
+        )
+        path = self.cache_dir / f"googlenet5a-{key}.npz"
+        cached = load_arrays(path, ("features",))
+        if cached is not None:
+            return cached["features"]
+        # V2's mean-subtracted pixels on torchvision's input scale (ImageNet std, 0-1 range)
+        images = self.arrays.prepared(mean=mean)
+        images /= 255.0 * np.asarray(IMAGENET_STD_RGB, np.float32).reshape(1, 3, 1, 1)
+        trunk = build_trunk(self.weights, self.seed)
+        features = pooled_features(trunk, images, self.batch_size, self.device)
+        save_arrays(path, {"features": features})
+        return features
+
+    def instances(self, split: Split) -> tuple[Instances, Instances]:
+        train_idx, test_idx, labels = self._assign(split)
+        features = self._fixed
+        if features is None:
+            features = self._features_for(self.arrays.channel_mean(train_idx))
+        out = []
+        for part, idx in (("train", train_idx), ("test", test_idx)):
+            obj = self.arrays.object_id[idx]
+            y = np.array([labels[o] for o in obj], dtype=np.int64)
+            if len(np.unique(y)) != 2:
+                raise ValueError(
+                    f"visual split of {split.adjective!r}: the {part} photographs hold labels "
+                    f"{np.unique(y).tolist()}, expected positives and negatives (objects without "
+                    f"photographs: {self.arrays.missing.tolist()})"
+                )
+            views = zip(obj, self.arrays.view[idx], strict=True)
+            names = np.array([f"{self._stems[o]}_v{v:02d}" for o, v in views], dtype=object)
+            out.append(Instances(features[idx], y, names, obj))
+        return out[0], out[1]
+
+    def _assign(self, split: Split) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
+        """Photograph indices of the training and test sides, and each object's label."""
+        counts: dict[int, list[int]] = {}
+        labels: dict[int, int] = {}
+        for side, trials in enumerate((split.train, split.test)):
+            for t in trials:
+                obj = TrialName.parse(t).object_id  # type: ignore[union-attr]
+                counts.setdefault(obj, [0, 0])[side] += 1
+                labels[obj] = split.labels[t]
+        train: list[np.ndarray] = []
+        test: list[np.ndarray] = []
+        for obj, (n_train, n_test) in sorted(counts.items()):
+            views = np.flatnonzero(self.arrays.object_id == obj)
+            if n_test == 0 or n_train == 0:
+                (train if n_test == 0 else test).append(views)
+                continue
+            if len(views) < 2:
+                raise ValueError(
+                    f"visual split of {split.adjective!r}: object {obj} is split by trial "
+                    f"({n_train} train, {n_test} test) but has {len(views)} photograph(s); "
+                    "at least 2 are needed to put views on both sides"
+                )
+            k = min(len(views) - 1, max(1, round(len(views) * n_train / (n_train + n_test))))
+            train.append(views[:k])
+            test.append(views[k:])
+        empty = np.zeros(0, dtype=np.int64)
+        return np.concatenate(train or [empty]), np.concatenate(test or [empty]), labels

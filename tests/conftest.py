@@ -26,6 +26,7 @@ FAST_MODELS = {
     "haptic_lstm": ["model.epochs=2", "model.finetune_epochs=1", "model.batch_size=256"],
     "linear_svm": [],
     "random": [],
+    "visual_googlenet": ["model.epochs=2", "model.finetune_epochs=1"],
 }
 
 

@@ -9,4 +9,4 @@ __all__ = ["MODELS", "Instances", "Model"]
 
 # Import the implementations so they register themselves (explicit: import errors stay visible).
 from tactile_exp.baselines import svm  # noqa: E402, F401  (linear_svm, Chu et al.'s classifier)
-from tactile_exp.models import haptic_cnn, haptic_lstm, linear, random_guess  # noqa: E402, F401
+from tactile_exp.models import googlenet, haptic_cnn, haptic_lstm, linear, random_guess  # noqa: E402, F401
