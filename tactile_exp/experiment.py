@@ -18,7 +18,7 @@ from tactile_exp import evaluate
 from tactile_exp.combine import COMBINERS, Separate
 from tactile_exp.config import ConfigError, Settings
 from tactile_exp.data.layout import Split
-from tactile_exp.data.phac2 import PHAC2, DataError
+from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import SPLITS
 from tactile_exp.modalities import MODALITIES, Modality
@@ -227,5 +227,3 @@ def _log_summary(
 
     plt.close(figure)
 
-
-__all__ = ["AdjectiveResult", "DataError", "JobResult", "classify", "load", "run"]

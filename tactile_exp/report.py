@@ -105,7 +105,7 @@ def _figure(adj: dict[str, dict[str, float]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(12, 4))
+    fig, ax = plt.subplots(figsize=(12, 4.5 + 0.15 * len(adj)))
     width = 0.8 / max(1, len(adj))
     x = np.arange(len(ADJECTIVES))
     for i, (name, aucs) in enumerate(adj.items()):
@@ -115,7 +115,7 @@ def _figure(adj: dict[str, dict[str, float]], path: Path) -> None:
     ax.set_xticks(x + 0.4 - width / 2, ADJECTIVES, rotation=60, ha="right", fontsize=8)
     ax.set_ylabel("AUC")
     ax.set_ylim(0, 1)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.28))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
