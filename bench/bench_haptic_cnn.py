@@ -1,11 +1,11 @@
-"""Haptic CNN training speed: the fast batched-matmul path against plain ``Conv1d(groups=32)``.
+"""Haptic CNN training speed: grouped convolution as batched matmul vs ``Conv1d(groups=32)``.
 
 Everything is measured in one run, so the ratios hold even on a noisy machine. Prints:
 1. one SGD step (batch 1000, 32 x 150 input) per implementation and lever: median of repeats;
-2. the fast path's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training set
+2. each implementation's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training set
    for one adjective) and the Table I row I estimate it implies: 24 adjectives x 200 epochs,
    plus the fine-tuning stage and feature extraction, measured, not assumed;
-3. the AUC of the fast and reference paths after a few epochs from the same init on one case.
+3. the AUC of the two implementations after a few epochs from the same init on one case.
 
 Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 5] [--threads 2]``
 """
@@ -51,7 +51,7 @@ def step_time(net_args: dict, repeats: int, bf16: bool = False) -> float:
 
 
 def levers(repeats: int) -> None:
-    """Each architecture: plain grouped Conv1d vs the fast path, then bf16 on the default."""
+    """Each architecture: plain grouped Conv1d vs batched matmul, then bf16 on the default."""
     default = dict(kernel_sizes=(5, 5, 5), widths=(4, 4, 4), strides=(2, 2, 2))
     architectures = [
         ("default: k 5/5/5, width 4, stride 2", default),
@@ -59,27 +59,27 @@ def levers(repeats: int) -> None:
         ("width 8 per group", {**default, "widths": (8, 8, 8)}),
         ("kernels 9/5/3", {**default, "kernel_sizes": (9, 5, 3)}),
     ]
-    header = f"{'architecture':38s} {'reference ms':>12s} {'fast ms':>8s} {'fast inst/s':>11s}"
-    print(header + f" {'speed-up':>8s}")
+    header = f"{'architecture':38s} {'conv1d ms':>10s} {'bmm ms':>8s} {'bmm inst/s':>11s}"
+    print(header + f" {'bmm speed-up':>12s}")
     for name, arch in architectures:
-        reference = step_time({**arch, "impl": "reference"}, repeats)
-        fast = step_time({**arch, "impl": "fast"}, repeats)
+        conv1d = step_time({**arch, "impl": "conv1d"}, repeats)
+        bmm = step_time({**arch, "impl": "bmm"}, repeats)
         print(
-            f"{name:38s} {reference * 1e3:12.1f} {fast * 1e3:8.1f} {BATCH / fast:11.0f} "
-            f"{reference / fast:7.1f}x"
+            f"{name:38s} {conv1d * 1e3:10.1f} {bmm * 1e3:8.1f} {BATCH / bmm:11.0f} "
+            f"{conv1d / bmm:11.1f}x"
         )
-    fast = step_time({**default, "impl": "fast"}, repeats)
-    bf16 = step_time({**default, "impl": "fast"}, repeats, bf16=True)
-    print(f"default, fast, bf16 autocast: {bf16 * 1e3:.1f} ms vs float32 {fast * 1e3:.1f} ms")
+    fp32 = step_time(default, repeats)
+    bf16 = step_time(default, repeats, bf16=True)
+    print(f"default (conv1d), bf16 autocast: {bf16 * 1e3:.1f} ms vs float32 {fp32 * 1e3:.1f} ms")
 
 
-def row_estimate(rng: np.random.Generator) -> None:
+def row_estimate(rng: np.random.Generator, impl: str) -> None:
     X = rng.standard_normal((N_TRAIN, CHANNELS, STEPS), dtype=np.float32)
     y = (rng.random(N_TRAIN) > 0.5).astype(int)
     train = Instances(X, y, np.zeros(N_TRAIN), np.zeros(N_TRAIN, dtype=int))
     timings = {}
     for epochs, finetune in ((1, 0), (3, 0), (1, 50)):
-        model = HapticCNN(epochs=epochs, finetune_epochs=finetune, seed=0, device="cpu")
+        model = HapticCNN(impl=impl, epochs=epochs, finetune_epochs=finetune, seed=0, device="cpu")
         start = time.perf_counter()
         model.fit(train)
         timings[(epochs, finetune)] = time.perf_counter() - start
@@ -88,7 +88,7 @@ def row_estimate(rng: np.random.Generator) -> None:
     finetune_epoch = (timings[(1, 50)] - timings[(1, 0)]) / 50
     per_adj = setup + EPOCHS * epoch + FINETUNE_EPOCHS * finetune_epoch
     print(
-        f"\nfull-size fit, {N_TRAIN} instances: {epoch:.2f} s per epoch "
+        f"\n{impl}: full-size fit, {N_TRAIN} instances: {epoch:.2f} s per epoch "
         f"({N_TRAIN / epoch:.0f} inst/s), setup {setup:.2f} s, "
         f"fine-tune {finetune_epoch * 1e3:.1f} ms per epoch"
     )
@@ -106,12 +106,12 @@ def auc_equivalence(rng: np.random.Generator) -> None:
     X[y == 1, 5, 40:80] *= 2.0
     train = Instances(X[:300], y[:300], np.zeros(300), np.zeros(300, dtype=int))
     aucs = {}
-    for impl in ("fast", "reference"):
+    for impl in ("bmm", "conv1d"):
         model = HapticCNN(impl=impl, epochs=5, finetune_epochs=5, batch_size=100, device="cpu")
         model.fit(train)
         aucs[impl] = roc_auc_score(y[300:], model.decision_function(X[300:]))
-    diff = abs(aucs["fast"] - aucs["reference"])
-    print(f"\nAUC fast {aucs['fast']:.6f} reference {aucs['reference']:.6f} |diff| {diff:.2e}")
+    diff = abs(aucs["bmm"] - aucs["conv1d"])
+    print(f"\nAUC bmm {aucs['bmm']:.6f} conv1d {aucs['conv1d']:.6f} |diff| {diff:.2e}")
 
 
 def main() -> None:
@@ -123,7 +123,8 @@ def main() -> None:
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     levers(args.repeats)
     rng = np.random.default_rng(0)
-    row_estimate(rng)
+    for impl in ("conv1d", "bmm"):
+        row_estimate(rng, impl)
     auc_equivalence(rng)
 
 

@@ -226,4 +226,3 @@ def _log_summary(
     import matplotlib.pyplot as plt
 
     plt.close(figure)
-
