@@ -6,16 +6,12 @@ sees the margin ``s * f`` and models never handle label conventions themselves.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import torch
 import torch.nn.functional as F
 
 from tactile_exp.registry import Registry
 
-Loss = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (scores, y01) -> mean loss
-
-LOSSES: Registry[torch.Tensor] = Registry("loss")
+LOSSES: Registry[torch.Tensor] = Registry("loss")  # entries: (scores, y01) -> mean loss
 
 
 def _margin(scores: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
