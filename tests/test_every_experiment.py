@@ -1,0 +1,26 @@
+"""Slow: every experiment file (every Table I row) runs end to end on tiny data."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_exp.config import settings_from_config
+from tactile_exp.experiment import run
+
+EXPERIMENTS = sorted(p.stem for p in (Path(__file__).parents[1] / "conf/experiment").glob("*.yaml"))
+# Tiny data has 2 trials and 2 views per object: shrink the rows that combine more.
+SHRINK = {"table1_j_haptic_cnn_10trials": ["combine=2"], "table1_b_haptic_static_10trials": [
+    "combine=2"], "table1_d_haptic_dynamic_10trials": ["combine=2"],
+    "table1_l_image_googlenet_8views": ["combine=2"]}  # fmt: skip
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_experiment_runs_end_to_end(tiny_config, experiment):
+    overrides = [f"experiment={experiment}", "data.views=2", "tracking.skip_finished=false"]
+    overrides += SHRINK.get(experiment, [])
+    result = run(settings_from_config(tiny_config(overrides, adjectives="[hard,thick]")))
+    assert set(result.results) == {"hard", "thick"}
+    for r in result.results.values():
+        assert 0.0 <= r.auc <= 1.0 and np.all(np.isfinite(r.scores))
