@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp.models.base import Instances
+from tactile_exp.data.layout import Instances
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet, HapticCNN
 from tactile_exp.models.losses import LOSSES
 

@@ -13,12 +13,16 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from tactile_exp.models.base import Instances
+from tactile_exp.data.layout import Instances
 from tactile_exp.registry import Registry
 
 
 class Combiner(ABC):
     """Turns per-instance features into per-unit features."""
+
+    # Capability, declared: True means every instance is its own unit, so the engine scores the
+    # model itself instead of retraining a head on combined features.
+    keeps_instances: bool = False
 
     @abstractmethod
     def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances: ...
@@ -75,6 +79,8 @@ class Mean(Combiner):
 @COMBINERS.register("separate")
 class Separate(Combiner):
     """Every instance is its own unit; the engine then scores the model directly."""
+
+    keeps_instances = True
 
     def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances:
         return Instances(features, instances.y, instances.trial, instances.object_id)

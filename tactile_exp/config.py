@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from tactile_exp.data.layout import ADJECTIVES
 
-DEVICES = ("auto", "cpu", "cuda")
+DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
 # Keys that change where results go, not what they are: left out of the config hash.
 UNHASHED = ("tracking", "hydra")
 
@@ -105,8 +106,8 @@ def settings_from_config(
             f"it takes combine=1, got {combine}"
         )
     device = resolved.get("device")
-    if device not in DEVICES:
-        raise ConfigError(f"device: must be one of {DEVICES}, got {device!r}")
+    if not isinstance(device, str) or not DEVICE.fullmatch(device):
+        raise ConfigError(f"device: must be auto, cpu, cuda or cuda:N, got {device!r}")
     seed = resolved.get("seed")
     if not isinstance(seed, int):
         raise ConfigError(f"seed: must be an integer, got {seed!r}")
@@ -152,8 +153,15 @@ def check_components(settings: Settings) -> None:
     from tactile_exp.data.sources import DATA_SOURCES
     from tactile_exp.data.splits import SPLITS
     from tactile_exp.modalities import MODALITIES
-    from tactile_exp.models import MODELS
+    from tactile_exp.models.registry import MODELS
 
+    if settings.device.startswith("cuda"):
+        from tactile_exp.train import resolve_device
+
+        try:
+            resolve_device(settings.device)
+        except ValueError as err:
+            raise ConfigError(f"device: {err}") from err
     for key, registry, name in (
         ("data", DATA_SOURCES, settings.data.name),
         ("modality", MODALITIES, settings.modality.name),
@@ -162,13 +170,14 @@ def check_components(settings: Settings) -> None:
         ("split", SPLITS, settings.split),
     ):
         if name not in registry:
-            raise ConfigError(f"{key}: unknown option {name!r}; known: {', '.join(registry)}")
+            known = ", ".join(registry.names())
+            raise ConfigError(f"{key}: unknown option {name!r}; known: {known}")
     try:
-        MODELS.build(settings.model.name, **settings.model.params)
+        model = MODELS.build(settings.model.name, **settings.model.params)
     except (TypeError, ValueError) as err:
         raise ConfigError(f"model.params ({settings.model.name}): {err}") from err
-    if settings.device == "cuda":
-        import torch
-
-        if not torch.cuda.is_available():
-            raise ConfigError("device: cuda requested but no CUDA device is available")
+    if model.modalities and settings.modality.name not in model.modalities:
+        raise ConfigError(
+            f"modality: model={settings.model.name} takes modality "
+            f"{' or '.join(model.modalities)}, got {settings.modality.name!r}"
+        )

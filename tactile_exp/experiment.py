@@ -15,16 +15,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tactile_exp import evaluate
-from tactile_exp.combine import COMBINERS, Separate
+from tactile_exp.combine import COMBINERS
 from tactile_exp.config import ConfigError, Settings
-from tactile_exp.data.layout import Split
+from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
-from tactile_exp.data.splits import SPLITS
+from tactile_exp.data.splits import make_split
 from tactile_exp.modalities import MODALITIES, Modality
-from tactile_exp.models import MODELS, Instances, Model
-from tactile_exp.models.base import EpochCallback, History
-from tactile_exp.track import Tracker, flatten
+from tactile_exp.models.base import EpochCallback, History, Model
+from tactile_exp.models.registry import MODELS
+from tactile_exp.tracking import Tracker, flatten
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ def classify(
     """
     model = model_factory()
     combine_units = COMBINERS.build(combiner)
-    if isinstance(combine_units, Separate):
+    if combine_units.keeps_instances:
         history = model.fit(train, on_epoch)
         return model.decision_function(test.X), test, history
     history = model.fit(train, on_epoch) if model.learns_representation else {}
@@ -101,7 +101,7 @@ def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
             f"most {limit} {unit}; allowed 1..{limit}"
         )
-    splits = {a: SPLITS[settings.split](dataset, a, settings.seed) for a in settings.adjectives}
+    splits = {a: make_split(dataset, a, settings.split, settings.seed) for a in settings.adjectives}
     modality.prepare()
     return dataset, modality, splits
 

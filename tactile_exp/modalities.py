@@ -14,9 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.data.layout import Split, TrialName
+from tactile_exp.data.layout import Instances, Split, TrialName
 from tactile_exp.data.phac2 import PHAC2
-from tactile_exp.models.base import Instances
 from tactile_exp.registry import Registry
 
 

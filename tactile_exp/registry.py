@@ -2,11 +2,17 @@
 
 A registry name is also the Hydra config-group option name, so ``model=haptic_cnn`` on the command
 line and ``MODELS["haptic_cnn"]`` in code are the same word.
+
+A registry lives in a small module of its own that implementation files import (timm's
+``_registry.py`` idiom), and names the modules that fill it: they are imported on the first
+lookup, so importing the registry (or a base class beside it) never drags in torch or hmmlearn,
+and an import error in an implementation still surfaces, at the lookup, with its traceback.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import importlib
+from collections.abc import Callable, Sequence
 from typing import Any, Generic, TypeVar
 
 T = TypeVar("T")
@@ -15,10 +21,13 @@ T = TypeVar("T")
 class Registry(Generic[T]):
     """Name -> factory map for one component kind; rejects duplicates and wrong base classes."""
 
-    def __init__(self, kind: str, base: type | None = None) -> None:
+    def __init__(self, kind: str, base: type | None = None, modules: Sequence[str] = ()) -> None:
+        """``modules``: the implementation modules that register entries, imported on first use."""
         self.kind = kind
         self.base = base
+        self.modules = tuple(modules)
         self._entries: dict[str, Callable[..., T]] = {}
+        self._loaded = not self.modules
 
     def register(self, name: str) -> Callable[[Callable[..., T]], Callable[..., T]]:
         def add(factory: Callable[..., T]) -> Callable[..., T]:
@@ -37,21 +46,26 @@ class Registry(Generic[T]):
 
         return add
 
+    def _load(self) -> dict[str, Callable[..., T]]:
+        if not self._loaded:
+            self._loaded = True  # set first: the modules register into this registry as they load
+            for module in self.modules:
+                importlib.import_module(module)
+        return self._entries
+
     def __getitem__(self, name: str) -> Callable[..., T]:
+        entries = self._load()
         try:
-            return self._entries[name]
+            return entries[name]
         except KeyError:
-            known = ", ".join(sorted(self._entries)) or "(none)"
+            known = ", ".join(sorted(entries)) or "(none)"
             raise KeyError(f"unknown {self.kind} {name!r}; known {self.kind}s: {known}") from None
 
     def build(self, name: str, /, **kwargs: Any) -> T:
         return self[name](**kwargs)
 
     def __contains__(self, name: object) -> bool:
-        return name in self._entries
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(sorted(self._entries))
+        return name in self._load()
 
     def names(self) -> list[str]:
-        return sorted(self._entries)
+        return sorted(self._load())

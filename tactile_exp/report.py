@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_exp.data.layout import ADJECTIVES
-from tactile_exp.track import Tracker
+from tactile_exp.tracking import Tracker
 
 # Gao et al. 2016, Table I: mean AUC (%) on the real PHAC-2, for comparison only.
 PAPER_TABLE1 = {

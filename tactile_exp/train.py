@@ -1,7 +1,7 @@
 """The SGD loop shared by every trained model (T3), device resolution and seeding.
 
 Kept free of the model registry (losses arrive as callables) so models can import it without an
-import cycle; the two-stage schedule that uses it lives in ``models/linear.py`` (``SGDModel``).
+import cycle; the two-stage schedule that uses it lives in ``models/sgd.py`` (``SGDModel``).
 """
 
 from __future__ import annotations
@@ -47,8 +47,9 @@ def validate_sgd_args(
     loss: str,
     pretrain_loss: str | None,
     known_losses: Collection[str],
+    where: str = "",
 ) -> None:
-    """Raise ValueError naming the first bad argument and what is allowed."""
+    """Raise ValueError naming the first bad argument (after ``where``) and what is allowed."""
     losses = ", ".join(sorted(known_losses))
     checks = [
         (isinstance(epochs, int) and epochs >= 1, f"epochs must be an int >= 1, got {epochs!r}"),
@@ -70,7 +71,7 @@ def validate_sgd_args(
     ]
     for ok, message in checks:
         if not ok:
-            raise ValueError(message)
+            raise ValueError(where + message)
 
 
 def sgd_epochs(

@@ -7,8 +7,8 @@ import pytest
 from sklearn.metrics import roc_auc_score
 
 from tactile_exp.baselines.svm import LeavePObjectsOut, LinearSVMModel, ObjectCVLinearSVM
+from tactile_exp.data.layout import Instances
 from tactile_exp.models import MODELS
-from tactile_exp.models.base import Instances
 
 
 def _objects_data(n_objects=20, trials=5, shift=1.5, seed=0):
@@ -85,6 +85,6 @@ def test_model_adapter_is_registered_and_heads_are_fresh_copies():
 def test_authors_c_grid_is_selectable_by_name():
     from tactile_exp.baselines.svm import AUTHORS_CS, LinearSVMModel
 
-    assert LinearSVMModel(Cs="authors").Cs == list(AUTHORS_CS)
+    assert LinearSVMModel(Cs="authors").svm.Cs == AUTHORS_CS
     with pytest.raises(ValueError, match="'authors'"):
         LinearSVMModel(Cs="author")

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from tactile_exp.combine import COMBINERS, unit_members
-from tactile_exp.models.base import Instances
+from tactile_exp.data.layout import Instances
 
 
 def _instances(trials_per_object: dict[int, int], per_trial: int) -> Instances:

@@ -29,6 +29,13 @@ def _options(group: str) -> list[str]:
     return sorted(p.stem for p in (CONF / group).glob("*.yaml"))
 
 
+def _model_for(modality: str) -> str:
+    """The default model if it takes ``modality``, else the first registered one that does."""
+    takes = [n for n in MODELS.names() if modality in MODELS[n].modalities]
+    takes_any = [n for n in MODELS.names() if not MODELS[n].modalities]
+    return "haptic_cnn" if "haptic_cnn" in takes else (takes or takes_any)[0]
+
+
 @pytest.mark.parametrize("group", sorted(REGISTRIES))
 def test_option_names_equal_registry_names(group):
     assert _options(group) == REGISTRIES[group].names()
@@ -44,6 +51,10 @@ def test_every_option_composes_and_builds(compose_config, group, option):
     overrides = [f"{group}={option}"]
     if group == "data" and option == "phac2":
         overrides.append("data.path=/nonexistent/phac.h5")
+    if group == "modality":
+        overrides.append(f"model={_model_for(option)}")
+    if group == "model" and MODELS[option].modalities:
+        overrides.append(f"modality={MODELS[option].modalities[0]}")
     cfg = compose_config(overrides)
     settings = settings_from_config(cfg)  # builds the model through its registry
     assert settings.choices.get(group, option) == option or group in ("experiment", "sweep")
@@ -88,10 +99,12 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("combine=1.5", "combine: must be a whole number"),
         ("adjectives=[]", "adjectives: must list at least one"),
         ("adjectives=[hard,fluffy]", "adjectives: unknown ['fluffy']"),
-        ("device=tpu", "device: must be one of"),
+        ("device=tpu", "device: must be auto, cpu, cuda or cuda:N"),
         ("model.lr=0", "model.params (haptic_cnn)"),
         ("model.lr=-1", "lr"),
         ("model.epochs=0", "epochs"),
+        ("schedule.head.lr=0", "head_schedule.lr must be > 0"),
+        ("modality=visual", "modality: model=haptic_cnn takes modality haptic, got 'visual'"),
     ],
 )
 def test_impossible_values_fail_naming_the_key(compose_config, override, message):

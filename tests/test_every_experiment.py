@@ -18,7 +18,7 @@ SHRINK = {"table1_j_haptic_cnn_10trials": ["combine=2"], "table1_b_haptic_static
 @pytest.mark.slow
 @pytest.mark.parametrize("experiment", EXPERIMENTS)
 def test_experiment_runs_end_to_end(tiny_config, experiment):
-    overrides = [f"experiment={experiment}", "data.views=2", "tracking.skip_finished=false"]
+    overrides = [f"experiment={experiment}", "data.views=2"]
     overrides += SHRINK.get(experiment, [])
     result = run(settings_from_config(tiny_config(overrides, adjectives="[hard,thick]")))
     assert set(result.results) == {"hard", "thick"}

@@ -7,7 +7,8 @@ import pytest
 import torch
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp.models import MODELS, Instances
+from tactile_exp.data.layout import Instances
+from tactile_exp.models import MODELS
 from tactile_exp.models.googlenet import (
     GoogLeNet,
     build_trunk,

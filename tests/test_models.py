@@ -5,7 +5,8 @@ import pytest
 import torch
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp.models import MODELS, Instances
+from tactile_exp.data.layout import Instances
+from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
 from tactile_exp.models.linear import LinearModel
 from tactile_exp.models.random_guess import RandomGuess

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tactile_exp import report
-from tactile_exp.track import Tracker
+from tactile_exp.tracking import Tracker
 
 
 @pytest.fixture()

@@ -11,7 +11,7 @@ from phac2_fixture import OBJECTS, published_groups, write_file
 
 from tactile_exp.data.layout import ADJECTIVES, Split, published_test_split
 from tactile_exp.data.phac2 import PHAC2, DataError
-from tactile_exp.data.splits import SPLITS, check_split
+from tactile_exp.data.splits import SPLITS, check_split, make_split
 
 ALL = tuple(OBJECTS)
 # PHAC2_FORMAT §2: trial counts of the published split (train, test).
@@ -48,7 +48,7 @@ def assert_no_leak(split: Split) -> None:
 
 def test_published_table_reproduced_without_groups(full: PHAC2) -> None:
     for adj in ADJECTIVES:
-        split = full.split(adj)
+        split = make_split(full, adj)
         want = {
             (r.object_id, t)
             for r in published_test_split()
@@ -65,7 +65,7 @@ def test_published_table_reproduced_without_groups(full: PHAC2) -> None:
 
 def test_published_groups_read_from_file(full: PHAC2, full_groups: PHAC2) -> None:
     for adj in ADJECTIVES:
-        assert full_groups.split(adj) == full.split(adj)
+        assert make_split(full_groups, adj) == make_split(full, adj)
 
 
 def test_groups_take_precedence_over_table(tmp_path: Path) -> None:
@@ -73,21 +73,21 @@ def test_groups_take_precedence_over_table(tmp_path: Path) -> None:
     # soft: positives 101, 410; negatives 508, 211. The table would test 410 and 508.
     groups = {"soft": ([names[2], names[3], names[4], names[5]], [*names[:2], *names[6:]])}
     path = write_file(tmp_path / "f.h5", (101, 410, 508, 211), 2, split_groups=groups)
-    split = PHAC2(path).split("soft")
+    split = make_split(PHAC2(path), "soft")
     assert split.test == tuple(sorted(groups["soft"][1]))
     assert split.objects("test") == {101, 211}
 
 
 def test_random_is_deterministic_and_seed_dependent(full: PHAC2) -> None:
-    a = [full.split(adj, "random", seed=3) for adj in ADJECTIVES]
-    assert a == [full.split(adj, "random", seed=3) for adj in ADJECTIVES]
-    b = [full.split(adj, "random", seed=4) for adj in ADJECTIVES]
+    a = [make_split(full, adj, "random", seed=3) for adj in ADJECTIVES]
+    assert a == [make_split(full, adj, "random", seed=3) for adj in ADJECTIVES]
+    b = [make_split(full, adj, "random", seed=4) for adj in ADJECTIVES]
     assert sum(x.test != y.test for x, y in zip(a, b, strict=True)) >= 20
 
 
 def test_random_follows_the_authors_rule(full: PHAC2) -> None:
     for adj in ADJECTIVES:
-        split = full.split(adj, "random", seed=1)
+        split = make_split(full, adj, "random", seed=1)
         assert_no_leak(split)
         for label in (0, 1):
             n = sum(o.labels[adj] == label for o in OBJECTS.values())
@@ -96,22 +96,22 @@ def test_random_follows_the_authors_rule(full: PHAC2) -> None:
                 assert sum(split.labels[t] == label for t in split.test) == 5
             else:
                 assert len(train) == min(max(int(0.9 * n), 1), n - 1), (adj, label)
-    nice = full.split("nice", "random", seed=1)
+    nice = make_split(full, "nice", "random", seed=1)
     assert nice.objects("train") & nice.objects("test") == {111}
 
 
 def test_published_falls_back_to_random_when_objects_missing(tmp_path: Path) -> None:
     ds = PHAC2(write_file(tmp_path / "f.h5", (101, 410, 508, 211, 114), 2, signals=False))
     with pytest.warns(UserWarning, match="published test object .* not in the file"):
-        split = ds.split("soft")
-    assert split == ds.split("soft", "random", seed=0)
+        split = make_split(ds, "soft")
+    assert split == make_split(ds, "soft", "random", seed=0)
     assert_no_leak(split)
 
 
 def test_random_with_one_object_of_a_class_per_side_fails_clearly(tmp_path: Path) -> None:
     ds = PHAC2(write_file(tmp_path / "f.h5", (101, 508), 1, signals=False))
     with pytest.raises(DataError, match=re.escape(str(ds.path)) + ".*'soft': test has no positive"):
-        ds.split("soft", "random")
+        make_split(ds, "soft", "random")
 
 
 def test_split_with_no_positive_in_test(tmp_path: Path) -> None:
@@ -119,7 +119,7 @@ def test_split_with_no_positive_in_test(tmp_path: Path) -> None:
     groups = {"soft": (names[:6], names[6:])}  # positives 101 and 410 both in train
     path = write_file(tmp_path / "f.h5", (101, 410, 508, 211), 2, split_groups=groups)
     with pytest.raises(DataError, match=re.escape(str(path)) + ".*'soft': test has no positive"):
-        PHAC2(path).split("soft")
+        make_split(PHAC2(path), "soft")
 
 
 def test_split_group_with_wrong_label(tmp_path: Path) -> None:
@@ -129,7 +129,7 @@ def test_split_group_with_wrong_label(tmp_path: Path) -> None:
     with pytest.raises(
         DataError, match="/train_test_sets/soft/test links brick_508_01.*label is 0"
     ):
-        PHAC2(path).split("soft")
+        make_split(PHAC2(path), "soft")
 
 
 def test_check_split_rejects_shared_object() -> None:
@@ -146,6 +146,6 @@ def test_check_split_rejects_shared_object() -> None:
 def test_unknown_rule_and_adjective(full: PHAC2) -> None:
     assert SPLITS.names() == ["published", "random"]
     with pytest.raises(KeyError, match="unknown split 'nope'"):
-        full.split("soft", "nope")
+        make_split(full, "soft", "nope")
     with pytest.raises(DataError, match="unknown adjective 'gritty'"):
-        full.split("gritty")
+        make_split(full, "gritty")

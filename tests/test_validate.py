@@ -13,6 +13,7 @@ from phac2_fixture import EP_ROWS, N_ROWS, OBJECTS, write_file
 from tactile_exp.data.__main__ import main
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.data.phac2 import PHAC2, load_photograph
+from tactile_exp.data.splits import make_split
 from tactile_exp.data.validate import summary, validate
 
 ALL = tuple(OBJECTS)
@@ -136,7 +137,7 @@ def test_generated_file_round_trip(generated: Path) -> None:
     assert segs["squeeze"].stop <= segs["hold"].start < segs["slow_slide"].start
     assert segs["slow_slide"].stop <= segs["fast_slide"].start
     for adj in ADJECTIVES:
-        split = ds.split(adj)
+        split = make_split(ds, adj)
         assert split.objects("train") | split.objects("test") == set(OBJECTS)
     photos = ds.photographs()
     assert set(photos) == set(OBJECTS) and all(len(v) == 1 for v in photos.values())

@@ -25,24 +25,25 @@ from tactile_exp.models import googlenet
 from tactile_exp.models.googlenet import GoogLeNet, pooled_features, xavier_init
 
 VIEWS = 2  # photographs per object: enough to test grouping and split-by-trial objects
-FAST = ["model.epochs=5", "model.finetune_epochs=2"]
+FAST = ["schedule=tiny"]
 LABELS = {o.object_id: o.labels for o in objects()}
 
 
-@pytest.fixture(scope="module")
-def visual_config(compose_config, cache_dir, mlflow_uri):
-    data = [o for o in TINY_DATA if not o.startswith("data.views=")] + [f"data.views={VIEWS}"]
+DATA = [o for o in TINY_DATA if not o.startswith("data.views=")] + [f"data.views={VIEWS}"]
 
+
+@pytest.fixture
+def visual_config(compose_config, cache_dir, mlflow_uri):
     def _compose(overrides: list[str]):
-        base = [*data, f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}"]
+        base = [*DATA, f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}"]
         return compose_config([*base, "adjectives=[hard,thick]", *FAST, *overrides])
 
     return _compose
 
 
 @pytest.fixture(scope="module")
-def dataset(visual_config) -> PHAC2:
-    settings = settings_from_config(visual_config([]))
+def dataset(compose_config, cache_dir) -> PHAC2:
+    settings = settings_from_config(compose_config([*DATA, f"cache_dir={cache_dir}"]))
     return DATA_SOURCES.build(settings.data.name, **settings.data.params)
 
 

@@ -18,8 +18,9 @@ from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import LinearSVC
 
-from tactile_exp.models import MODELS
-from tactile_exp.models.base import EpochCallback, History, Instances, Model
+from tactile_exp.data.layout import Instances
+from tactile_exp.models.base import EpochCallback, History, Model, clone
+from tactile_exp.models.registry import MODELS
 
 # On standardised features C above 10 is near hard-margin and ~10x slower to fit (liblinear).
 DEFAULT_CS: tuple[float, ...] = tuple(np.logspace(-4, 1, 6))
@@ -125,6 +126,7 @@ class LinearSVMModel(Model):
 
     def __init__(
         self,
+        *,
         Cs: Sequence[float] | str | None = None,
         n_draws: int = 20,
         p_out: int = 3,
@@ -133,11 +135,12 @@ class LinearSVMModel(Model):
         """``Cs``: a list of C values, None for DEFAULT_CS, or "authors" for AUTHORS_CS."""
         if isinstance(Cs, str) and Cs != "authors":
             raise ValueError(f"Cs must be a list of numbers, null or 'authors', got {Cs!r}")
-        self.Cs = list(AUTHORS_CS if Cs == "authors" else DEFAULT_CS if Cs is None else Cs)
+        self.Cs = Cs
         self.n_draws = n_draws
         self.p_out = p_out
         self.seed = seed
-        self.svm = ObjectCVLinearSVM(self.Cs, n_draws, p_out, seed)
+        grid = AUTHORS_CS if Cs == "authors" else DEFAULT_CS if Cs is None else Cs
+        self.svm = ObjectCVLinearSVM(list(grid), n_draws, p_out, seed)
 
     def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
         self.svm.fit(train.X.reshape(len(train), -1), train.y, train.object_id)
@@ -146,5 +149,5 @@ class LinearSVMModel(Model):
     def decision_function(self, X: np.ndarray) -> np.ndarray:
         return self.svm.decision_function(X.reshape(len(X), -1))
 
-    def head(self) -> LinearSVMModel:
-        return LinearSVMModel(self.Cs, self.n_draws, self.p_out, self.seed)
+    def head(self) -> Model:
+        return clone(self)

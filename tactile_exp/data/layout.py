@@ -14,6 +14,11 @@ from importlib import resources
 
 import numpy as np
 
+
+class DataError(ValueError):
+    """Bad input data; the message names the file, the group or key, and what was expected."""
+
+
 ADJECTIVES: tuple[str, ...] = (
     "absorbent", "bumpy", "compressible", "cool", "crinkly", "fuzzy",
     "hairy", "hard", "metallic", "nice", "porous", "rough",
@@ -183,3 +188,22 @@ class Split:
     def objects(self, part: str) -> set[int]:
         names = self.train if part == "train" else self.test
         return {TrialName.parse(n).object_id for n in names}  # type: ignore[union-attr]
+
+
+@dataclass
+class Instances:
+    """Model inputs with the bookkeeping needed to combine, split and evaluate them."""
+
+    X: np.ndarray  # (n, ...) float32
+    y: np.ndarray  # (n,) int 0/1
+    trial: np.ndarray  # (n,) trial group names
+    object_id: np.ndarray  # (n,) int
+
+    def __post_init__(self) -> None:
+        n = len(self.X)
+        for key in ("y", "trial", "object_id"):
+            if len(getattr(self, key)) != n:
+                raise ValueError(f"Instances.{key} has {len(getattr(self, key))} rows, X has {n}")
+
+    def __len__(self) -> int:
+        return len(self.X)

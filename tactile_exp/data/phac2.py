@@ -25,8 +25,8 @@ from tactile_exp.data.layout import (
     BIOTAC_CHANNELS,
     EPS,
     FINGERS,
+    DataError,
     FingerData,
-    Split,
     TrialData,
     TrialName,
 )
@@ -43,10 +43,6 @@ _OPTIONAL_FLOAT = {  # path inside the trial group -> per-row shape
     "transforms/rotation": (4,),
 }
 _ID_TOKEN = re.compile(r"(?<!\d)(\d{3})(?!\d)")
-
-
-class DataError(ValueError):
-    """Bad input data; the message names the file, the group or key, and what was expected."""
 
 
 def default_cache_dir() -> Path:
@@ -229,15 +225,7 @@ class PHAC2:
         except (OSError, RuntimeError) as e:
             raise DataError(f"{self.path}: /{trial.name}: HDF5 read failed ({e})") from e
 
-    # ---------------------------------------------------------------- splits, photographs
-    def split(self, adjective: str, rule: str = "published", seed: int = 0) -> Split:
-        """One adjective's train/test split by a rule of `splits.SPLITS` (E1, E3)."""
-        from tactile_exp.data.splits import SPLITS
-
-        if adjective not in ADJECTIVES:
-            raise DataError(f"{self.path}: unknown adjective {adjective!r} (expected one of D4)")
-        return SPLITS[rule](self, adjective, seed)
-
+    # ---------------------------------------------------------------- photographs
     def photographs(self) -> dict[int, list[Path]]:
         """Object id -> sorted JPEG paths, matched by group stem, else by the 3-digit id (§3)."""
         if not self.photo_dir.is_dir():

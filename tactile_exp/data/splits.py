@@ -1,7 +1,8 @@
 """Per-adjective train/test splits (METHOD E1, E3; PHAC2_FORMAT §2).
 
-Each rule is a function ``(dataset, adjective, seed) -> Split`` in `SPLITS`. Every split leaves
-`check_split`, so no rule can hand out a split with object leakage or a one-class side.
+Each rule is a function ``(dataset, adjective, seed) -> Split`` in `SPLITS`; `make_split` is the
+one way to get a split. Every split leaves `check_split`, so no rule can hand out a split with
+object leakage or a one-class side.
 """
 
 from __future__ import annotations
@@ -16,11 +17,11 @@ from tactile_exp.data.layout import (
     ADJECTIVES,
     NEGATIVE_SPLIT_GROUP,
     POSITIVE_SPLIT_GROUP,
+    DataError,
     Split,
     TrialName,
     published_test_split,
 )
-from tactile_exp.data.phac2 import DataError
 from tactile_exp.registry import Registry
 
 if TYPE_CHECKING:
@@ -29,6 +30,13 @@ if TYPE_CHECKING:
 TRAIN_RATIO = 0.9  # the authors' 90/10 (the "90_10" in the file name)
 
 SPLITS: Registry[Split] = Registry("split")  # rule(dataset, adjective, seed) -> Split
+
+
+def make_split(dataset: PHAC2, adjective: str, rule: str = "published", seed: int = 0) -> Split:
+    """One adjective's train/test split by a rule of `SPLITS` (E1, E3)."""
+    if adjective not in ADJECTIVES:
+        raise DataError(f"{dataset.path}: unknown adjective {adjective!r} (expected one of D4)")
+    return SPLITS[rule](dataset, adjective, seed)
 
 
 def check_split(split: Split, where: str = "") -> Split:

@@ -11,8 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.data.layout import ADJECTIVES, EPS
-from tactile_exp.data.phac2 import PHAC2, DataError
+from tactile_exp.data.layout import ADJECTIVES, EPS, DataError
+from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.splits import make_split
 
 
 def validate(
@@ -32,7 +33,7 @@ def validate(
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                dataset.split(adj, "published")
+                make_split(dataset, adj, "published")
         except DataError as e:
             problems.append(str(e))
     if photographs:
@@ -71,7 +72,7 @@ def summary(dataset: PHAC2) -> dict[str, Any]:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = dataset.split(adj, "published")
+                s = make_split(dataset, adj, "published")
             splits[adj] = {"train": len(s.train), "test": len(s.test)}
         except DataError as e:
             splits[adj] = {"error": str(e)}

@@ -8,40 +8,37 @@ instances: the paper's "concatenate activations and retrain only the loss layer"
 
 from __future__ import annotations
 
+import inspect
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+
+from tactile_exp.data.layout import Instances
 
 # on_epoch(epoch, n_epochs, metrics): called after each epoch (1-based) to show progress.
 EpochCallback = Callable[[int, int, dict[str, float]], None]
 History = dict[str, list[float]]  # metric name -> one value per epoch
 
 
-@dataclass
-class Instances:
-    """Model inputs with the bookkeeping needed to combine, split and evaluate them."""
-
-    X: np.ndarray  # (n, ...) float32
-    y: np.ndarray  # (n,) int 0/1
-    trial: np.ndarray  # (n,) trial group names
-    object_id: np.ndarray  # (n,) int
-
-    def __post_init__(self) -> None:
-        n = len(self.X)
-        for key in ("y", "trial", "object_id"):
-            if len(getattr(self, key)) != n:
-                raise ValueError(f"Instances.{key} has {len(getattr(self, key))} rows, X has {n}")
-
-    def __len__(self) -> int:
-        return len(self.X)
-
-
 class Model(ABC):
-    """A binary classifier for one adjective."""
+    """A binary classifier for one adjective.
 
-    learns_representation: bool = True  # False: transform() needs no fit (e.g. hand features)
+    Like a scikit-learn estimator, every constructor parameter is an explicit keyword argument
+    stored under its own name, so ``get_params`` and ``clone`` rebuild an unfitted copy.
+    """
+
+    # Capabilities, declared (scikit-learn's tags). learns_representation False: transform()
+    # needs no fit (e.g. hand features). modalities: the `modality` options whose instances it
+    # takes; empty: any (it flattens rows).
+    learns_representation: bool = True
+    modalities: tuple[str, ...] = ()
+
+    def get_params(self) -> dict[str, Any]:
+        """The constructor's keyword arguments as this model holds them."""
+        names = inspect.signature(type(self).__init__).parameters
+        return {n: getattr(self, n) for n in names if n != "self"}
 
     @abstractmethod
     def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
@@ -58,3 +55,8 @@ class Model(ABC):
     def head(self) -> Model:
         """A fresh classifier for combined features (T4: retrain only the loss layer)."""
         raise NotImplementedError(f"{type(self).__name__} cannot classify combined instances")
+
+
+def clone(model: Model) -> Model:
+    """A fresh, unfitted model with ``model``'s parameters (scikit-learn's ``clone``)."""
+    return type(model)(**model.get_params())

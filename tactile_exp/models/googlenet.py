@@ -27,8 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from tactile_exp.models import MODELS
-from tactile_exp.models.linear import SGDModel
+from tactile_exp.models.registry import MODELS
+from tactile_exp.models.sgd import SGDModel
 from tactile_exp.train import caffe_xavier_
 
 INCEPTION5A_CHANNELS = 832
@@ -249,6 +249,7 @@ class VisualGoogLeNet(SGDModel):
     """
 
     learns_representation = False  # the representation is the frozen trunk's, computed upstream
+    modalities = ("visual",)
 
     def _check_input(self, X: np.ndarray) -> None:
         if X.ndim != 2 or X.shape[1] != INCEPTION5A_CHANNELS:

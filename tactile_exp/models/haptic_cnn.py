@@ -12,7 +12,7 @@ measured alternative for other hardware.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -20,8 +20,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from tactile_exp.models import MODELS
-from tactile_exp.models.linear import SGDModel
+from tactile_exp.models.registry import MODELS
+from tactile_exp.models.sgd import SGDModel
 from tactile_exp.train import caffe_xavier_
 
 IMPLS = ("conv1d", "bmm")
@@ -126,6 +126,8 @@ class HapticCNN(SGDModel):
     ``conv3_shape_`` for a channel x time map.
     """
 
+    modalities = ("haptic",)  # (n, 32 x fingers, time) signals
+
     def __init__(
         self,
         *,
@@ -134,9 +136,31 @@ class HapticCNN(SGDModel):
         strides: Sequence[int] = (2, 2, 2),
         groups: int = 32,
         impl: str = "conv1d",
-        **training: Any,  # SGDModel's: epochs, finetune_epochs, batch_size, lr, momentum, ...
+        epochs: int = 200,
+        finetune_epochs: int = 100,
+        batch_size: int = 1000,
+        lr: float = 0.01,
+        momentum: float = 0.9,
+        loss: str = "hinge",
+        pretrain_loss: str | None = "logistic",
+        head_schedule: Mapping[str, Any] | None = None,
+        seed: int = 0,
+        device: str = "auto",
     ) -> None:
-        super().__init__(**training)
+        super().__init__(
+            epochs=epochs,
+            finetune_epochs=finetune_epochs,
+            batch_size=batch_size,
+            lr=lr,
+            momentum=momentum,
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            head_schedule=head_schedule,
+            seed=seed,
+            device=device,
+        )
+        self.kernel_sizes, self.widths, self.strides = kernel_sizes, widths, strides
+        self.groups, self.impl = groups, impl
         self.net_args = dict(
             groups=groups,
             kernel_sizes=tuple(kernel_sizes),

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
-from tactile_exp.models import MODELS
-from tactile_exp.models.linear import SGDModel
+from tactile_exp.models.registry import MODELS
+from tactile_exp.models.sgd import SGDModel
 from tactile_exp.train import caffe_xavier_
 
 
@@ -42,14 +43,36 @@ class HapticLSTM(SGDModel):
     ``loss``. ``transform`` returns the FC(10) activations after the ReLU.
     """
 
+    modalities = ("haptic",)  # (n, 32 x fingers, time) signals
+
     def __init__(
         self,
         *,
         hidden: int = 10,
         fc_width: int = 10,
-        **training: Any,  # SGDModel's: epochs, finetune_epochs, batch_size, lr, momentum, ...
+        epochs: int = 200,
+        finetune_epochs: int = 100,
+        batch_size: int = 1000,
+        lr: float = 0.01,
+        momentum: float = 0.9,
+        loss: str = "hinge",
+        pretrain_loss: str | None = "logistic",
+        head_schedule: Mapping[str, Any] | None = None,
+        seed: int = 0,
+        device: str = "auto",
     ) -> None:
-        super().__init__(**training)
+        super().__init__(
+            epochs=epochs,
+            finetune_epochs=finetune_epochs,
+            batch_size=batch_size,
+            lr=lr,
+            momentum=momentum,
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            head_schedule=head_schedule,
+            seed=seed,
+            device=device,
+        )
         for name, value in (("hidden", hidden), ("fc_width", fc_width)):
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name} must be an int >= 1, got {value!r}")

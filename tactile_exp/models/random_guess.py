@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from tactile_exp.models import MODELS
-from tactile_exp.models.base import EpochCallback, History, Instances, Model
+from tactile_exp.data.layout import Instances
+from tactile_exp.models.base import EpochCallback, History, Model
+from tactile_exp.models.registry import MODELS
 
 
 @MODELS.register("random")
@@ -14,7 +15,7 @@ class RandomGuess(Model):
 
     learns_representation = False
 
-    def __init__(self, seed: int = 0) -> None:
+    def __init__(self, *, seed: int = 0) -> None:
         self.seed = seed
         self._rng = np.random.default_rng(seed)
 

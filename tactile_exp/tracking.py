@@ -16,9 +16,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from hydra.experimental.callback import Callback
-from omegaconf import DictConfig
-
 os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")  # no calls home; the network is closed
 
 log = logging.getLogger(__name__)
@@ -151,16 +148,3 @@ class Tracker:
 
     def log_dir(self, run_id: str, folder: Path, path: str) -> None:
         self.client.log_artifacts(run_id, str(folder), path)
-
-
-class PrepareSweep(Callback):
-    """Before a multirun launches parallel jobs: create the MLflow experiment, the data and the
-    shared preprocessed arrays once, so jobs neither race on the sqlite schema nor repeat work."""
-
-    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        from tactile_exp.config import settings_from_config
-        from tactile_exp.experiment import load
-
-        settings = settings_from_config(config)
-        Tracker(settings.tracking.uri, settings.tracking.experiment)
-        load(settings)

@@ -1,0 +1,215 @@
+"""The two-stage SGD schedule (T2, T3) and the linear "loss layer" it ends in.
+
+``SGDModel`` is a body (input -> features) followed by one linear classification layer, trained
+in two stages:
+
+1. the whole network with ``pretrain_loss`` (``loss`` when ``pretrain_loss`` is None) for
+   ``epochs`` epochs;
+2. when ``pretrain_loss`` is set, the classification layer alone is fine-tuned with ``loss`` for
+   ``finetune_epochs`` epochs on the frozen body's features. The paper ("after learning the
+   weights for the convolutional layers, fine-tuning with hinge-loss") leaves open whether the
+   body moves in stage 2; we keep it frozen, as the combined-instance heads (T4) do, which also
+   lets stage 2 run on features computed once.
+
+``head()`` gives the ``linear`` model (``models/linear.py``) for combined instances, trained by
+its own schedule (``head_schedule``, the ``schedule.head`` config node): combined units are ~10x
+fewer than instances.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from tactile_exp.data.layout import Instances
+from tactile_exp.models.base import EpochCallback, History, Model
+from tactile_exp.models.losses import LOSSES
+from tactile_exp.models.registry import MODELS
+from tactile_exp.train import (
+    caffe_xavier_,
+    resolve_device,
+    seed_everything,
+    sgd_epochs,
+    validate_sgd_args,
+)
+
+INFERENCE_BATCH = 4096
+HEAD_KEYS = ("epochs", "finetune_epochs", "batch_size", "lr", "momentum")  # its own schedule
+
+
+class SGDModel(Model):
+    """A body plus a linear classification layer, trained by the two-stage SGD schedule."""
+
+    def __init__(
+        self,
+        *,
+        epochs: int = 200,
+        finetune_epochs: int = 100,
+        batch_size: int = 1000,
+        lr: float = 0.01,
+        momentum: float = 0.9,
+        loss: str = "hinge",
+        pretrain_loss: str | None = "logistic",
+        head_schedule: Mapping[str, Any] | None = None,
+        seed: int = 0,
+        device: str = "auto",
+    ) -> None:
+        """``head_schedule``: how ``head()`` trains the classification layer on combined instances
+        (T4), keys among ``HEAD_KEYS``; None or a missing key: this model's own value."""
+        validate_sgd_args(
+            epochs=epochs,
+            finetune_epochs=finetune_epochs,
+            batch_size=batch_size,
+            lr=lr,
+            momentum=momentum,
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            known_losses=LOSSES.names(),
+        )
+        self.device_ = resolve_device(device)
+        self.device = device
+        self.head_schedule = None if head_schedule is None else dict(head_schedule)
+        unknown = sorted(set(self.head_schedule or {}) - set(HEAD_KEYS))
+        if unknown:
+            raise ValueError(
+                f"head_schedule: unknown keys {unknown}; allowed: {', '.join(HEAD_KEYS)}"
+            )
+        self.epochs = epochs
+        self.finetune_epochs = finetune_epochs
+        self.batch_size = batch_size
+        self.lr = lr
+        self.momentum = momentum
+        self.loss = loss
+        self.pretrain_loss = pretrain_loss
+        self.seed = seed
+        validate_sgd_args(
+            **self._head_settings(),
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            known_losses=LOSSES.names(),
+            where="head_schedule.",
+        )
+        self.body_: nn.Module | None = None
+        self.classifier_: nn.Linear | None = None
+        self.input_shape_: tuple[int, ...] | None = None
+
+    @abstractmethod
+    def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
+        """A fresh body for rows of ``input_shape`` and the width of its features."""
+
+    def _check_input(self, X: np.ndarray) -> None:
+        """Raise ValueError when training rows do not suit this model."""
+
+    def _fit_preprocessing(self, X: np.ndarray) -> None:
+        """Learn input statistics from the training rows (nothing by default)."""
+
+    def _preprocess(self, X: np.ndarray) -> np.ndarray:
+        return X
+
+    def _tensor(self, X: np.ndarray) -> torch.Tensor:
+        if self.body_ is None or self.classifier_ is None:
+            raise RuntimeError(f"{type(self).__name__} is not fitted; call fit first")
+        X = np.asarray(X)
+        if X.shape[1:] != self.input_shape_:
+            raise ValueError(
+                f"{type(self).__name__}: X rows have shape {X.shape[1:]}, "
+                f"the model was fitted on rows of shape {self.input_shape_}"
+            )
+        X = self._preprocess(X)
+        return torch.as_tensor(np.ascontiguousarray(X, dtype=np.float32), device=self.device_)
+
+    def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
+        X = np.asarray(train.X)
+        if len(X) == 0:
+            raise ValueError(f"{type(self).__name__}.fit: no training instances")
+        self._check_input(X)
+        generator = seed_everything(self.seed)
+        self._fit_preprocessing(X)
+        body, width = self._build_body(X.shape[1:])
+        classifier = nn.Linear(width, 1)
+        caffe_xavier_(classifier.weight, width)
+        nn.init.zeros_(classifier.bias)
+        self.body_ = body.to(self.device_)
+        self.classifier_ = classifier.to(self.device_)
+        self.input_shape_ = X.shape[1:]
+        Xt = self._tensor(X)
+        yt = torch.as_tensor(np.asarray(train.y), dtype=torch.float32, device=self.device_)
+
+        finetune = self.pretrain_loss is not None and self.finetune_epochs > 0
+        n_epochs = self.epochs + (self.finetune_epochs if finetune else 0)
+        done = 0
+
+        def reporter(metric: str) -> Callable[[float], None]:
+            def report(value: float) -> None:
+                nonlocal done
+                done += 1
+                if on_epoch is not None:
+                    on_epoch(done, n_epochs, {metric: value})
+
+            return report
+
+        body_, classifier_ = self.body_, self.classifier_
+        common = dict(
+            batch_size=self.batch_size, lr=self.lr, momentum=self.momentum, generator=generator
+        )
+        body_.train()
+        history: History = {
+            "train_loss": sgd_epochs(
+                lambda x: classifier_(body_(x)).squeeze(1),
+                [*body_.parameters(), *classifier_.parameters()],
+                Xt,
+                yt,
+                loss=LOSSES[self.pretrain_loss or self.loss],
+                epochs=self.epochs,
+                report=reporter("train_loss"),
+                **common,
+            )
+        }
+        if finetune:
+            history["finetune_loss"] = sgd_epochs(
+                lambda f: classifier_(f).squeeze(1),
+                list(classifier_.parameters()),
+                self._features(Xt),
+                yt,
+                loss=LOSSES[self.loss],
+                epochs=self.finetune_epochs,
+                report=reporter("finetune_loss"),
+                **common,
+            )
+        return history
+
+    @torch.no_grad()
+    def _features(self, X: torch.Tensor) -> torch.Tensor:
+        self.body_.eval()
+        parts = [self.body_(X[i : i + INFERENCE_BATCH]) for i in range(0, len(X), INFERENCE_BATCH)]
+        if not parts:
+            return X.new_zeros((0, self.classifier_.in_features))
+        return torch.cat(parts)
+
+    def transform(self, X: np.ndarray) -> np.ndarray:
+        """The body's features for each row of ``X``: (n, D) float32."""
+        return self._features(self._tensor(X)).cpu().numpy()
+
+    @torch.no_grad()
+    def decision_function(self, X: np.ndarray) -> np.ndarray:
+        scores = self.classifier_(self._features(self._tensor(X))).squeeze(1)
+        return scores.double().cpu().numpy()
+
+    def _head_settings(self) -> dict[str, Any]:
+        return {key: (self.head_schedule or {}).get(key, getattr(self, key)) for key in HEAD_KEYS}
+
+    def head(self) -> Model:
+        """A fresh ``linear`` model with the head's schedule, for combined features (T4)."""
+        return MODELS.build(
+            "linear",
+            **self._head_settings(),
+            loss=self.loss,
+            pretrain_loss=self.pretrain_loss,
+            seed=self.seed,
+            device=self.device,
+        )
