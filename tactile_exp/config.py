@@ -7,6 +7,7 @@ error names the config key and the allowed values.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import re
 from dataclasses import dataclass, field
@@ -18,8 +19,9 @@ from omegaconf import DictConfig, OmegaConf
 from tactile_exp.data.layout import ADJECTIVES
 
 DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
-# Keys that change where results go, not what they are: left out of the config hash.
-UNHASHED = ("tracking", "hydra")
+# Keys that change where results go or what they are compared with, not what they are: left out
+# of the config hash.
+UNHASHED = ("tracking", "hydra", "paper")
 
 
 class ConfigError(ValueError):
@@ -68,9 +70,18 @@ def config_hash(resolved: dict[str, Any]) -> str:
 
 
 def _component(node: Any, group: str) -> Component:
+    """``name`` picks the registry entry; ``_module_`` (optional) names a module to import first
+    that registers it, so a component outside the package needs only its module and its YAML."""
     if not isinstance(node, dict) or "name" not in node:
         raise ConfigError(f"{group}: expected a mapping with a 'name' key, got {node!r}")
-    return Component(str(node["name"]), {k: v for k, v in node.items() if k != "name"})
+    module = node.get("_module_")
+    if module is not None:
+        try:
+            importlib.import_module(str(module))
+        except ImportError as err:
+            raise ConfigError(f"{group}._module_: cannot import {module!r} ({err})") from err
+    params = {k: v for k, v in node.items() if k not in ("name", "_module_")}
+    return Component(str(node["name"]), params)
 
 
 def settings_from_config(

@@ -2,7 +2,8 @@
 
 Reads every FINISHED parent run of the MLflow experiment, groups runs that differ only in seed
 (by the Table I row when one was chosen), and writes ``table1.md``/``table1.csv`` (mean AUC over
-runs, with the paper's figure on the real data beside it) and ``per_adjective.csv``/``.png``
+runs, with the paper's figure on the real data beside it: the ``paper`` node of the row's
+experiment file, logged with the run) and ``per_adjective.csv``/``.png``
 (the paper's Fig. 5 view: per-adjective AUC of each method, averaged over seeds and splits).
 """
 
@@ -19,12 +20,6 @@ import numpy as np
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.tracking import Tracker
 
-# Gao et al. 2016, Table I: mean AUC (%) on the real PHAC-2, for comparison only.
-PAPER_TABLE1 = {
-    "a": 77.3, "b": 70.8, "c": 75.5, "d": 74.3, "e": 77.5, "f": 78.2, "g": 72.1, "h": 81.6,
-    "i": 83.2, "j": 82.1, "k": 71.5, "l": 77.2, "m": 84.7, "n": 85.9, "o": 50.0,
-}  # fmt: skip
-
 
 def method_of(run_name: str, experiment: str | None) -> str:
     """Runs that differ only in seed describe one method."""
@@ -34,7 +29,8 @@ def method_of(run_name: str, experiment: str | None) -> str:
 
 
 def collect(tracker: Tracker) -> dict[str, list[dict[str, float]]]:
-    """method -> one {metric: value} per FINISHED parent run."""
+    """method -> one {metric: value} per FINISHED parent run (plus ``paper.auc`` when the run's
+    experiment file gives the paper's figure)."""
     runs = tracker.client.search_runs(
         [tracker.experiment_id],
         filter_string="tags.run_level = 'parent' and attributes.status = 'FINISHED'",
@@ -43,7 +39,10 @@ def collect(tracker: Tracker) -> dict[str, list[dict[str, float]]]:
     methods: dict[str, list[dict[str, float]]] = defaultdict(list)
     for run in runs:
         name = method_of(run.info.run_name, run.data.params.get("choice.experiment"))
-        methods[name].append(dict(run.data.metrics))
+        values = dict(run.data.metrics)
+        if run.data.params.get("paper.auc") not in (None, "None"):
+            values["paper.auc"] = float(run.data.params["paper.auc"])
+        methods[name].append(values)
     return dict(sorted(methods.items()))
 
 
@@ -51,8 +50,8 @@ def table1(methods: dict[str, list[dict[str, float]]]) -> list[dict[str, str]]:
     rows = []
     for name, runs in methods.items():
         means = np.array([r["mean_auc"] for r in runs]) * 100
-        row = re.match(r"table1_([a-o])_", name)
-        paper = PAPER_TABLE1.get(row.group(1)) if row else None
+        row = re.match(r"table1_([a-z])_", name)
+        paper = next((r["paper.auc"] for r in runs if "paper.auc" in r), None)
         rows.append(
             {
                 "row": row.group(1).upper() if row else "",

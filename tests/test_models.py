@@ -24,10 +24,6 @@ def easy_case(n: int, channels: int = 32, steps: int = 150, seed: int = 0, noise
     return Instances(X, y, np.array([f"t{i}" for i in range(n)]), np.arange(n) // 10)
 
 
-def test_all_models_registered():
-    assert {"haptic_cnn", "haptic_lstm", "linear", "random"} <= set(MODELS.names())
-
-
 @pytest.mark.parametrize("channels", [32, 64])
 def test_cnn_shapes(channels):
     train = easy_case(40, channels)
@@ -207,3 +203,58 @@ def test_bad_inputs_raise_clear_errors():
     model.fit(easy_case(20))
     with pytest.raises(ValueError, match=r"fitted on rows of shape \(32, 150\)"):
         model.decision_function(np.zeros((2, 64, 150), dtype=np.float32))
+
+
+# One example row per modality a model may declare; models that declare none take any rows.
+EXAMPLE_ROWS = {"haptic": (32, 40), "visual": (832,)}
+
+
+def _contract_case(shape: tuple[int, ...], n: int = 60) -> Instances:
+    rng = np.random.default_rng(0)
+    y = (np.arange(n) // 2 % 2).astype(np.int64)  # consecutive pairs share a label (and object)
+    X = rng.standard_normal((n, *shape)).astype(np.float32)
+    X[y == 1] += 0.5
+    return Instances(X, y, np.array([f"t{i}" for i in range(n)], dtype=object), np.arange(n) // 4)
+
+
+@pytest.mark.parametrize("name", MODELS.names())
+def test_every_registered_model_keeps_the_contract(compose_config, name):
+    """Built from its own YAML on the tiny schedule: fits, scores, clones, gives a head, and is
+    deterministic for a seed. A new model is tested here the moment it is registered."""
+    from tactile_exp.config import settings_from_config
+    from tactile_exp.models.base import clone
+
+    declared = MODELS[name].modalities
+    overrides = [f"model={name}", "schedule=tiny", "device=cpu"]
+    overrides += [f"modality={declared[0]}"] if declared else []
+    params = settings_from_config(compose_config(overrides)).model.params
+    model = MODELS.build(name, **params)
+    assert model.get_params() == params  # explicit keywords, held under their own names
+    train = _contract_case(EXAMPLE_ROWS.get(declared[0] if declared else "", (24,)))
+    history = model.fit(train)
+    assert all(len(v) >= 1 for v in history.values())
+    scores = model.decision_function(train.X)
+    assert scores.shape == (len(train),) and np.isfinite(scores).all()
+
+    twin = clone(model)
+    assert type(twin) is type(model) and twin.get_params() == model.get_params()
+    twin.fit(train)
+    np.testing.assert_array_equal(twin.decision_function(train.X), scores)
+
+    features = model.transform(train.X) if model.learns_representation else train.X
+    pairs = features.reshape(len(train) // 2, -1)  # two instances combined per unit
+    units = Instances(pairs, train.y[::2], train.trial[::2], train.object_id[::2])
+    head = model.head()
+    head.fit(units)
+    assert head.decision_function(pairs).shape == (len(units),)
+
+
+def test_head_schedule_is_its_own():
+    model = MODELS.build(
+        "haptic_cnn", head_schedule={"epochs": 7, "batch_size": 64, "lr": 0.1}, **FAST
+    )
+    head = model.head()
+    assert (head.epochs, head.batch_size, head.lr) == (7, 64, 0.1)
+    assert (head.finetune_epochs, head.momentum, head.seed) == (2, 0.9, model.seed)
+    with pytest.raises(ValueError, match="head_schedule: unknown keys"):
+        MODELS.build("haptic_cnn", head_schedule={"epoch": 7})

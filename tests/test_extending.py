@@ -1,0 +1,91 @@
+"""The extension contract: a new model is one module + one YAML, a new Table I row is one
+experiment file, and the Table I sweep picks the row up; proved in a temporary config dir."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import yaml
+from conftest import CONF, TINY_DATA
+from hydra import compose, initialize_config_dir
+from hydra.core.override_parser.overrides_parser import OverridesParser
+
+from tactile_exp.config import settings_from_config
+from tactile_exp.experiment import run
+from tactile_exp.models import MODELS
+
+MODULE = '''
+"""A nearest-centroid classifier: the whole of a new model's code."""
+
+import numpy as np
+
+from tactile_exp.models.base import Model
+from tactile_exp.models.registry import MODELS
+
+
+@MODELS.register("nearest_centroid")
+class NearestCentroid(Model):
+    learns_representation = False
+
+    def __init__(self, *, shrink: float = 0.0) -> None:
+        self.shrink = shrink
+
+    def fit(self, train, on_epoch=None):
+        X = train.X.reshape(len(train), -1)
+        self.direction_ = X[train.y == 1].mean(0) - (1 - self.shrink) * X[train.y == 0].mean(0)
+        return {}
+
+    def decision_function(self, X):
+        return np.asarray(X).reshape(len(X), -1) @ self.direction_
+'''
+
+
+def table1_rows(conf: Path) -> list[str]:
+    """The experiments `-m sweep=table1` runs: its glob, filtered by Hydra over the files."""
+    sweep = yaml.safe_load((conf / "sweep" / "table1.yaml").read_text())
+    value = sweep["hydra"]["sweeper"]["params"]["experiment"]
+    glob = OverridesParser.create().parse_override(f"experiment={value}").value()
+    return glob.filter(sorted(p.stem for p in (conf / "experiment").glob("*.yaml")))
+
+
+def test_table1_sweep_is_every_table1_file_and_nothing_else():
+    rows = table1_rows(CONF)
+    assert [r.split("_")[1] for r in rows] == list("abcdefghijklo")
+    assert "quick_table1_i" not in rows
+
+
+def test_new_model_and_new_row_in_a_temporary_config_dir(tmp_path, monkeypatch, cache_dir):
+    conf = tmp_path / "conf"
+    shutil.copytree(CONF, conf)
+    (tmp_path / "my_models").mkdir()
+    (tmp_path / "my_models" / "centroid.py").write_text(MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(MODELS, "_entries", dict(MODELS._load()))  # forget the model afterwards
+    (conf / "model" / "nearest_centroid.yaml").write_text(
+        "name: nearest_centroid\n_module_: my_models.centroid\nshrink: 0.0\n"
+    )
+    (conf / "experiment" / "table1_z_nearest_centroid.yaml").write_text(
+        "# @package _global_\n"
+        "defaults:\n"
+        "  - override /model: nearest_centroid\n"
+        "  - override /combine_instances: separate\n"
+        "paper:\n  row: Z\n  auc: 61.5\n"
+    )
+    assert "table1_z_nearest_centroid" in table1_rows(conf)
+    overrides = [
+        *TINY_DATA,
+        f"cache_dir={cache_dir}",
+        f"tracking.uri=sqlite:///{tmp_path / 'mlflow.db'}",
+        "adjectives=[hard,soft]",
+        "experiment=table1_z_nearest_centroid",
+    ]
+    with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
+        cfg = compose("config", overrides=overrides)
+    settings = settings_from_config(cfg)
+    assert "nearest_centroid" in MODELS.names()
+    assert settings.model.params == {"shrink": 0.0}
+    result = run(settings)
+    assert set(result.results) == {"hard", "soft"}
+    for r in result.results.values():
+        assert 0.0 <= r.auc <= 1.0 and np.isfinite(r.scores).all()
+        assert len(np.unique(r.scores)) > 1  # the new model's scores, not a constant
