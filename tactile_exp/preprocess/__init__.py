@@ -9,6 +9,7 @@ from tactile_exp.preprocess.haptic import (
 )
 from tactile_exp.preprocess.visual import (
     VisualArrays,
+    VisualFeatures,
     crop_plate,
     find_plate,
     load_visual_arrays,
@@ -19,6 +20,7 @@ __all__ = [
     "HapticArrays",
     "HapticPreprocessor",
     "VisualArrays",
+    "VisualFeatures",
     "crop_plate",
     "downsample_pac",
     "find_plate",

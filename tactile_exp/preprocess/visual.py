@@ -265,3 +265,80 @@ def load_visual_arrays(
     arrays = compute_visual_arrays(dataset, size)
     save_arrays(path, {k: getattr(arrays, k) for k in _ARRAY_KEYS})
     return arrays
+
+
+class VisualFeatures:
+    """V2 and M3's frozen trunk as fit/transform: ``fit`` learns the channel mean (ImageNet's, or
+    the training photographs' with ``mean="train"``), ``transform`` gives the pooled,
+    L2-normalised inception (5a) features of chosen photographs, (n, 832).
+
+    The trunk runs once per set of images, weights file (or seed) and mean, over every photograph,
+    cached on disk under ``cache_dir``: shared by every adjective and job.
+    """
+
+    def __init__(
+        self,
+        arrays: VisualArrays,
+        *,
+        cache_dir: Path,
+        mean: str = "imagenet",
+        weights: Path | None = None,
+        seed: int = 0,
+        batch_size: int = 32,
+        device: str = "auto",
+    ) -> None:
+        if mean not in ("imagenet", "train"):
+            raise ValueError(f"mean must be 'imagenet' or 'train', got {mean!r}")
+        self.arrays = arrays
+        self.cache_dir = cache_dir
+        self.mean = mean
+        self.weights = weights
+        self.seed = seed
+        self.batch_size = batch_size
+        self.device = device
+        self._by_mean: dict[tuple[float, ...], np.ndarray] = {}
+
+    def fit(self, index: np.ndarray | None = None) -> VisualFeatures:
+        """Learn the channel mean from photographs ``index`` (all when None) if ``mean="train"``,
+        and run (or load) the trunk for it."""
+        fitted = IMAGENET_MEAN_RGB if self.mean == "imagenet" else self.arrays.channel_mean(index)
+        self.mean_ = tuple(round(float(m), 4) for m in fitted)
+        if self.mean_ not in self._by_mean:
+            self._by_mean = {self.mean_: self._all_features(self.mean_)}  # keep only the latest
+        return self
+
+    def transform(self, index: np.ndarray) -> np.ndarray:
+        """Features of photographs ``index`` (rows of ``arrays``): (len(index), 832)."""
+        return self._by_mean[self.mean_][index]
+
+    def _all_features(self, mean: tuple[float, ...]) -> np.ndarray:
+        """The trunk's features of every photograph with channel ``mean`` subtracted; cached on
+        disk by the images' bytes, the weights file's bytes (or seed) and the mean."""
+        import hashlib
+
+        from tactile_exp.models.googlenet import (
+            IMAGENET_STD_RGB,
+            build_trunk,
+            file_digest,
+            pooled_features,
+        )
+        from tactile_exp.train import resolve_device
+
+        key = cache_key(
+            kind="googlenet_5a",
+            images=hashlib.sha1(self.arrays.images.tobytes()).hexdigest(),
+            weights=file_digest(self.weights) if self.weights else f"xavier-seed{self.seed}",
+            mean=mean,
+            version=1,
+        )
+        path = self.cache_dir / f"googlenet5a-{key}.npz"
+        cached = load_arrays(path, ("features",))
+        if cached is not None:
+            return cached["features"]
+        # V2's mean-subtracted pixels on torchvision's input scale (ImageNet std, 0-1 range)
+        images = self.arrays.prepared(mean=mean)
+        images /= 255.0 * np.asarray(IMAGENET_STD_RGB, np.float32).reshape(1, 3, 1, 1)
+        trunk = build_trunk(self.weights, self.seed)
+        features = pooled_features(trunk, images, self.batch_size, resolve_device(self.device))
+        save_arrays(path, {"features": features})
+        return features

@@ -1,0 +1,55 @@
+"""What a model sees: the ``modality`` config group.
+
+A modality turns one adjective's split into training and test ``Instances``, fitting whatever it
+must fit (normaliser, PCA, HMM chains) on the training trials only. ``prepare`` does the one pass
+over the file that every adjective shares (cached on disk), before any training starts.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from tactile_exp.data.layout import Instances, Split, TrialName
+from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.registry import Registry
+
+
+class Modality(ABC):
+    def __init__(self, dataset: PHAC2, cache_dir: Path) -> None:
+        self.dataset = dataset
+        self.cache_dir = cache_dir
+
+    def max_combine(self) -> tuple[int, str]:
+        """The largest ``combine`` (instances of one object grouped as a unit) and its unit name."""
+        return int(max(np.bincount([t.object_id for t in self.dataset.trials]))), "trials"
+
+    @abstractmethod
+    def prepare(self) -> None:
+        """Read and cache what all adjectives share; raises on bad input before any training."""
+
+    @abstractmethod
+    def instances(self, split: Split) -> tuple[Instances, Instances]:
+        """Training and test instances of one adjective's split."""
+
+
+MODALITIES: Registry[Modality] = Registry(
+    "modality",
+    Modality,
+    modules=(
+        "tactile_exp.modalities.haptic",
+        "tactile_exp.modalities.haptic_features",
+        "tactile_exp.modalities.visual",
+    ),
+)
+
+
+def trial_rows(trials: Sequence[str], split: Split, per_trial: int) -> tuple[np.ndarray, ...]:
+    """Labels, names and object ids of ``per_trial`` consecutive rows per trial of ``trials``."""
+    names = np.repeat(np.asarray(trials, dtype=object), per_trial)
+    y = np.repeat([split.labels[t] for t in trials], per_trial).astype(np.int64)
+    objects = np.repeat([TrialName.parse(t).object_id for t in trials], per_trial)  # type: ignore[union-attr]
+    return y, names, objects
