@@ -21,6 +21,7 @@ from tactile_exp.baselines import features as feat
 from tactile_exp.baselines.dynamic import DynamicFeatures
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.splits import make_split
 from tactile_exp.data.synthetic import default_file
 
 
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace, feature_cache: Path) -> None:
     t0 = time.perf_counter()
     for adj in ADJECTIVES[:k]:
         t1 = time.perf_counter()
-        model = DynamicFeatures(args.grid).fit(table, data.split(adj))
+        model = DynamicFeatures(args.grid).fit(table, make_split(data, adj))
         model.transform(table, table.trials)
         print(
             f"  {adj}: 16 chains {time.perf_counter() - t1:.1f} s, first (N,T,K) {model.params_[0]}"
