@@ -185,28 +185,62 @@ _SHARP = {  # ... except these: thick/thin stay visible, appearance is less nois
 _TRIAL_NOISE = 0.12  # per-trial: contact position and local variation of the surface
 
 
+_VISUAL_PROPS = ("metalness", "transparency")  # seen only: no signal reads them
+_VISUAL_BASE: dict[str, tuple[float, float]] = {  # in the order of _VISUAL_PROPS
+    "foam": (0.0, 0.0), "plastic": (0.08, 0.08), "paper": (0.0, 0.0), "fabric": (0.0, 0.0),
+    "organic": (0.0, 0.0), "stone": (0.05, 0.0), "glass": (0.2, 0.65), "metal": (0.85, 0.0),
+}  # fmt: skip
+_VISUAL_LABEL_EFFECTS = {"metallic": {"metalness": 0.4}}
+_VISUAL_NOISE = 0.12
+
+
 def object_properties(spec: SyntheticSpec) -> dict[int, dict[str, float]]:
     """Latent properties of each object of ``spec`` (the only input of every signal and image)."""
     out = {}
     for obj in _objects(spec):
         rng = np.random.default_rng([spec.seed, obj.object_id, 0])
-        base = dict(zip(_PROPS, _MATERIAL_BASE[obj.material], strict=True))
-        for adj in obj.positives:
-            for prop, delta in _LABEL_EFFECTS[adj].items():
-                base[prop] += delta
-        props = {
-            k: float(np.clip(v + rng.normal(0, _SHARP.get(k, _NOISE)), 0, 1))
-            for k, v in base.items()
-        }
-        props["hue"] = float(rng.uniform(0, 1))
-        props["contact_area"] = float(rng.uniform(0.5, 1.5))  # shape nuisance, label-free
-        soft, hard = math.log(20e-3), math.log(1.2e-3)
-        props["indent_500"] = math.exp(soft + (hard - soft) * props["stiffness"])
-        shape = float(rng.uniform(0, 0.04))  # object width between the fingers, not thickness
-        width = 0.012 + 0.012 * props["thickness"] + shape
-        props["grip_width"] = max(width, props["indent_500"] + 0.004)
-        out[obj.object_id] = props
+        visual_rng = np.random.default_rng([spec.seed, obj.object_id, 0, 1])  # own stream
+        out[obj.object_id] = _draw(obj.material, obj.positives, rng, visual_rng)
     return out
+
+
+def draw_object_properties(material: str, rng: np.random.Generator) -> dict[str, float]:
+    """Latent properties of a newly drawn object of ``material`` (one of ``_MATERIAL_BASE``).
+
+    Drawn like the 60 objects' (material base plus the same object noise) but with no label
+    effects, so new objects (e.g. for visual pre-training) carry nothing of the 60's labels.
+    """
+    if material not in _MATERIAL_BASE:
+        raise ValueError(f"material {material!r}: expected one of {sorted(_MATERIAL_BASE)}")
+    return _draw(material, (), rng, rng)
+
+
+def _draw(
+    material: str,
+    positives: tuple[str, ...],
+    rng: np.random.Generator,
+    visual_rng: np.random.Generator,
+) -> dict[str, float]:
+    base = dict(zip(_PROPS, _MATERIAL_BASE[material], strict=True))
+    visual = dict(zip(_VISUAL_PROPS, _VISUAL_BASE[material], strict=True))
+    for adj in positives:
+        for prop, delta in _LABEL_EFFECTS[adj].items():
+            base[prop] += delta
+        for prop, delta in _VISUAL_LABEL_EFFECTS.get(adj, {}).items():
+            visual[prop] += delta
+    props = {
+        k: float(np.clip(v + rng.normal(0, _SHARP.get(k, _NOISE)), 0, 1)) for k, v in base.items()
+    }
+    props["hue"] = float(rng.uniform(0, 1))
+    props["contact_area"] = float(rng.uniform(0.5, 1.5))  # shape nuisance, label-free
+    soft, hard = math.log(20e-3), math.log(1.2e-3)
+    props["indent_500"] = math.exp(soft + (hard - soft) * props["stiffness"])
+    shape = float(rng.uniform(0, 0.04))  # object width between the fingers, not thickness
+    width = 0.012 + 0.012 * props["thickness"] + shape
+    props["grip_width"] = max(width, props["indent_500"] + 0.004)
+    for k, v in visual.items():
+        props[k] = float(np.clip(v + visual_rng.normal(0, _VISUAL_NOISE), 0, 1))
+    return props
 
 
 # ------------------------------------------------------------------------------ trial signals
