@@ -91,7 +91,7 @@ from tactile_exp.data.layout import (
     published_test_split,
 )
 
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 log = logging.getLogger(__name__)
 
 
