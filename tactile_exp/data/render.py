@@ -176,7 +176,7 @@ def _draw_object(
     lit = np.where(top_face, 1.12, cylinder)
 
     # Surface: grain (frequency ~ roughness, contrast ~ texture_contrast), shaded bumps, fuzz.
-    cell = max(ow / (3 + 30 * props["roughness"]), 1.5)
+    cell = max(ow / (8 + 40 * props["roughness"]), 1.5)  # always finer than the bumps
     grain = _smooth_noise(rng, wh, ww, (round(wh / cell), round(ww / cell)))
     tex = 1 + (0.03 + 0.45 * props["texture_contrast"]) * grain
     bump_cell = max(ow / 3.5, 2)
@@ -184,7 +184,7 @@ def _draw_object(
     gy, gx = np.gradient(relief)
     slope = gx * light_dir - gy  # light from above, left or right
     slope /= float(slope.std()) + 1e-6
-    tex *= 1 + 0.4 * props["bumpiness"] * np.clip(slope, -2.5, 2.5)
+    tex *= 1 + 0.9 * props["bumpiness"] * np.clip(slope, -1.1, 1.1)
     fuzz = rng.standard_normal((wh, ww)).astype(np.float32)
     tex *= 1 + 0.25 * hair * cv2.GaussianBlur(fuzz, (0, 0), max(w / 1200, 0.4))
     obj = colour * (light * lit * tex)[..., None]

@@ -10,9 +10,12 @@ Labels never enter a signal directly. Each object first gets latent physical pro
 drawn (seeded) from a per-material base, plus label effects, plus object noise (``_NOISE``):
 stiffness, roughness, thermal effusivity, friction, thickness, hairiness, porosity, springiness,
 stickiness, crinkliness, bumpiness, and visual ones (hue, saturation, value, gloss, texture
-contrast, size). Two derived quantities set the mechanics: ``indent_500`` (indentation in m at
-which the firmer finger reads +500 counts; 20 mm soft ... 1.2 mm stiff) and ``grip_width``
-(object width between the fingers; mostly object shape, only weakly thickness).
+contrast, size; metalness and transparency are seen only, drawn from their own random stream so
+adding them moved no haptic property). ``draw_object_properties`` draws a new object of a
+material the same way without label effects (visual pre-training). Two derived quantities set
+the mechanics: ``indent_500`` (indentation in m at which the firmer finger reads +500 counts;
+20 mm soft ... 1.2 mm stiff) and ``grip_width`` (object width between the fingers; mostly
+object shape, only weakly thickness).
 Every signal then follows from the properties through simple physics:
 
 - gripper: the controller of §1.4 (tap, squeeze, hold, two slides, every detail state). The
@@ -31,8 +34,10 @@ Every signal then follows from the properties through simple physics:
 - electrodes: per-finger baseline pattern of §5, a pressure-driven pattern (E7-E10, E17 down;
   E1, E4, E6, E11, E14, E16 up) and a large local drop at the contact edge, mirrored between the
   fingers (E1..E6 <-> E11..E16); shear by friction and a bump pattern while sliding.
-- photographs (``render``): size/height from thickness (strongly), colour, gloss, texture, bumps
-  and hair strands from the visual properties.
+- photographs (``render``): height from thickness (strongly), width from size, colour, grain
+  (roughness, texture contrast), shaded bumps, a specular streak (gloss), banded reflections
+  (metalness), the background through glass (transparency), soft outline and strands
+  (hairiness). Touch-only properties (stiffness, porosity, springiness, ...) are not drawn.
 
 Noise: object properties scatter around material + label effects with sigma 0.32 (0.12 for
 thickness and size, 0.18 for appearance), and a label-free object "contact area" (0.5 ... 1.5)
