@@ -171,6 +171,8 @@ def test_render_object_from_newly_drawn_properties():
                 np.hypot(plate.cx - view.centre[0], plate.cy - view.centre[1]) < 0.08 * view.radius
             )
             assert crop_box(view.image.shape, plate)[3] > 0
+    same = [draw_object_properties("foam", np.random.default_rng(3)) for _ in range(2)]
+    assert same[0] == same[1]
     metal = [draw_object_properties("metal", rng)["metalness"] for _ in range(20)]
     foam = [draw_object_properties("foam", rng)["metalness"] for _ in range(20)]
     assert np.mean(metal) > np.mean(foam) + 0.5
