@@ -40,28 +40,39 @@ Every signal then follows from the properties through simple physics:
   (hairiness). Touch-only properties (stiffness, porosity, springiness, ...) are not drawn.
 
 Noise: object properties scatter around material + label effects with sigma 0.32 (0.12 for
-thickness and size, 0.18 for appearance), and a label-free object "contact area" (0.5 ... 1.5)
-scales thermal and texture responses. Per trial: every property again (sigma 0.12), finger shares
-and contact position, stiffness (+-10 %), grip width, speeds and durations, sensor baselines and
-drift. Absorbent, squishy and springy act only through touch; thick and thin mostly through
-sight (the gripper sees thickness weakly and noisily); nice and unpleasant only through the weak
-label effects of ``_LABEL_EFFECTS``.
+thickness, size, metalness and transparency, 0.18 for the other appearance properties), and a
+label-free object "contact area" (0.5 ... 1.5) scales thermal and texture responses. Per trial:
+every property again (sigma 0.12), finger shares and contact position, stiffness (+-10 %), grip
+width, speeds and durations, sensor baselines and drift. Absorbent, squishy and springy act only
+through touch; thick and thin mostly through sight (the gripper sees thickness weakly and noisily);
+nice and unpleasant only through the weak label effects of ``_LABEL_EFFECTS``.
 
 File: gzip level 1 + shuffle (4 % larger than level 4, a third faster to write); objects are
 spread over worker processes, each writing a part file that is copied in without recompression.
 
-Difficulty, measured on the full default file (seed 0, generator version 2) with
-``.venv/bin/python bench/bench_difficulty.py``: per-trial mean/std features per EP and finger,
-StandardScaler + LogisticRegression on the published train split, ROC AUC on its test split.
+Difficulty, measured on the full default file (seed 0, generator version 3) with
+``TACTILE_EXP_CACHE=... .venv/bin/python bench/bench_difficulty.py``: per-trial mean/std features
+per EP and finger, and simple features of the object in each photograph's V1 crop (height,
+width, saturation, value, specular fraction, texture energy at three scales, edge density,
+strand fringe); StandardScaler + LogisticRegression on the published train split, ROC AUC on its
+test split ("E1"), and out-of-fold AUC of object-grouped 5-fold CV over all 60 objects ("CV").
+The published test sets hold 1-3 positive objects for most adjectives, so E1 AUCs swing with
+single objects; CV is steadier.
 
-- haptic: mean AUC 0.849 over the 24 adjectives (0.829 over the 21 with a visual score);
+- haptic: E1 mean AUC 0.849 over the 24 adjectives (0.829 over the 21 with a visual score);
   weakest smooth 0.56, soft 0.64, bumpy 0.64, textured 0.64; strongest rough, sticky 1.00.
-- visual (mean colour, colour std, edge density and height of the crop): mean AUC 0.50 over 21
-  adjectives (nice, sticky, unpleasant have one positive object, split by trial). Such tiny
-  features miss most of the appearance cues (random hue dominates the colour mean), and
-  material confounds invert some small test sets (hard 0.02, fuzzy 0.00).
-- touch-only absorbent/squishy/springy: haptic 0.72 vs visual 0.35; thick/thin: haptic 0.66 vs
-  visual 0.80.
+- visual: E1 mean AUC 0.693 over 21 adjectives (nice, sticky, unpleasant have one positive
+  object, split by trial), CV 0.709. Generator version 2 scored 0.645 (E1) and 0.700 (CV) with
+  the same features, 0.504 (E1) with the earlier, cruder ones.
+- thick/thin, by sight vs touch: E1 0.81/0.97 vs 0.38/0.94, CV 0.93/0.98 vs 0.33/0.84.
+- seen adjectives, visual E1 (CV): fuzzy 0.94 (0.46), hairy 0.62 (0.88), metallic 1.00 (0.95),
+  textured 0.84 (0.73), bumpy 0.75 (0.47), smooth 0.62 (0.71), cool 0.99 (0.80); mean 0.82
+  (haptic 0.80). Fuzzy and bumpy have 7 and 3 positive objects and the latent hairiness and
+  bumpiness scatter (noise 0.32), so CV's few-positive folds are weak for them.
+- touch-only absorbent/squishy/springy/compressible by sight: E1 0.19/0.43/0.01/0.63 (touch
+  0.73/0.68/0.76/0.82), CV 0.74/0.51/0.75/0.58. Nothing of porosity, stiffness or springiness is
+  drawn; what sight finds is the material (foam: thick, saturated), and on the published split
+  that cue inverts (springy's one test positive is a thin, glossy silicone block).
 """
 
 from __future__ import annotations
