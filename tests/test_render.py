@@ -6,8 +6,14 @@ import cv2
 import numpy as np
 import pytest
 
-from tactile_exp.data.render import View, render_view, write_jpeg
-from tactile_exp.data.synthetic import SyntheticSpec, object_properties
+from tactile_exp.data.render import PROPERTIES, View, render_object, render_view, write_jpeg
+from tactile_exp.data.synthetic import (
+    _MATERIAL_BASE,
+    SyntheticSpec,
+    draw_object_properties,
+    object_properties,
+)
+from tactile_exp.preprocess.visual import crop_box, find_plate
 
 PROPS = object_properties(SyntheticSpec(object_ids=(101, 406, 508, 703)))
 
@@ -68,17 +74,112 @@ def test_views_differ_and_renders_are_deterministic(tmp_path):
     assert back.shape == a.image.shape and np.abs(back.astype(int) - a.image).mean() < 4
 
 
-def test_hairy_objects_get_strands_and_glossy_ones_a_highlight():
-    base = dict(PROPS[508])
-    plain = render_view({**base, "hairiness": 0.0, "gloss": 0.0}, 0, 480, 320, seed=2)
-    hairy = render_view({**base, "hairiness": 1.0, "gloss": 0.0}, 0, 480, 320, seed=2)
-    glossy = render_view({**base, "hairiness": 0.0, "gloss": 1.0}, 0, 480, 320, seed=2)
+def crop_stats(view: View) -> dict[str, float]:
+    """Appearance of the object in the V1 crop's centre band (half a plate radius wide)."""
+    (cx, cy), r = view.centre, view.radius
+    band = view.image[
+        int(cy - 1.5 * r) : int(cy - 0.5 * r), int(cx - 0.25 * r) : int(cx + 0.25 * r)
+    ]
+    hsv = cv2.cvtColor(band, cv2.COLOR_BGR2HSV).astype(float)
+    grey = cv2.cvtColor(band, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    fine = np.abs(grey - cv2.GaussianBlur(grey, (0, 0), 1.0)).mean()
+    coarse = np.abs(cv2.GaussianBlur(grey, (0, 0), 1.0) - cv2.GaussianBlur(grey, (0, 0), 4.0))
+    return {
+        "specular": float(((hsv[..., 2] > 235) & (hsv[..., 1] < 60)).mean()),
+        "saturation": float(hsv[..., 1].mean()),
+        "fine": float(fine),
+        "coarse": float(coarse.mean()),
+    }
+
+
+# a thick, plain, matte object: every cue starts low, so one property at a time shows
+PLAIN = {
+    **PROPS[508], "thickness": 0.9, "hairiness": 0.0, "gloss": 0.0, "metalness": 0.0,
+    "transparency": 0.0, "texture_contrast": 0.0, "roughness": 0.3, "bumpiness": 0.0,
+    "saturation": 0.7,
+}  # fmt: skip
+
+
+def test_metal_and_gloss_raise_the_highlight_fraction_and_metal_greys():
+    views = {
+        name: [render_view({**PLAIN, **change}, v, 240, 160, seed=3) for v in range(3)]
+        for name, change in (
+            ("plain", {}),
+            ("glossy", {"gloss": 1.0}),
+            ("metal", {"metalness": 1.0, "gloss": 0.8}),
+        )
+    }
+    stats = {k: [crop_stats(v) for v in vs] for k, vs in views.items()}
+    for i in range(3):
+        plain, glossy, metal = (stats[k][i] for k in ("plain", "glossy", "metal"))
+        assert plain["specular"] < 0.005
+        assert glossy["specular"] > 0.02 and metal["specular"] > 0.02
+        assert metal["saturation"] < 0.7 * plain["saturation"]
+
+
+def test_texture_and_bumps_follow_their_properties():
+    def stats(change: dict[str, float]) -> dict[str, float]:
+        return crop_stats(render_view({**PLAIN, **change}, 0, 240, 160, seed=4))
+
+    plain = stats({})
+    grain = stats({"texture_contrast": 1.0, "roughness": 1.0})
+    bumps = stats({"bumpiness": 1.0})
+    assert grain["fine"] > 2 * plain["fine"]
+    assert bumps["coarse"] > 1.5 * plain["coarse"]
+
+
+def test_hairy_objects_get_strands_beyond_their_outline():
+    plain = render_view(PLAIN, 0, 480, 320, seed=2)
+    hairy = render_view({**PLAIN, "hairiness": 1.0}, 0, 480, 320, seed=2)
 
     def edges(v: View) -> float:
         return float(cv2.Canny(cv2.cvtColor(v.image, cv2.COLOR_BGR2GRAY), 80, 160).mean())
 
-    assert edges(hairy) > 1.15 * edges(plain)
-    assert glossy.image.astype(int).sum() > plain.image.astype(int).sum()
+    assert edges(hairy) > 1.3 * edges(plain)
+    # strands cross the wall beside the object: the crop's outer columns change
+    (cx, cy), r = plain.centre, plain.radius
+    rows = slice(int(cy - 1.4 * r), int(cy - 0.6 * r))
+    ow = r * (0.38 + 0.45 * PLAIN["size"])  # render.py's half width at most
+    beside = slice(int(cx + ow + 2), int(cx + ow + 0.1 * r))
+    diff = np.abs(hairy.image.astype(int) - plain.image.astype(int)).sum(axis=2) > 60
+    assert diff[rows, beside].mean() > 0.02
+
+
+def test_touch_only_properties_leave_the_photograph_alone():
+    touch = {
+        "stiffness": 0.0, "porosity": 1.0, "springiness": 1.0, "effusivity": 1.0,
+        "stickiness": 1.0, "friction": 1.0, "crinkliness": 1.0, "contact_area": 1.5,
+    }  # fmt: skip
+    a = render_view(PROPS[101], 2, 160, 120, seed=5)
+    b = render_view({**PROPS[101], **touch}, 2, 160, 120, seed=5)
+    assert np.array_equal(a.image, b.image)
+
+
+def test_render_object_from_newly_drawn_properties():
+    rng = np.random.default_rng(11)
+    for material in sorted(_MATERIAL_BASE):
+        props = draw_object_properties(material, rng)
+        assert set(props) == set(PROPS[101])  # drawn like the 60 objects
+        assert all(0 <= props[k] <= 1 for k in PROPERTIES)
+        views = render_object(props, width=160, height=120, seed=(7, 1))
+        again = render_object(props, width=160, height=120, seed=(7, 1))
+        assert len(views) == 8
+        assert all(np.array_equal(a.image, b.image) for a, b in zip(views, again, strict=True))
+        for view in views[:3]:
+            plate = find_plate(cv2.cvtColor(view.image, cv2.COLOR_BGR2RGB))
+            assert (
+                np.hypot(plate.cx - view.centre[0], plate.cy - view.centre[1]) < 0.08 * view.radius
+            )
+            assert crop_box(view.image.shape, plate)[3] > 0
+    same = [draw_object_properties("foam", np.random.default_rng(3)) for _ in range(2)]
+    assert same[0] == same[1]
+    metal = [draw_object_properties("metal", rng)["metalness"] for _ in range(20)]
+    foam = [draw_object_properties("foam", rng)["metalness"] for _ in range(20)]
+    assert np.mean(metal) > np.mean(foam) + 0.5
+    with pytest.raises(ValueError, match="material 'wood'"):
+        draw_object_properties("wood", rng)
+    with pytest.raises(KeyError, match="metalness"):
+        render_view({k: v for k, v in PROPS[101].items() if k != "metalness"}, 0, 96, 64)
 
 
 @pytest.mark.slow

@@ -3,11 +3,23 @@
 The scene follows what the crop (V1) expects: a light grey, low-saturation plate with a subtle
 brushed texture, seen from a slightly elevated camera (a near-circular ellipse), on a dark blue
 wall / brown table background, with the object standing on the plate centre. Appearance comes
-only from the latent properties of ``synthetic.object_properties``: height from thickness (the
-strongest cue, so thick/thin are visual), width from size, colour from hue/saturation/value,
-gloss highlight, texture contrast, bumps and hair strands. Views differ in object rotation,
-lighting and camera offset. ``render_view`` returns the true plate geometry so tests can check
-a crop.
+only from the latent visual properties (``synthetic.object_properties`` or, for a newly drawn
+object, ``synthetic.draw_object_properties``), never from labels, so sight tells what the
+properties carry and nothing else:
+
+- height from ``thickness`` (0.6 ... 1.5 plate radii: thin objects show a sliver in the crop,
+  thick ones fill it), width from ``size``;
+- colour from ``hue``, ``saturation``, ``value``; grey objects stay darker than the plate;
+- surface: grain whose frequency follows ``roughness`` and contrast ``texture_contrast``;
+  shaded bumps (lit from the view's light) from ``bumpiness``;
+- lustre: a specular streak, sharper and brighter with ``gloss``; ``metalness`` turns the body
+  grey with banded environment reflections and a near-white highlight; ``transparency`` lets
+  the background through with a dark refracting rim (glass);
+- ``hairiness``: soft, blurred outline and strands over the outline and surface.
+
+Stiffness, porosity, springiness and the other touch properties are not drawn. Views differ in
+object rotation, lighting and camera offset. ``render_view`` returns the true plate geometry so
+tests can check a crop; ``render_object`` renders all views of one object.
 """
 
 from __future__ import annotations
@@ -22,6 +34,11 @@ import numpy as np
 
 JPEG_QUALITY = 90
 PLATE_GREY = 190.0
+VIEWS = 8  # photographs per object in PHAC-2
+PROPERTIES = (
+    "thickness", "size", "hue", "saturation", "value", "roughness", "texture_contrast",
+    "bumpiness", "gloss", "metalness", "transparency", "hairiness",
+)  # fmt: skip
 
 
 class View(NamedTuple):
@@ -43,6 +60,28 @@ def _hsv_to_bgr(h: float, s: float, v: float) -> np.ndarray:
     return cv2.cvtColor(pixel, cv2.COLOR_HSV2BGR)[0, 0].astype(np.float32)
 
 
+def _check(props: Mapping[str, float]) -> None:
+    missing = [k for k in PROPERTIES if k not in props]
+    if missing:
+        raise KeyError(f"render: latent properties {missing} missing (expected {PROPERTIES})")
+
+
+def render_object(
+    props: Mapping[str, float],
+    *,
+    width: int = 480,
+    height: int = 320,
+    seed: int | Sequence[int] = 0,
+    views: int = VIEWS,
+) -> list[View]:
+    """All ``views`` photographs of one object, from its latent ``props`` alone.
+
+    ``props`` needs the keys of ``PROPERTIES`` (values in [0, 1]); any object works, one of the
+    60 or a newly drawn one. The same ``seed`` and props give the same images.
+    """
+    return [render_view(props, v, width, height, seed=seed) for v in range(views)]
+
+
 def render_view(
     props: Mapping[str, float],
     view: int,
@@ -51,6 +90,7 @@ def render_view(
     seed: int | Sequence[int] = 0,
 ) -> View:
     """Render view ``view`` of an object with latent ``props`` at ``width`` x ``height``."""
+    _check(props)
     seeds = [seed] if isinstance(seed, int) else list(seed)
     rng = np.random.default_rng([*seeds, 1000 + view])
     h, w = height, width
@@ -82,57 +122,121 @@ def render_view(
     shadow = np.exp(-(((x - cx) / (0.6 * radius)) ** 2) - ((y - cy) / (0.25 * ry)) ** 2)
     img *= (1 - 0.25 * shadow * plate)[..., None]
 
-    # Object: a body standing on the plate centre.
-    turn = abs(math.cos(rng.uniform(0, math.pi)))
-    ow = radius * (0.45 + 0.45 * props["size"]) * (0.75 + 0.25 * turn)
-    oh = radius * min(0.12 + 1.3 * props["thickness"], 1.4)
-    top_ry = ow * 0.25 * (1 - props["stiffness"] * 0.5)
-    mask = np.zeros((h, w), np.uint8)
-    c = (round(cx), round(cy))
-    axes = (max(round(ow), 1), max(round(top_ry), 1))
-    cv2.rectangle(mask, (c[0] - axes[0], round(cy - oh)), (c[0] + axes[0], c[1]), 255, -1)
-    cv2.ellipse(mask, c, axes, 0, 0, 180, 255, -1)
-    cv2.ellipse(mask, (c[0], round(cy - oh)), axes, 0, 180, 360, 255, -1)
-    body = cv2.GaussianBlur(mask.astype(np.float32) / 255, (0, 0), max(w / 800, 0.5))
-
-    grey = props["saturation"] < 0.3  # keep grey objects darker than the plate
-    value = (0.25 + 0.6 * props["value"]) * (0.7 if grey else 1.0)
-    colour = _hsv_to_bgr(props["hue"], props["saturation"], value)
-    rel = np.clip((x - cx) / max(ow, 1), -1, 1)
-    cylinder = 0.75 + 0.25 * np.cos((rel - 0.4 * light_dir) * math.pi / 2)
-    cell = max(ow / (6 + 10 * props["roughness"]), 2)
-    grain = _smooth_noise(rng, h, w, (max(round(h / cell), 2), max(round(w / cell), 2)))
-    tex = 1 + (0.05 + 0.3 * props["texture_contrast"]) * grain
-    lumps = np.sin((x - cx) / max(ow, 1) * 9 + rng.uniform(0, 6)) * np.sin(
-        (y - cy) / max(ow, 1) * 9
-    )
-    tex = tex + 0.25 * props["bumpiness"] * lumps
-    obj = colour * (light * cylinder * tex)[..., None]
-    hx = cx + 0.4 * light_dir * ow
-    hy = cy - 0.65 * oh
-    spread = (0.08 + 0.25 * (1 - props["gloss"])) * ow
-    spot = np.exp(-(((x - hx) / spread) ** 2) - ((y - hy) / (2.5 * spread)) ** 2)
-    obj += (180 * props["gloss"] ** 1.5 * spot)[..., None]
-    img = img * (1 - body[..., None]) + obj * body[..., None]
-
-    # Hair strands along the outline.
-    strands = int(400 * props["hairiness"] ** 1.5 * (w * h / (480 * 320)) ** 0.5)
-    if strands:
-        ys, xs = np.nonzero(mask[::2, ::2])
-        pick = rng.integers(0, len(ys), strands)
-        ang = rng.uniform(0, 2 * math.pi, strands)
-        length = radius * rng.uniform(0.03, 0.1, strands)
-        tone = colour * rng.uniform(0.6, 1.3, (strands, 1))
-        thick = max(1, round(w / 1000))
-        for i in range(strands):
-            p0 = (int(xs[pick[i]] * 2), int(ys[pick[i]] * 2))
-            dx, dy = length[i] * math.cos(ang[i]), length[i] * math.sin(ang[i])
-            p1 = (int(p0[0] + dx), int(p0[1] + dy))
-            cv2.line(img, p0, p1, tone[i].tolist(), thick, cv2.LINE_AA)
-
+    _draw_object(img, props, rng, (cx, cy, radius), light, light_dir)
     img += rng.normal(0, 2.0, (h, w, 1)).astype(np.float32)
     image = np.clip(img, 0, 255).astype(np.uint8)
     return View(image, (float(cx), float(cy)), float(radius))
+
+
+def _draw_object(
+    img: np.ndarray,
+    props: Mapping[str, float],
+    rng: np.random.Generator,
+    plate: tuple[float, float, float],
+    light: float,
+    light_dir: float,
+) -> None:
+    """Paint the object standing on the plate centre into ``img`` (float BGR, in place).
+
+    Only a window around the object is computed, so large photographs stay cheap.
+    """
+    cx, cy, radius = plate
+    h, w = img.shape[:2]
+    hair = props["hairiness"]
+    turn = abs(math.cos(rng.uniform(0, math.pi)))
+    ow = radius * (0.38 + 0.45 * props["size"]) * (0.8 + 0.2 * turn)  # half width
+    oh = radius * min(0.6 + 0.9 * props["thickness"], 1.5)  # side wall height
+    top_ry = ow * rng.uniform(0.22, 0.28)  # top face seen from the elevated camera
+    reach = radius * (0.05 + 0.16 * hair)  # strands stick out this far
+    x0, x1 = max(int(cx - ow - reach) - 2, 0), min(int(cx + ow + reach) + 3, w)
+    y0, y1 = max(int(cy - oh - top_ry - reach) - 2, 0), min(int(cy + top_ry + reach) + 3, h)
+    win = img[y0:y1, x0:x1].copy()  # contiguous, for cv2.line
+    wh, ww = win.shape[:2]
+    ocx, ocy = cx - x0, cy - y0  # object centre in window coordinates
+    xs = np.arange(ww, dtype=np.float32)[None, :]
+    ys = np.arange(wh, dtype=np.float32)[:, None]
+
+    # Silhouette: side wall, front rim and top face; hair softens the outline.
+    mask = np.zeros((wh, ww), np.uint8)
+    c, top = (round(ocx), round(ocy)), (round(ocx), round(ocy - oh))
+    axes = (max(round(ow), 1), max(round(top_ry), 1))
+    cv2.rectangle(mask, (c[0] - axes[0], top[1]), (c[0] + axes[0], c[1]), 255, -1)
+    cv2.ellipse(mask, c, axes, 0, 0, 180, 255, -1)
+    cv2.ellipse(mask, top, axes, 0, 0, 360, 255, -1)
+    soft = max(w / 800, 0.5) + 0.04 * hair * ow
+    body = cv2.GaussianBlur(mask.astype(np.float32) / 255, (0, 0), soft)
+    top_face = ((xs - ocx) / ow) ** 2 + ((ys - (ocy - oh)) / top_ry) ** 2 <= 1.0
+
+    # Diffuse colour, cylinder shading, lit top face.
+    grey = props["saturation"] < 0.3  # keep grey objects darker than the plate
+    value = (0.25 + 0.6 * props["value"]) * (0.7 if grey else 1.0)
+    colour = _hsv_to_bgr(props["hue"], props["saturation"], value)
+    u = np.clip((xs - ocx) / max(ow, 1), -1, 1)
+    cylinder = 0.72 + 0.28 * np.cos((u - 0.4 * light_dir) * math.pi / 2)
+    lit = np.where(top_face, 1.12, cylinder)
+
+    # Surface: grain (frequency ~ roughness, contrast ~ texture_contrast), shaded bumps, fuzz.
+    cell = max(ow / (8 + 40 * props["roughness"]), 1.5)  # always finer than the bumps
+    grain = _smooth_noise(rng, wh, ww, (round(wh / cell), round(ww / cell)))
+    tex = 1 + (0.03 + 0.45 * props["texture_contrast"]) * grain
+    bump_cell = max(ow / 3.5, 2)
+    relief = _smooth_noise(rng, wh, ww, (round(wh / bump_cell), round(ww / bump_cell)))
+    gy, gx = np.gradient(relief)
+    slope = gx * light_dir - gy  # light from above, left or right
+    slope /= float(slope.std()) + 1e-6
+    tex *= 1 + 0.9 * props["bumpiness"] * np.clip(slope, -1.1, 1.1)
+    fuzz = rng.standard_normal((wh, ww)).astype(np.float32)
+    tex *= 1 + 0.25 * hair * cv2.GaussianBlur(fuzz, (0, 0), max(w / 1200, 0.4))
+    obj = colour * (light * lit * tex)[..., None]
+
+    # Metal: dark, bluish grey body with banded reflections of the surroundings.
+    metal = props["metalness"]
+    phase = rng.uniform(0, 2 * math.pi)
+    bands = 0.25 + 0.85 * (0.5 + 0.5 * np.sin(5.5 * u + 1.5 * light_dir + phase)) ** 3
+    cool = np.array([1.25, 1.0, 0.85], np.float32)  # reflected wall: bluish, unlike the plate
+    steel = cool * np.float32(colour.mean() * 0.3 + 70) + 0.1 * colour
+    reflection = steel * (light * np.where(top_face, 0.9, bands) * tex)[..., None]
+    obj = (1 - metal) * obj + metal * reflection
+
+    # Glass: the background shows through, a dark refracting rim at the sides.
+    clear = 0.8 * props["transparency"]
+    rim = np.exp(-(((1 - np.abs(u)) / 0.12) ** 2))
+    obj = (1 - clear) * obj + clear * win * np.float32(0.92)
+    obj *= (1 - 0.55 * props["transparency"] * rim)[..., None]
+
+    # Specular streak: sharper and brighter with gloss, near-white on metal.
+    gloss = props["gloss"]
+    hx = ocx + 0.3 * light_dir * ow
+    spread = (0.06 + 0.3 * (1 - gloss) ** 2) * ow
+    side = np.clip((ys - (ocy - oh)) / max(oh, 1), 0, 1) * np.clip((ocy - ys) / (0.3 * oh), 0, 1)
+    streak = np.exp(-(((xs - hx) / spread) ** 2)) * (0.35 + 0.65 * side)
+    spot = np.exp(-(((xs - hx) / (2 * spread)) ** 2) - ((ys - (ocy - oh)) / (0.5 * top_ry)) ** 2)
+    peak = 260 * gloss**2 + 160 * metal
+    obj += (peak * np.maximum(streak, spot))[..., None]
+
+    win *= 1 - body[..., None]
+    win += obj * body[..., None]
+
+    # Hair strands over the outline (and some over the surface).
+    strands = int(700 * hair**1.5)
+    if strands:
+        edge = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
+        ey, ex = np.nonzero(edge)
+        iy, ix = np.nonzero(mask)
+        on_edge = rng.random(strands) < 0.7
+        pick_e = rng.integers(0, len(ey), strands)
+        pick_i = rng.integers(0, len(iy), strands)
+        py = np.where(on_edge, ey[pick_e], iy[pick_i])
+        px = np.where(on_edge, ex[pick_e], ix[pick_i])
+        ang = rng.uniform(0, 2 * math.pi, strands)
+        length = radius * rng.uniform(0.02, 0.04 + 0.12 * hair, strands)
+        tone = colour * rng.uniform(0.5, 1.5, (strands, 1))
+        thick = max(1, round(w / 900))
+        ends = np.stack([px + length * np.cos(ang), py + length * np.sin(ang)], axis=1)
+        for i in range(strands):
+            p0, p1 = (int(px[i]), int(py[i])), (int(ends[i, 0]), int(ends[i, 1]))
+            cv2.line(win, p0, p1, tone[i].tolist(), thick, cv2.LINE_AA)
+    img[y0:y1, x0:x1] = win
 
 
 def write_jpeg(path: Path, image: np.ndarray, quality: int = JPEG_QUALITY) -> None:

@@ -10,9 +10,12 @@ Labels never enter a signal directly. Each object first gets latent physical pro
 drawn (seeded) from a per-material base, plus label effects, plus object noise (``_NOISE``):
 stiffness, roughness, thermal effusivity, friction, thickness, hairiness, porosity, springiness,
 stickiness, crinkliness, bumpiness, and visual ones (hue, saturation, value, gloss, texture
-contrast, size). Two derived quantities set the mechanics: ``indent_500`` (indentation in m at
-which the firmer finger reads +500 counts; 20 mm soft ... 1.2 mm stiff) and ``grip_width``
-(object width between the fingers; mostly object shape, only weakly thickness).
+contrast, size; metalness and transparency are seen only, drawn from their own random stream so
+adding them moved no haptic property). ``draw_object_properties`` draws a new object of a
+material the same way without label effects (visual pre-training). Two derived quantities set
+the mechanics: ``indent_500`` (indentation in m at which the firmer finger reads +500 counts;
+20 mm soft ... 1.2 mm stiff) and ``grip_width`` (object width between the fingers; mostly
+object shape, only weakly thickness).
 Every signal then follows from the properties through simple physics:
 
 - gripper: the controller of §1.4 (tap, squeeze, hold, two slides, every detail state). The
@@ -31,32 +34,45 @@ Every signal then follows from the properties through simple physics:
 - electrodes: per-finger baseline pattern of §5, a pressure-driven pattern (E7-E10, E17 down;
   E1, E4, E6, E11, E14, E16 up) and a large local drop at the contact edge, mirrored between the
   fingers (E1..E6 <-> E11..E16); shear by friction and a bump pattern while sliding.
-- photographs (``render``): size/height from thickness (strongly), colour, gloss, texture, bumps
-  and hair strands from the visual properties.
+- photographs (``render``): height from thickness (strongly), width from size, colour, grain
+  (roughness, texture contrast), shaded bumps, a specular streak (gloss), banded reflections
+  (metalness), the background through glass (transparency), soft outline and strands
+  (hairiness). Touch-only properties (stiffness, porosity, springiness, ...) are not drawn.
 
 Noise: object properties scatter around material + label effects with sigma 0.32 (0.12 for
-thickness and size, 0.18 for appearance), and a label-free object "contact area" (0.5 ... 1.5)
-scales thermal and texture responses. Per trial: every property again (sigma 0.12), finger shares
-and contact position, stiffness (+-10 %), grip width, speeds and durations, sensor baselines and
-drift. Absorbent, squishy and springy act only through touch; thick and thin mostly through
-sight (the gripper sees thickness weakly and noisily); nice and unpleasant only through the weak
-label effects of ``_LABEL_EFFECTS``.
+thickness, size, metalness and transparency, 0.18 for the other appearance properties), and a
+label-free object "contact area" (0.5 ... 1.5) scales thermal and texture responses. Per trial:
+every property again (sigma 0.12), finger shares and contact position, stiffness (+-10 %), grip
+width, speeds and durations, sensor baselines and drift. Absorbent, squishy and springy act only
+through touch; thick and thin mostly through sight (the gripper sees thickness weakly and noisily);
+nice and unpleasant only through the weak label effects of ``_LABEL_EFFECTS``.
 
 File: gzip level 1 + shuffle (4 % larger than level 4, a third faster to write); objects are
 spread over worker processes, each writing a part file that is copied in without recompression.
 
-Difficulty, measured on the full default file (seed 0, generator version 2) with
-``.venv/bin/python bench/bench_difficulty.py``: per-trial mean/std features per EP and finger,
-StandardScaler + LogisticRegression on the published train split, ROC AUC on its test split.
+Difficulty, measured on the full default file (seed 0, generator version 3) with
+``TACTILE_EXP_CACHE=... .venv/bin/python bench/bench_difficulty.py``: per-trial mean/std features
+per EP and finger, and simple features of the object in each photograph's V1 crop (height,
+width, saturation, value, specular fraction, texture energy at three scales, edge density,
+strand fringe); StandardScaler + LogisticRegression on the published train split, ROC AUC on its
+test split ("E1"), and out-of-fold AUC of object-grouped 5-fold CV over all 60 objects ("CV").
+The published test sets hold 1-3 positive objects for most adjectives, so E1 AUCs swing with
+single objects; CV is steadier.
 
-- haptic: mean AUC 0.849 over the 24 adjectives (0.829 over the 21 with a visual score);
+- haptic: E1 mean AUC 0.849 over the 24 adjectives (0.829 over the 21 with a visual score);
   weakest smooth 0.56, soft 0.64, bumpy 0.64, textured 0.64; strongest rough, sticky 1.00.
-- visual (mean colour, colour std, edge density and height of the crop): mean AUC 0.50 over 21
-  adjectives (nice, sticky, unpleasant have one positive object, split by trial). Such tiny
-  features miss most of the appearance cues (random hue dominates the colour mean), and
-  material confounds invert some small test sets (hard 0.02, fuzzy 0.00).
-- touch-only absorbent/squishy/springy: haptic 0.72 vs visual 0.35; thick/thin: haptic 0.66 vs
-  visual 0.80.
+- visual: E1 mean AUC 0.693 over 21 adjectives (nice, sticky, unpleasant have one positive
+  object, split by trial), CV 0.709. Generator version 2 scored 0.645 (E1) and 0.700 (CV) with
+  the same features, 0.504 (E1) with the earlier, cruder ones.
+- thick/thin, by sight vs touch: E1 0.81/0.97 vs 0.38/0.94, CV 0.93/0.98 vs 0.33/0.84.
+- seen adjectives, visual E1 (CV): fuzzy 0.94 (0.46), hairy 0.62 (0.88), metallic 1.00 (0.95),
+  textured 0.84 (0.73), bumpy 0.75 (0.47), smooth 0.62 (0.71), cool 0.99 (0.80); mean 0.82
+  (haptic 0.80). Fuzzy and bumpy have 7 and 3 positive objects and the latent hairiness and
+  bumpiness scatter (noise 0.32), so CV's few-positive folds are weak for them.
+- touch-only absorbent/squishy/springy/compressible by sight: E1 0.19/0.43/0.01/0.63 (touch
+  0.73/0.68/0.76/0.82), CV 0.74/0.51/0.75/0.58. Nothing of porosity, stiffness or springiness is
+  drawn; what sight finds is the material (foam: thick, saturated), and on the published split
+  that cue inverts (springy's one test positive is a thin, glossy silicone block).
 """
 
 from __future__ import annotations
@@ -91,7 +107,7 @@ from tactile_exp.data.layout import (
     published_test_split,
 )
 
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 log = logging.getLogger(__name__)
 
 
@@ -185,28 +201,62 @@ _SHARP = {  # ... except these: thick/thin stay visible, appearance is less nois
 _TRIAL_NOISE = 0.12  # per-trial: contact position and local variation of the surface
 
 
+_VISUAL_PROPS = ("metalness", "transparency")  # seen only: no signal reads them
+_VISUAL_BASE: dict[str, tuple[float, float]] = {  # in the order of _VISUAL_PROPS
+    "foam": (0.0, 0.0), "plastic": (0.08, 0.08), "paper": (0.0, 0.0), "fabric": (0.0, 0.0),
+    "organic": (0.0, 0.0), "stone": (0.05, 0.0), "glass": (0.2, 0.65), "metal": (0.85, 0.0),
+}  # fmt: skip
+_VISUAL_LABEL_EFFECTS = {"metallic": {"metalness": 0.4}}
+_VISUAL_NOISE = 0.12
+
+
 def object_properties(spec: SyntheticSpec) -> dict[int, dict[str, float]]:
     """Latent properties of each object of ``spec`` (the only input of every signal and image)."""
     out = {}
     for obj in _objects(spec):
         rng = np.random.default_rng([spec.seed, obj.object_id, 0])
-        base = dict(zip(_PROPS, _MATERIAL_BASE[obj.material], strict=True))
-        for adj in obj.positives:
-            for prop, delta in _LABEL_EFFECTS[adj].items():
-                base[prop] += delta
-        props = {
-            k: float(np.clip(v + rng.normal(0, _SHARP.get(k, _NOISE)), 0, 1))
-            for k, v in base.items()
-        }
-        props["hue"] = float(rng.uniform(0, 1))
-        props["contact_area"] = float(rng.uniform(0.5, 1.5))  # shape nuisance, label-free
-        soft, hard = math.log(20e-3), math.log(1.2e-3)
-        props["indent_500"] = math.exp(soft + (hard - soft) * props["stiffness"])
-        shape = float(rng.uniform(0, 0.04))  # object width between the fingers, not thickness
-        width = 0.012 + 0.012 * props["thickness"] + shape
-        props["grip_width"] = max(width, props["indent_500"] + 0.004)
-        out[obj.object_id] = props
+        visual_rng = np.random.default_rng([spec.seed, obj.object_id, 0, 1])  # own stream
+        out[obj.object_id] = _draw(obj.material, obj.positives, rng, visual_rng)
     return out
+
+
+def draw_object_properties(material: str, rng: np.random.Generator) -> dict[str, float]:
+    """Latent properties of a newly drawn object of ``material`` (one of ``_MATERIAL_BASE``).
+
+    Drawn like the 60 objects' (material base plus the same object noise) but with no label
+    effects, so new objects (e.g. for visual pre-training) carry nothing of the 60's labels.
+    """
+    if material not in _MATERIAL_BASE:
+        raise ValueError(f"material {material!r}: expected one of {sorted(_MATERIAL_BASE)}")
+    return _draw(material, (), rng, rng)
+
+
+def _draw(
+    material: str,
+    positives: tuple[str, ...],
+    rng: np.random.Generator,
+    visual_rng: np.random.Generator,
+) -> dict[str, float]:
+    base = dict(zip(_PROPS, _MATERIAL_BASE[material], strict=True))
+    visual = dict(zip(_VISUAL_PROPS, _VISUAL_BASE[material], strict=True))
+    for adj in positives:
+        for prop, delta in _LABEL_EFFECTS[adj].items():
+            base[prop] += delta
+        for prop, delta in _VISUAL_LABEL_EFFECTS.get(adj, {}).items():
+            visual[prop] += delta
+    props = {
+        k: float(np.clip(v + rng.normal(0, _SHARP.get(k, _NOISE)), 0, 1)) for k, v in base.items()
+    }
+    props["hue"] = float(rng.uniform(0, 1))
+    props["contact_area"] = float(rng.uniform(0.5, 1.5))  # shape nuisance, label-free
+    soft, hard = math.log(20e-3), math.log(1.2e-3)
+    props["indent_500"] = math.exp(soft + (hard - soft) * props["stiffness"])
+    shape = float(rng.uniform(0, 0.04))  # object width between the fingers, not thickness
+    width = 0.012 + 0.012 * props["thickness"] + shape
+    props["grip_width"] = max(width, props["indent_500"] + 0.004)
+    for k, v in visual.items():
+        props[k] = float(np.clip(v + visual_rng.normal(0, _VISUAL_NOISE), 0, 1))
+    return props
 
 
 # ------------------------------------------------------------------------------ trial signals
