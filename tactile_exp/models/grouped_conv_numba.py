@@ -105,29 +105,30 @@ def _weighted_sum(row, src, chans, times, weights, count, bias):  # pragma: no c
 def conv_relu_forward(x, w, b, stride, out):  # pragma: no cover (compiled)
     """out[g, o, t, :] = relu(b[g, o] + sum_{i, j} w[g, o, i, j] x[g, i, t * stride - pad + j, :]).
 
-    One task per (group, output channel); each output row is built in place (it stays in L1).
+    One task per group, walking time once with every output channel at each step, so the input
+    rows a step reads stay in cache for all channels; each output row is built in place.
     """
     groups, c_in, t_in, _ = x.shape
     c_out, k = w.shape[1], w.shape[3]
     t_out = out.shape[2]
     pad = k // 2
-    for task in prange(groups * c_out):
-        g, o = task // c_out, task % c_out
+    for g in prange(groups):
         chans = np.empty(c_in * k, np.int64)
         times = np.empty(c_in * k, np.int64)
         weights = np.empty(c_in * k, np.float32)
         for t in range(t_out):
-            count = 0
-            for i in range(c_in):
-                for j in range(k):
-                    ti = t * stride - pad + j
-                    if 0 <= ti < t_in:
-                        chans[count], times[count], weights[count] = i, ti, w[g, o, i, j]
-                        count += 1
-            row = out[g, o, t]
-            _weighted_sum(row, x[g], chans, times, weights, count, b[g, o])
-            for m in range(row.shape[0]):
-                row[m] = max(row[m], np.float32(0.0))
+            for o in range(c_out):
+                count = 0
+                for i in range(c_in):
+                    for j in range(k):
+                        ti = t * stride - pad + j
+                        if 0 <= ti < t_in:
+                            chans[count], times[count], weights[count] = i, ti, w[g, o, i, j]
+                            count += 1
+                row = out[g, o, t]
+                _weighted_sum(row, x[g], chans, times, weights, count, b[g, o])
+                for m in range(row.shape[0]):
+                    row[m] = max(row[m], np.float32(0.0))
 
 
 @numba.njit(parallel=True, **_JIT)
