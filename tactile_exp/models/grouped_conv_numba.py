@@ -266,6 +266,8 @@ class GroupedConvStack(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, x, groups: int, strides: Sequence[int], *params: torch.Tensor):
+        if x.requires_grad:
+            raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
         weights, biases = params[0::2], params[1::2]
         n, channels, steps = x.shape
         n_pad = _padded(n)

@@ -78,9 +78,12 @@ class GroupedTemporalConvNet(nn.Module):
         self.n_features = int(np.prod(self.out_shape))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.impl == "compiled" or (self.impl == "auto" and x.device.type == "cpu"):
-            if x.device.type != "cpu":
-                raise ValueError(f"impl='compiled' runs on CPU only, got input on {x.device}")
+        if self.impl == "compiled" and x.device.type != "cpu":
+            raise ValueError(f"impl='compiled' runs on CPU only, got input on {x.device}")
+        # The kernels give no gradient for the input itself: torch's path does, when asked.
+        if self.impl == "compiled" or (
+            self.impl == "auto" and x.device.type == "cpu" and not x.requires_grad
+        ):
             from tactile_exp.models.grouped_conv_numba import grouped_conv_stack  # numba: lazy
 
             return grouped_conv_stack(
