@@ -82,23 +82,31 @@ def throughput(repeats: int) -> float:
     return ratio
 
 
-def best_time(fn: Callable[..., object], args: tuple, repeats: int) -> float:
+def best_time(fn: Callable[..., object], args: tuple, repeats: int) -> tuple[float, float]:
+    """Best wall seconds and best CPU seconds (all threads) of one call, over ``repeats``."""
     fn(*args)
-    times = []
+    wall, cpu = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         fn(*args)
-        times.append(time.perf_counter() - start)
-    return min(times)
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return min(wall), min(cpu)
+
+
+def rate(gflop: float, times: tuple[float, float]) -> str:
+    wall, cpu = times
+    return f"{wall * 1e3:.1f} ms = {gflop / wall:.1f} wall, {gflop / cpu:.1f} per core"
 
 
 def kernel_rates(repeats: int) -> None:
     """GFLOP/s of each compiled kernel on the default net's layers at batch 1000 (best of
-    ``repeats``) and of a 2000 x 2000 sgemm, in the same run and threads."""
+    ``repeats``) and of a 2000 x 2000 sgemm, in the same run and threads: per wall second and
+    per CPU second (the rate of one core while it runs, less sensitive to other load)."""
     n, groups = BATCH, 32
     n_pad = -(-n // kernels.LANES) * kernels.LANES
     rng = np.random.default_rng(0)
-    print(f"\n3. compiled kernels, batch {BATCH}, GFLOP/s (best of {repeats}; 2 FLOP per FMA)")
+    print(f"\n3. GFLOP/s at batch {BATCH} (best of {repeats}; 2 FLOP per FMA)")
     c_in, length, net_gflop = 1, STEPS, 0.0
     for layer in (1, 2, 3):
         t_out = kernels.conv_out_len(length, 5, 2)
@@ -117,21 +125,18 @@ def kernel_rates(repeats: int) -> None:
             ),
             "input grad": best_time(kernels.conv_grad_input, (grad, w, 2, grad_x), repeats),
         }
-        cells = ", ".join(f"{k} {v * 1e3:.1f} ms = {gflop / v:.1f}" for k, v in rates.items())
-        print(f"   conv{layer} ({c_in}->4 per group, {gflop * 1e3:.0f} MFLOP): {cells}")
+        print(f"   conv{layer} ({c_in}->4 per group, {gflop * 1e3:.0f} MFLOP):")
+        for name, times in rates.items():
+            print(f"     {name:28s} {rate(gflop, times)}")
         c_in, length = 4, t_out
-    x, net = (
-        torch.randn(BATCH, CHANNELS, STEPS),
-        GroupedTemporalConvNet(CHANNELS, STEPS, impl="torch"),
-    )
+    x, net = torch.randn(BATCH, CHANNELS, STEPS), GroupedTemporalConvNet(CHANNELS, STEPS)
+    net.impl = "torch"
     with torch.no_grad():
-        seconds = best_time(net, (x,), repeats)
+        conv1d = best_time(net, (x,), repeats)
     a = torch.randn(2000, 2000)
-    sgemm = 2 * 2000**3 / best_time(torch.mm, (a, a), repeats) / 1e9
-    print(f"   dense matmul (torch sgemm 2000^3): {sgemm:.1f} GFLOP/s")
-    print(
-        f"   torch F.conv1d(groups=32) forward of the 3 layers: {net_gflop / seconds:.1f} GFLOP/s"
-    )
+    sgemm = best_time(torch.mm, (a, a), repeats)
+    print(f"   {'dense matmul, torch sgemm 2000^3':32s} {rate(2 * 2000**3 / 1e9, sgemm)}")
+    print(f"   {'torch F.conv1d(groups=32) fwd':32s} {rate(net_gflop, conv1d)}")
 
 
 def compile_time() -> float:

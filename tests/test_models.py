@@ -65,6 +65,13 @@ def test_auto_is_compiled_on_cpu_and_torch_still_selectable():
     assert type(net(x).grad_fn).__name__ == "GroupedConvStackBackward"
     net.impl = "torch"
     assert type(net(x).grad_fn).__name__ != "GroupedConvStackBackward"
+    net.impl = "auto"  # an input that needs a gradient goes through torch, which gives one
+    x.requires_grad_()
+    net(x).sum().backward()
+    assert x.grad is not None and x.grad.abs().sum() > 0
+    net.impl = "compiled"
+    with pytest.raises(ValueError, match="impl='torch'"):
+        net(x)
 
 
 def test_compiled_and_torch_training_give_the_same_auc():
