@@ -1,79 +1,172 @@
-"""Haptic CNN training speed: grouped convolution as batched matmul vs ``Conv1d(groups=32)``.
+"""Haptic CNN training speed on CPU: compiled numba kernels vs ``F.conv1d(groups=32)``.
 
-Everything is measured in one run, so the ratios hold even on a noisy machine. Prints:
-1. one SGD step (batch 1000, 32 x 150 input) per implementation and lever: median of repeats;
-2. each implementation's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training set
-   for one adjective) and the Table I row I estimate it implies: 24 adjectives x 200 epochs,
-   plus the fine-tuning stage and feature extraction, measured, not assumed;
-3. the AUC of the two implementations after a few epochs from the same init on one case.
+Everything is measured in one run, the two implementations interleaved, so the ratios hold even
+on a shared machine. Prints:
+1. the first-use compile time (a fresh numba cache in a subprocess) and the cached load time;
+2. training throughput (forward, backward, SGD step; default architecture, batch 1000) of both,
+   in wall time and in CPU time per step, and their ratio;
+3. each compiled kernel's GFLOP/s at batch 1000 beside torch's dense matmul (sgemm) rate;
+4. each implementation's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training
+   set for one adjective) and the Table I row I estimate it implies: 24 adjectives x (200 epochs
+   + 100 fine-tuning epochs) + setup, measured, not assumed, plus the compile time once;
+5. the AUC of the two implementations after a few epochs from the same init on one case.
 
-Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 5] [--threads 2]``
+Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 7] [--threads 2]``
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
-from contextlib import nullcontext
+from collections.abc import Callable
 
 import numpy as np
 import torch
 from sklearn.metrics import roc_auc_score
 
 from tactile_exp.data.layout import Instances
+from tactile_exp.models import grouped_conv_numba as kernels
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet, HapticCNN
 from tactile_exp.models.losses import LOSSES
 
 N_TRAIN, CHANNELS, STEPS, BATCH = 5300, 32, 150, 1000
 ADJECTIVES, EPOCHS, FINETUNE_EPOCHS = 24, 200, 100
+IMPLS = ("torch", "compiled")
 
 
-def step_time(net_args: dict, repeats: int, bf16: bool = False) -> float:
-    """Median seconds of one SGD step (forward, backward, update) at batch 1000."""
+def sgd_step(impl: str) -> Callable[[], None]:
+    """One SGD step (forward, backward, update) of the default net + linear head at batch 1000."""
     torch.manual_seed(0)
-    net = GroupedTemporalConvNet(CHANNELS, STEPS, **net_args)
+    net = GroupedTemporalConvNet(CHANNELS, STEPS, impl=impl)
     head = torch.nn.Linear(net.n_features, 1)
-    params = [*net.parameters(), *head.parameters()]
-    optimiser = torch.optim.SGD(params, lr=0.01, momentum=0.9)
+    optimiser = torch.optim.SGD([*net.parameters(), *head.parameters()], lr=0.01, momentum=0.9)
     x, y = torch.randn(BATCH, CHANNELS, STEPS), (torch.rand(BATCH) > 0.5).float()
-    autocast = torch.autocast("cpu", dtype=torch.bfloat16) if bf16 else nullcontext()
-    times = []
-    for _ in range(repeats + 1):  # the first step warms up
-        start = time.perf_counter()
-        with autocast:
-            loss = LOSSES["logistic"](head(net(x)).squeeze(1).float(), y)
+
+    def step() -> None:
+        loss = LOSSES["logistic"](head(net(x)).squeeze(1), y)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times[1:])
+
+    return step
 
 
-def levers(repeats: int) -> None:
-    """Each architecture: plain grouped Conv1d vs batched matmul, then bf16 on the default."""
-    default = dict(kernel_sizes=(5, 5, 5), widths=(4, 4, 4), strides=(2, 2, 2))
-    architectures = [
-        ("default: k 5/5/5, width 4, stride 2", default),
-        ("stride 1 (no time reduction)", {**default, "strides": (1, 1, 1)}),
-        ("width 8 per group", {**default, "widths": (8, 8, 8)}),
-        ("kernels 9/5/3", {**default, "kernel_sizes": (9, 5, 3)}),
-    ]
-    header = f"{'architecture':38s} {'conv1d ms':>10s} {'bmm ms':>8s} {'bmm inst/s':>11s}"
-    print(header + f" {'bmm speed-up':>12s}")
-    for name, arch in architectures:
-        conv1d = step_time({**arch, "impl": "conv1d"}, repeats)
-        bmm = step_time({**arch, "impl": "bmm"}, repeats)
+def throughput(repeats: int) -> float:
+    """Prints both implementations' steps, interleaved; returns the wall-time speed-up."""
+    steps = {impl: sgd_step(impl) for impl in IMPLS}
+    wall: dict[str, list[float]] = {impl: [] for impl in IMPLS}
+    cpu: dict[str, list[float]] = {impl: [] for impl in IMPLS}
+    for impl in IMPLS:
+        steps[impl]()  # warm-up (and the compiled kernels' cache load)
+    for _ in range(repeats):
+        for impl in IMPLS:
+            start, start_cpu = time.perf_counter(), time.process_time()
+            steps[impl]()
+            wall[impl].append(time.perf_counter() - start)
+            cpu[impl].append(time.process_time() - start_cpu)
+    print(f"\n2. training step, default net, batch {BATCH}, median of {repeats} (interleaved)")
+    for impl in IMPLS:
+        step_wall, step_cpu = statistics.median(wall[impl]), statistics.median(cpu[impl])
         print(
-            f"{name:38s} {conv1d * 1e3:10.1f} {bmm * 1e3:8.1f} {BATCH / bmm:11.0f} "
-            f"{conv1d / bmm:11.1f}x"
+            f"   {impl:9s} {step_wall * 1e3:7.1f} ms/step wall, {BATCH / step_wall:7.0f} inst/s; "
+            f"{step_cpu * 1e3:7.1f} ms CPU time/step"
         )
-    fp32 = step_time(default, repeats)
-    bf16 = step_time(default, repeats, bf16=True)
-    print(f"default (conv1d), bf16 autocast: {bf16 * 1e3:.1f} ms vs float32 {fp32 * 1e3:.1f} ms")
+    ratio = statistics.median(wall["torch"]) / statistics.median(wall["compiled"])
+    cpu_ratio = statistics.median(cpu["torch"]) / statistics.median(cpu["compiled"])
+    print(f"   compiled / torch throughput: {ratio:.1f}x wall time, {cpu_ratio:.1f}x CPU time")
+    return ratio
 
 
-def row_estimate(rng: np.random.Generator, impl: str) -> None:
+def best_time(fn: Callable[..., object], args: tuple, repeats: int) -> tuple[float, float]:
+    """Best wall seconds and best CPU seconds (all threads) of one call, over ``repeats``."""
+    fn(*args)
+    wall, cpu = [], []
+    for _ in range(repeats):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        fn(*args)
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return min(wall), min(cpu)
+
+
+def rate(gflop: float, times: tuple[float, float]) -> str:
+    wall, cpu = times
+    return f"{wall * 1e3:.1f} ms = {gflop / wall:.1f} wall, {gflop / cpu:.1f} per core"
+
+
+def kernel_rates(repeats: int) -> None:
+    """GFLOP/s of each compiled kernel on the default net's layers at batch 1000 (best of
+    ``repeats``) and of a 2000 x 2000 sgemm, in the same run and threads: per wall second and
+    per CPU second (the rate of one core while it runs, less sensitive to other load)."""
+    n, groups = BATCH, 32
+    n_pad = -(-n // kernels.LANES) * kernels.LANES
+    rng = np.random.default_rng(0)
+    print(f"\n3. GFLOP/s at batch {BATCH} (best of {repeats}; 2 FLOP per FMA)")
+    c_in, length, net_gflop = 1, STEPS, 0.0
+    for layer in (1, 2, 3):
+        t_out = kernels.conv_out_len(length, 5, 2)
+        x = rng.random((groups, c_in, length, n_pad), dtype=np.float32)
+        w = rng.standard_normal((groups, 4, c_in, 5), dtype=np.float32)
+        b = np.zeros((groups, 4), np.float32)
+        out = np.empty((groups, 4, t_out, n_pad), np.float32)
+        grad = rng.standard_normal(out.shape, dtype=np.float32)
+        grad_w, grad_b, grad_x = np.empty_like(w), np.empty_like(b), np.empty_like(x)
+        gflop = 2 * groups * 4 * c_in * 5 * t_out * n / 1e9
+        net_gflop += gflop
+        rates = {
+            "forward+ReLU": best_time(kernels.conv_relu_forward, (x, w, b, 2, out), repeats),
+            "ReLU mask+weight+bias grad": best_time(
+                kernels.relu_grad_weight_bias, (out, grad, x, 2, grad_w, grad_b), repeats
+            ),
+            "input grad": best_time(kernels.conv_grad_input, (grad, w, 2, grad_x), repeats),
+        }
+        print(f"   conv{layer} ({c_in}->4 per group, {gflop * 1e3:.0f} MFLOP):")
+        for name, times in rates.items():
+            print(f"     {name:28s} {rate(gflop, times)}")
+        c_in, length = 4, t_out
+    x, net = torch.randn(BATCH, CHANNELS, STEPS), GroupedTemporalConvNet(CHANNELS, STEPS)
+    net.impl = "torch"
+    with torch.no_grad():
+        conv1d = best_time(net, (x,), repeats)
+    a = torch.randn(2000, 2000)
+    sgemm = best_time(torch.mm, (a, a), repeats)
+    print(f"   {'dense matmul, torch sgemm 2000^3':32s} {rate(2 * 2000**3 / 1e9, sgemm)}")
+    print(f"   {'torch F.conv1d(groups=32) fwd':32s} {rate(net_gflop, conv1d)}")
+
+
+def compile_time() -> float:
+    """Seconds for the first compiled forward + backward with an empty numba cache (fresh
+    process), then with the cache that run left."""
+    code = (
+        "import time, torch; from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet; "
+        "net = GroupedTemporalConvNet(32, 20); x = torch.randn(3, 32, 20); "
+        "start = time.perf_counter(); net(x).sum().backward(); "
+        "print(time.perf_counter() - start)"
+    )
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        first, cached = (
+            float(
+                subprocess.run(
+                    [sys.executable, "-c", code],
+                    env=env,
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                ).stdout
+            )
+            for _ in range(2)
+        )
+    print(f"1. first use: compile {first:.1f} s (once per machine); cached load {cached:.1f} s")
+    return first
+
+
+def row_estimate(rng: np.random.Generator, impl: str, compile_s: float) -> None:
     X = rng.standard_normal((N_TRAIN, CHANNELS, STEPS), dtype=np.float32)
     y = (rng.random(N_TRAIN) > 0.5).astype(int)
     train = Instances(X, y, np.zeros(N_TRAIN), np.zeros(N_TRAIN, dtype=int))
@@ -87,15 +180,12 @@ def row_estimate(rng: np.random.Generator, impl: str) -> None:
     setup = timings[(1, 0)] - epoch
     finetune_epoch = (timings[(1, 50)] - timings[(1, 0)]) / 50
     per_adj = setup + EPOCHS * epoch + FINETUNE_EPOCHS * finetune_epoch
+    total = ADJECTIVES * per_adj + (compile_s if impl == "compiled" else 0.0)
     print(
-        f"\n{impl}: full-size fit, {N_TRAIN} instances: {epoch:.2f} s per epoch "
-        f"({N_TRAIN / epoch:.0f} inst/s), setup {setup:.2f} s, "
-        f"fine-tune {finetune_epoch * 1e3:.1f} ms per epoch"
-    )
-    print(
-        f"row I estimate (extrapolated, not run): {ADJECTIVES} x ({EPOCHS} epochs + "
-        f"{FINETUNE_EPOCHS} fine-tune epochs) = {ADJECTIVES * per_adj / 60:.1f} min "
-        f"({per_adj:.0f} s per adjective)"
+        f"   {impl:9s} {epoch:.2f} s per epoch ({N_TRAIN / epoch:.0f} inst/s), setup "
+        f"{setup:.2f} s, fine-tune {finetune_epoch * 1e3:.1f} ms per epoch -> row I "
+        f"{total / 60:.1f} min ({per_adj:.0f} s per adjective"
+        f"{', + compile once' if impl == 'compiled' else ''})"
     )
 
 
@@ -106,26 +196,35 @@ def auc_equivalence(rng: np.random.Generator) -> None:
     X[y == 1, 5, 40:80] *= 2.0
     train = Instances(X[:300], y[:300], np.zeros(300), np.zeros(300, dtype=int))
     aucs = {}
-    for impl in ("bmm", "conv1d"):
+    for impl in IMPLS:
         model = HapticCNN(impl=impl, epochs=5, finetune_epochs=5, batch_size=100, device="cpu")
         model.fit(train)
         aucs[impl] = roc_auc_score(y[300:], model.decision_function(X[300:]))
-    diff = abs(aucs["bmm"] - aucs["conv1d"])
-    print(f"\nAUC bmm {aucs['bmm']:.6f} conv1d {aucs['conv1d']:.6f} |diff| {diff:.2e}")
+    diff = abs(aucs["compiled"] - aucs["torch"])
+    print(f"\n5. AUC compiled {aucs['compiled']:.6f} torch {aucs['torch']:.6f} |diff| {diff:.2e}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
-    levers(args.repeats)
+    kernels.numba.set_num_threads(args.threads)
+    print(
+        f"torch {torch.__version__}, numba {kernels.numba.__version__} "
+        f"({kernels.numba.config.THREADING_LAYER}), {args.threads} threads, "
+        f"load average {os.getloadavg()[0]:.1f}"
+    )
+    compile_s = compile_time()
+    throughput(args.repeats)
+    kernel_rates(args.repeats)
     rng = np.random.default_rng(0)
-    for impl in ("conv1d", "bmm"):
-        row_estimate(rng, impl)
+    print(f"\n4. full-size fit, {N_TRAIN} instances, paper settings extrapolated (not run)")
+    for impl in IMPLS:
+        row_estimate(rng, impl, compile_s)
     auc_equivalence(rng)
+    print(f"load average at the end {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

@@ -23,6 +23,14 @@ TINY_DATA = [
 ]
 
 
+@pytest.fixture(scope="session", autouse=True)
+def numba_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One compiled-kernel cache per test run, shared by every test (set before numba loads)."""
+    path = tmp_path_factory.mktemp("numba")
+    os.environ["NUMBA_CACHE_DIR"] = str(path)
+    return path
+
+
 @pytest.fixture(scope="session")
 def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("cache")

@@ -1,0 +1,68 @@
+"""The compiled (numba) grouped conv stack equals ``F.conv1d(groups=...)``; its cache location.
+
+The first compiled call in a run compiles the kernels (~20 s on 2 idle cores) into the session's
+``NUMBA_CACHE_DIR`` (conftest); every later test reuses them.
+"""
+
+import os
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
+
+# (batch, channels, steps, groups, kernel_sizes, widths, strides)
+SHAPES = [
+    (1, 32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2)),  # the default net, a batch of 1
+    (7, 64, 41, 32, (3, 9, 5), (1, 8, 4), (3, 1, 2)),  # odd batch, stride 3 not dividing 41
+    (33, 6, 20, 1, (9, 3, 5), (8, 1, 4), (1, 3, 2)),  # one group, several input channels
+    (17, 32, 23, 32, (9, 5, 3), (8, 4, 1), (2, 3, 1)),  # kernel 9 wider than the stride
+    (5, 32, 4, 32, (3, 3, 3), (4, 4, 4), (3, 3, 3)),  # lengths 4 -> 2 -> 1 -> 1
+]
+
+
+def _forward_and_grads(net: GroupedTemporalConvNet, x: torch.Tensor, impl: str):
+    net.impl = impl
+    net.zero_grad()
+    out = net(x)
+    # A non-uniform upstream gradient, so every output position is weighted differently.
+    (out * torch.linspace(-1.0, 1.0, out.shape[1])).sum().backward()
+    return out.detach(), [p.grad.clone() for p in net.parameters()]
+
+
+@pytest.mark.parametrize(
+    ("n", "channels", "steps", "groups", "kernels", "widths", "strides"), SHAPES
+)
+def test_compiled_forward_and_gradients_equal_torch(
+    n, channels, steps, groups, kernels, widths, strides
+):
+    torch.manual_seed(n)
+    net = GroupedTemporalConvNet(
+        channels, steps, groups=groups, kernel_sizes=kernels, widths=widths, strides=strides
+    )
+    with torch.no_grad():  # non-zero biases, so the bias path and the ReLU mask both matter
+        for bias in net.biases:
+            bias.uniform_(-0.1, 0.1)
+    x = torch.randn(n, channels, steps)
+    out_c, grads_c = _forward_and_grads(net, x, "compiled")
+    out_t, grads_t = _forward_and_grads(net, x, "torch")
+    assert out_c.shape == (n, net.n_features)
+    assert (out_t > 0).float().mean() > 0.2  # the ReLUs neither all pass nor all block
+    torch.testing.assert_close(out_c, out_t, rtol=1e-5, atol=1e-5)
+    for name, g_c, g_t in zip(
+        [name for name, _ in net.named_parameters()], grads_c, grads_t, strict=True
+    ):
+        assert g_t.abs().max() > 0, name
+        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4, msg=name)
+
+
+def test_numba_cache_goes_to_the_user_cache_folder(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["TACTILE_EXP_CACHE"] = str(tmp_path)
+    code = "import tactile_exp.models.grouped_conv_numba, numba; print(numba.config.CACHE_DIR)"
+    lines = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.splitlines()
+    assert lines[0] == str(tmp_path / "numba")
