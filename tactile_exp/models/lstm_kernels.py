@@ -18,6 +18,7 @@ numba's compiled-code cache lives in the user cache folder (``$NUMBA_CACHE_DIR``
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numba
@@ -32,6 +33,8 @@ if not numba.config.CACHE_DIR:  # read when the kernels below are decorated with
 _JIT = dict(fastmath=True, error_model="numpy", cache=True)
 _CLAMP = np.float32(7.90531110763549805)  # tanh is 1 - 2e-7 here: the approximation's range
 _HALF = np.float32(0.5)
+_POOL: list[np.ndarray] = []  # reusable kernel buffers, see _buffer
+_POOL_BYTES = 512 * 2**20
 _ONE = np.float32(1.0)
 
 
@@ -67,15 +70,15 @@ def _to_feature_time_batch(x, out):
 
 
 @numba.njit(**_JIT)
-def _forward(xp, w_hh, acts, c_prev, tanh_c, h_prev, h_last):
-    """Run the recurrence on the input projection ``xp`` (4H, T, B), gates in nn.LSTM's order
-    (i, f, g, o). Fills the gate activations ``acts`` (4H, T, B), the state before each step
-    ``c_prev``/``h_prev`` (H, T, B), ``tanh_c`` = tanh(c_t) (H, T, B) and ``h_last`` (H, B)."""
-    G, T, B = xp.shape
+def _forward(acts, w_hh, c_prev, tanh_c, h_prev, h_last):
+    """Run the recurrence on the input projection in ``acts`` (4H, T, B), gates in nn.LSTM's
+    order (i, f, g, o), overwriting it with the gate activations. Fills the state before each
+    step ``c_prev``/``h_prev`` (H, T, B), ``tanh_c`` = tanh(c_t) (H, T, B) and ``h_last`` (H, B)."""
+    G, T, B = acts.shape
     H = G // 4
-    acc = np.empty(B, xp.dtype)
-    c = np.zeros((H, B), xp.dtype)
-    h = np.zeros((H, B), xp.dtype)
+    acc = np.empty(B, acts.dtype)
+    c = np.zeros((H, B), acts.dtype)
+    h = np.zeros((H, B), acts.dtype)
     for t in range(T):
         for j in range(H):
             for b in range(B):
@@ -83,7 +86,7 @@ def _forward(xp, w_hh, acts, c_prev, tanh_c, h_prev, h_last):
                 h_prev[j, t, b] = h[j, b]
         for gate in range(G):
             for b in range(B):
-                acc[b] = xp[gate, t, b]
+                acc[b] = acts[gate, t, b]
             for k in range(H):
                 w = w_hh[gate, k]
                 for b in range(B):
@@ -136,6 +139,26 @@ def _backward(dh_last, w_hh, acts, c_prev, tanh_c, d_gates):
                     dh[k, b] += w * d_gates[gate, t, b]
 
 
+def _buffer(*shape: int) -> np.ndarray:
+    """A float32 array of ``shape``, taken from ``_POOL`` when nothing else holds one.
+
+    The buffers of one batch total ~100 MB; writing freshly allocated pages every step costs more
+    than the kernels. A buffer held by a pending backward (or anything else) is never handed out.
+    """
+    for arr in _POOL:
+        if arr.shape == shape and sys.getrefcount(arr) == 3:  # _POOL, `arr` and this call
+            return arr
+    nbytes = 4 * int(np.prod(shape))
+    for arr in list(_POOL):
+        if sum(a.nbytes for a in _POOL) + nbytes <= _POOL_BYTES:
+            break
+        if sys.getrefcount(arr) == 3:  # the same three: list(_POOL) is one more, `arr` one less
+            _POOL.remove(arr)
+    arr = np.empty(shape, np.float32)
+    _POOL.append(arr)
+    return arr
+
+
 class LSTMLastHidden(torch.autograd.Function):
     """The last hidden state (B, H) of a one-layer LSTM over (B, C, T) float32 CPU input, with
     ``nn.LSTM``'s parameters (weight_ih (4H, C), weight_hh (4H, H), bias_ih, bias_hh)."""
@@ -144,33 +167,34 @@ class LSTMLastHidden(torch.autograd.Function):
     def forward(ctx, x, w_ih, w_hh, b_ih, b_hh):  # type: ignore[override]
         B, C, T = x.shape
         H = w_hh.shape[1]
-        xs = x.new_empty(C, T, B)
-        _to_feature_time_batch(x.detach().contiguous().numpy(), xs.numpy())
-        xp = torch.addmm((b_ih + b_hh)[:, None], w_ih, xs.view(C, T * B)).view(4 * H, T, B)
-        acts = torch.empty_like(xp)
-        c_prev, tanh_c, h_prev = (x.new_empty(H, T, B) for _ in range(3))
-        h_last = x.new_empty(H, B)
-        arrays = (acts, c_prev, tanh_c, h_prev, h_last)
-        _forward(xp.detach().numpy(), w_hh.detach().numpy(), *(a.numpy() for a in arrays))
-        ctx.save_for_backward(xs, w_ih, w_hh, acts, c_prev, tanh_c, h_prev)
-        return h_last.t()
+        inputs = _buffer(C + H, T, B)  # x and h_{t-1}, stacked: one gemm for both gradients
+        xs, h_prev = inputs[:C], inputs[C:]
+        acts = _buffer(4 * H, T, B)
+        c_prev, tanh_c = _buffer(H, T, B), _buffer(H, T, B)
+        h_last = np.empty((H, B), np.float32)
+        _to_feature_time_batch(x.detach().contiguous().numpy(), xs)
+        torch.addmm(
+            (b_ih + b_hh)[:, None],
+            w_ih,
+            torch.from_numpy(xs).view(C, T * B),
+            out=torch.from_numpy(acts).view(4 * H, T * B),
+        )
+        _forward(acts, w_hh.detach().numpy(), c_prev, tanh_c, h_prev, h_last)
+        ctx.save_for_backward(w_ih, w_hh)
+        ctx.arrays = (inputs, acts, c_prev, tanh_c)
+        return torch.from_numpy(h_last).t()
 
     @staticmethod
     def backward(ctx, dh):  # type: ignore[override]
-        xs, w_ih, w_hh, acts, c_prev, tanh_c, h_prev = ctx.saved_tensors
+        w_ih, w_hh = ctx.saved_tensors
+        inputs, acts, c_prev, tanh_c = ctx.arrays
         G, T, B = acts.shape
-        d_gates = torch.empty_like(acts)
-        _backward(
-            dh.t().contiguous().numpy(),
-            w_hh.detach().numpy(),
-            acts.numpy(),
-            c_prev.numpy(),
-            tanh_c.numpy(),
-            d_gates.numpy(),
-        )
-        flat = d_gates.view(G, T * B)
-        d_w_hh = flat @ h_prev.view(-1, T * B).t()
-        d_w_ih = flat @ xs.view(-1, T * B).t()
+        d_gates = _buffer(G, T, B)
+        dh = dh.t().contiguous().numpy()
+        _backward(dh, w_hh.detach().numpy(), acts, c_prev, tanh_c, d_gates)
+        flat = torch.from_numpy(d_gates).view(G, T * B)
+        d_w = flat @ torch.from_numpy(inputs).view(-1, T * B).t()
+        d_w_ih, d_w_hh = d_w[:, : w_ih.shape[1]], d_w[:, w_ih.shape[1] :]
         d_b = flat.sum(1)
         dx = (w_ih.t() @ flat).view(-1, T, B).permute(2, 0, 1) if ctx.needs_input_grad[0] else None
         return dx, d_w_ih, d_w_hh, d_b, d_b
