@@ -199,7 +199,8 @@ class BaselineFeatures:
         dynamic = DynamicFeatures(self.hmm_grid, self.leak_test_positives, seed=self.seed)
         if self.cache_dir is None:
             return dynamic.fit(self.sequence_table_, split)
-        path = Path(self.cache_dir) / f"baseline_hmm_{split.adjective}_{self.chain_key(split)}.npz"
+        key = self._chain_key(split, dynamic)
+        path = Path(self.cache_dir) / f"baseline_hmm_{split.adjective}_{key}.npz"
         arrays = load_arrays(path, DynamicFeatures.KEYS)
         if arrays is not None:
             return dynamic.load_arrays(arrays)
@@ -207,7 +208,7 @@ class BaselineFeatures:
         save_arrays(path, dynamic.arrays())
         return dynamic
 
-    def chain_key(self, split: Split) -> str:
+    def _chain_key(self, split: Split, dynamic: DynamicFeatures) -> str:
         """Cache key of one adjective's fitted chains: data, split, chain settings, seed."""
         return cache_key(
             kind="hmm",
@@ -216,10 +217,7 @@ class BaselineFeatures:
             train=sorted(split.train),
             test=sorted(split.test),
             labels=sorted(split.labels.items()),
-            settings=DynamicFeatures(
-                self.hmm_grid, self.leak_test_positives, seed=self.seed
-            ).settings(),
-            lengths=list(DynamicFeatures.lengths(self.hmm_grid)),
+            settings=dynamic.settings(),
             v=CODE_VERSION,
         )
 
