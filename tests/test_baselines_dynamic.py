@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from baselines_fixture import make_trial
+from hmmlearn import hmm
 
 from tactile_exp.baselines import dynamic as dyn
 from tactile_exp.data.layout import Split
@@ -32,7 +33,10 @@ def test_vectorised_forward_pass_equals_hmmlearn_score():
     scatter = np.stack([(s - m).T @ (s - m) for s in seqs])
     chain = dyn.HMMChain(3, 4).fit(np.full(30, 12.0), np.tile(m, (30, 1)), scatter, seqs)
     symbols = chain.symbols(seqs)
-    expected = [chain.hmm_.score(s.reshape(-1, 1)) for s in symbols]
+    reference = hmm.CategoricalHMM(n_components=3, n_features=4)
+    reference.startprob_, reference.transmat_ = chain.startprob_, chain.transmat_
+    reference.emissionprob_ = chain.emissionprob_
+    expected = [reference.score(s.reshape(-1, 1)) for s in symbols]
     np.testing.assert_allclose(chain.score(seqs), expected, rtol=1e-8)
 
 
@@ -57,10 +61,7 @@ def _fit(table, split, leak=False):
 
 
 def _params(model):
-    return [
-        np.concatenate([c.kmeans_.cluster_centers_.ravel(), c.hmm_.emissionprob_.ravel()])
-        for c in model.chains_
-    ]
+    return [np.concatenate([c.centers_.ravel(), c.emissionprob_.ravel()]) for c in model.chains_]
 
 
 @pytest.fixture(scope="module")
@@ -108,19 +109,26 @@ def test_unknown_grid_is_rejected():
         dyn.DynamicFeatures("huge")
 
 
-def test_feature_builder_on_a_generated_file(tmp_path, tiny_grid, monkeypatch):
-    from tactile_exp.baselines import features as feat
+def _generated(folder):
+    """A tiny generated file and a 'soft' split of it (objects 105 and 206 held out)."""
     from tactile_exp.data.phac2 import PHAC2
     from tactile_exp.data.synthetic import SyntheticSpec, generate
 
     spec = SyntheticSpec(
         object_ids=(101, 103, 104, 105, 201, 202, 206), trials=2, duration_scale=0.1, views=0
     )
-    data = PHAC2(generate(tmp_path / "tiny.h5", spec))
+    data = PHAC2(generate(folder / "tiny.h5", spec))
     names = [t.name for t in data.trials]
     labels = {n: int(n.split("_")[-2].startswith("1")) for n in names}
     test = tuple(n for n in names if "_105_" in n or "_206_" in n)
-    split = Split("soft", tuple(n for n in names if n not in test), test, labels)
+    return data, names, Split("soft", tuple(n for n in names if n not in test), test, labels)
+
+
+def test_feature_builder_on_a_generated_file(tmp_path, tiny_grid, monkeypatch):
+    from tactile_exp.baselines import features as feat
+
+    data, names, split = _generated(tmp_path)
+    labels = split.labels
     kwargs = dict(features=("static", "dynamic"), faithful=False, dynamic_pool="object")
     with pytest.warns(UserWarning):  # the short synthetic EPs fill some static features
         bf = feat.BaselineFeatures(data, hmm_grid="tiny", cache_dir=tmp_path, **kwargs).fit(split)
@@ -130,7 +138,7 @@ def test_feature_builder_on_a_generated_file(tmp_path, tiny_grid, monkeypatch):
     dyn_block = X[:, 188:]  # pooled per object within one side: both trials share the vector
     np.testing.assert_array_equal(dyn_block[0], dyn_block[1])
     assert not np.array_equal(dyn_block[0], dyn_block[2])
-    assert len(list(tmp_path.glob("baseline_*.npz"))) == 2
+    assert len(list(tmp_path.glob("baseline_*.npz"))) == 3  # static, sequences, soft's chains
     feat._MEMO.clear()  # a new process: the disk cache answers, the file is not read again
     monkeypatch.setattr(data, "iter_trials", None)
     again = feat.BaselineFeatures(data, hmm_grid="tiny", cache_dir=tmp_path, **kwargs).fit(split)
@@ -139,3 +147,54 @@ def test_feature_builder_on_a_generated_file(tmp_path, tiny_grid, monkeypatch):
         feat.BaselineFeatures(data, hmm_grid="tiny", **kwargs).fit(
             Split("soft", split.train[:-2], split.test, labels)
         ).transform(names)
+
+
+def test_fitted_chains_are_cached_per_data_split_settings_and_seed(
+    tmp_path, tiny_grid, monkeypatch
+):
+    from tactile_exp.baselines import features as feat
+
+    data, names, split = _generated(tmp_path)
+    cache = tmp_path / "cache"
+
+    def features(**kw):
+        settings = dict(features=("dynamic",), hmm_grid="tiny", cache_dir=cache, seed=0) | kw
+        return feat.BaselineFeatures(data, **settings)
+
+    first = features().fit(split)  # row C fits the chains
+    X = first.transform(names)
+    assert len(list(cache.glob("baseline_hmm_soft_*.npz"))) == 1
+
+    def refit(*args, **kwargs):
+        raise AssertionError("chains refitted")
+
+    monkeypatch.setattr(dyn.DynamicFeatures, "fit", refit)
+    feat._MEMO.clear()  # another job: only the disk cache remembers
+    again = features().fit(split)  # a hit: loaded, not refitted, bit-identical features
+    np.testing.assert_array_equal(again.transform(names), X)
+    assert again.dynamic_.params_ == first.dynamic_.params_
+    pooled = features(dynamic_pool="object").fit(split).transform(names)  # row D/F's chains too
+    assert not np.array_equal(pooled, X) and np.isfinite(pooled).all()
+
+    moved = split.train[-1]  # one training trial moved to the test side
+    other_split = Split("soft", split.train[:-1], (*split.test, moved), split.labels)
+    flipped = Split(
+        "soft", split.train, split.test, split.labels | {moved: 1 - split.labels[moved]}
+    )
+    dyn.GRIDS["tiny2"] = {**TINY_GRID, "n_states": (3,)}
+    try:
+        misses = [
+            (features(), other_split),
+            (features(), flipped),
+            (features(seed=1), split),
+            (features(leak_test_positives=True), split),
+            (features(hmm_grid="tiny2"), split),
+        ]
+        for model, changed in misses:
+            with pytest.raises(AssertionError, match="refitted"):
+                model.fit(changed)
+        monkeypatch.setattr(data, "identity", lambda: "another-file")
+        with pytest.raises(AssertionError, match="refitted"):
+            features().fit(split)
+    finally:
+        del dyn.GRIDS["tiny2"]

@@ -162,6 +162,8 @@ def forward_loglik(
 class HMMChain:
     """One chain: PCA(97%) -> k-means(K) symbols -> CategoricalHMM(N), on resampled sequences."""
 
+    STATE = ("mean", "axes", "centers", "startprob", "transmat", "emissionprob")
+
     def __init__(self, n_states: int, n_symbols: int, seed: int = 0, n_init: int = 10) -> None:
         self.n_states = n_states
         self.n_symbols = n_symbols
@@ -177,9 +179,9 @@ class HMMChain:
         points = self._project(seqs).reshape(-1, self.axes_.shape[1])
         with warnings.catch_warnings(), threadpool_limits(1):  # threads only add overhead here
             warnings.simplefilter("ignore")  # too few distinct points for K: KMeans still labels
-            self.kmeans_ = KMeans(self.n_symbols, n_init=self.n_init, random_state=self.seed)
-            labels = self.kmeans_.fit_predict(points)
-        self.hmm_ = hmm.CategoricalHMM(
+            kmeans = KMeans(self.n_symbols, n_init=self.n_init, random_state=self.seed)
+            labels = kmeans.fit_predict(points)
+        model = hmm.CategoricalHMM(
             n_components=self.n_states,
             n_features=self.n_symbols,
             n_iter=HMM_ITER,
@@ -187,8 +189,24 @@ class HMMChain:
             random_state=self.seed,
             implementation="scaling",  # same EM as "log", about 10x faster
         )
-        self.hmm_.fit(labels.reshape(-1, 1), lengths=[seqs.shape[1]] * len(seqs))
+        model.fit(labels.reshape(-1, 1), lengths=[seqs.shape[1]] * len(seqs))
+        self.centers_ = kmeans.cluster_centers_
+        self.startprob_, self.transmat_ = model.startprob_, model.transmat_
+        self.emissionprob_ = model.emissionprob_
         return self
+
+    def arrays(self, prefix: str) -> dict[str, np.ndarray]:
+        """What scoring needs, as named float arrays (for the on-disk chain cache)."""
+        return {prefix + name: getattr(self, name + "_") for name in self.STATE}
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray], prefix: str) -> HMMChain:
+        """A fitted chain from ``arrays``' output (scores exactly as the chain that wrote it)."""
+        emission = a[prefix + "emissionprob"]
+        chain = cls(*emission.shape)
+        for name in cls.STATE:
+            setattr(chain, name + "_", a[prefix + name])
+        return chain
 
     def _project(self, seqs: np.ndarray) -> np.ndarray:
         return (seqs - self.mean_) @ self.axes_
@@ -196,13 +214,14 @@ class HMMChain:
     def symbols(self, seqs: np.ndarray) -> np.ndarray:
         """(m, T) nearest-centroid symbols."""
         z = self._project(seqs)
-        d = ((z[:, :, None, :] - self.kmeans_.cluster_centers_[None, None]) ** 2).sum(axis=-1)
+        d = ((z[:, :, None, :] - self.centers_[None, None]) ** 2).sum(axis=-1)
         return np.argmin(d, axis=-1)
 
     def score(self, seqs: np.ndarray) -> np.ndarray:
         """(m,) log-likelihood of each resampled sequence."""
-        h = self.hmm_
-        return forward_loglik(h.startprob_, h.transmat_, h.emissionprob_, self.symbols(seqs))
+        return forward_loglik(
+            self.startprob_, self.transmat_, self.emissionprob_, self.symbols(seqs)
+        )
 
 
 def _candidates(grid: dict[str, tuple[int, ...]]) -> list[tuple[int, int, int]]:
@@ -228,6 +247,37 @@ class DynamicFeatures:
         self.holdout = holdout
         self.n_init = n_init
         self.seed = seed
+
+    def settings(self) -> dict[str, object]:
+        """Everything besides the data and the split that the fitted chains depend on."""
+        return {
+            "grid": GRIDS[self.grid],
+            "leak_test_positives": self.leak_test_positives,
+            "holdout": self.holdout,
+            "n_init": self.n_init,
+            "seed": self.seed,
+            "hmm": [HMM_ITER, HMM_TOL, VARIANCE_KEPT],
+        }
+
+    KEYS: tuple[str, ...] = (
+        "params",
+        "fit_trials",
+        *(f"chain{c}_{name}" for c in range(len(CHAINS)) for name in HMMChain.STATE),
+    )
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The fitted chains as named arrays (strings and floats only: loads without pickle)."""
+        out = {"params": np.array(self.params_), "fit_trials": np.array(self.fit_trials_)}
+        for c, chain in enumerate(self.chains_):
+            out |= chain.arrays(f"chain{c}_")
+        return out
+
+    def load_arrays(self, a: dict[str, np.ndarray]) -> DynamicFeatures:
+        """Restore the fitted state saved by ``arrays`` (in place of ``fit``)."""
+        self.params_ = [tuple(int(v) for v in row) for row in a["params"]]
+        self.fit_trials_ = [str(t) for t in a["fit_trials"]]
+        self.chains_ = [HMMChain.from_arrays(a, f"chain{c}_") for c in range(len(CHAINS))]
+        return self
 
     @staticmethod
     def lengths(grid: str) -> tuple[int, ...]:

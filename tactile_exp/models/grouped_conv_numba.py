@@ -8,33 +8,19 @@ kernels never handle a tail. Forward and backward of the whole three-layer stack
 ``torch.autograd.Function``: one transpose into the layout at entry, one out of it at exit.
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
-install), and its on-disk cache makes the compile a once-per-machine cost. The cache lives under
-the user cache folder (``$NUMBA_CACHE_DIR`` if set, else ``<cache>/numba`` with ``<cache>`` as in
-``default_cache_dir``), never in the package; it must be set before numba is imported, hence
-the environment variable at the top of this module.
+install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 
-from tactile_exp.data.phac2 import default_cache_dir
+import numpy as np
+import torch
+from numba import prange
+from torch.autograd.function import once_differentiable
 
-os.environ.setdefault("NUMBA_CACHE_DIR", str(default_cache_dir() / "numba"))
-# workqueue: no spinning worker threads. With 2 cores shared by other work, numba's OpenMP layer
-# spent ~50% more CPU per training step and ran ~1.8x slower in wall time (measured).
-os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
-
-import numba  # noqa: E402  (after NUMBA_CACHE_DIR: numba reads it at import)
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from numba import prange  # noqa: E402
-from torch.autograd.function import once_differentiable  # noqa: E402
-
-if not numba.config.CACHE_DIR:  # numba was imported earlier, before the variable was set
-    numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
-    numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
+from tactile_exp.models.numba_setup import numba
 
 LANES = 16  # batch padding: two AVX2 float32 vectors
 # Reassociation lets the weight-gradient reductions vectorise; no nnan/ninf, so NaNs propagate.

@@ -1,4 +1,9 @@
-"""The haptic LSTM (M2): 10 recurrent units over time -> FC(10) + ReLU -> FC(1)."""
+"""The haptic LSTM (M2): 10 recurrent units over time -> FC(10) + ReLU -> FC(1).
+
+``impl`` picks how the recurrence runs: ``torch`` is ``nn.LSTM`` (cuDNN on a GPU), ``compiled``
+the numba kernels of ``lstm_kernels`` (CPU only, ~4x faster there, same parameters), ``auto``
+the compiled kernels on CPU and ``nn.LSTM`` elsewhere.
+"""
 
 from __future__ import annotations
 
@@ -9,16 +14,27 @@ import numpy as np
 import torch
 from torch import nn
 
+from tactile_exp.models.lstm_kernels import lstm_last_hidden
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.sgd import SGDModel
 from tactile_exp.train import caffe_xavier_
 
+IMPLS = ("auto", "compiled", "torch")
+
 
 class LSTMBody(nn.Module):
-    """LSTM over the time axis of (n, C, T) input; the last hidden state -> FC(hidden) + ReLU."""
+    """LSTM over the time axis of (n, C, T) input; the last hidden state -> FC(hidden) + ReLU.
 
-    def __init__(self, n_channels: int, hidden: int = 10, fc_width: int = 10) -> None:
+    Both implementations share ``nn.LSTM``'s parameters, so they start from the same weights.
+    """
+
+    def __init__(
+        self, n_channels: int, hidden: int = 10, fc_width: int = 10, impl: str = "torch"
+    ) -> None:
         super().__init__()
+        if impl not in ("compiled", "torch"):
+            raise ValueError(f"LSTMBody impl must be 'compiled' or 'torch', got {impl!r}")
+        self.impl = impl
         self.lstm = nn.LSTM(n_channels, hidden, batch_first=True)
         self.fc = nn.Linear(hidden, fc_width)
         for name, param in self.lstm.named_parameters():
@@ -30,8 +46,11 @@ class LSTMBody(nn.Module):
         nn.init.zeros_(self.fc.bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        _, (last, _) = self.lstm(x.transpose(1, 2))
-        return self.fc(last[-1]).relu()
+        if self.impl == "compiled":
+            last = lstm_last_hidden(x, self.lstm)
+        else:
+            last = self.lstm(x.transpose(1, 2))[1][0][-1]
+        return self.fc(last).relu()
 
 
 @MODELS.register("haptic_lstm")
@@ -50,6 +69,7 @@ class HapticLSTM(SGDModel):
         *,
         hidden: int = 10,
         fc_width: int = 10,
+        impl: str = "auto",
         epochs: int = 200,
         finetune_epochs: int = 100,
         batch_size: int = 1000,
@@ -76,11 +96,19 @@ class HapticLSTM(SGDModel):
         for name, value in (("hidden", hidden), ("fc_width", fc_width)):
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+        if impl not in IMPLS:
+            raise ValueError(f"impl must be one of {', '.join(IMPLS)}, got {impl!r}")
+        if impl == "compiled" and self.device.type != "cpu":
+            raise ValueError(f"impl='compiled' runs on CPU only; device is {self.device}")
         self.hidden, self.fc_width = hidden, fc_width
+        self.impl = impl
 
     def _check_input(self, X: np.ndarray) -> None:
         if X.ndim != 3:
             raise ValueError(f"haptic_lstm expects X of shape (n, channels, time), got {X.shape}")
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
-        return LSTMBody(input_shape[0], self.hidden, self.fc_width), self.fc_width
+        impl = self.impl
+        if impl == "auto":
+            impl = "compiled" if self.device.type == "cpu" else "torch"
+        return LSTMBody(input_shape[0], self.hidden, self.fc_width, impl), self.fc_width

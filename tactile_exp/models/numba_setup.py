@@ -1,0 +1,26 @@
+"""numba, configured once for every compiled kernel of the project.
+
+Compiled code is cached in the user cache folder (``$NUMBA_CACHE_DIR`` when set, else
+``numba/`` under ``$TACTILE_EXP_CACHE`` or ``~/.cache/tactile_exp``), never inside the package
+or the checkout, so kernels compile once per machine. numba reads these settings when it is
+imported, hence this module: kernel modules import ``numba`` from here.
+"""
+
+from __future__ import annotations
+
+import os
+
+from tactile_exp.data.phac2 import default_cache_dir
+
+os.environ.setdefault("NUMBA_CACHE_DIR", str(default_cache_dir() / "numba"))
+# workqueue: no spinning worker threads. With 2 cores shared by other work, numba's OpenMP layer
+# spent ~50% more CPU per training step and ran ~1.8x slower in wall time (measured).
+os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
+
+import numba  # noqa: E402  (after the variables above: numba reads them at import)
+
+if not numba.config.CACHE_DIR:  # numba was imported earlier, before the variable was set
+    numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
+    numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
+
+__all__ = ["numba"]
