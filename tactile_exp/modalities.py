@@ -120,9 +120,10 @@ class Visual(Modality):
 
     The trunk runs once per data set, weights file and channel mean (``prepare``), cached on disk
     under ``cache_dir`` and shared by every adjective and job; see ``models/googlenet.py`` for why
-    it lives here rather than in the model. ``mean="train"`` fits the V2 channel mean on each
-    split's training photographs instead of using ImageNet's (what torchvision-layout weights
-    expect); that costs one trunk pass per adjective.
+    it lives here rather than in the model. ``layout`` picks the trunk (``torchvision`` or
+    ``caffe``, the MINC release's) and its input (``googlenet.network_input``). ``mean="train"``
+    fits the V2 channel mean on each split's training photographs instead of using the one the
+    layout's weights expect; that costs one trunk pass per adjective.
 
     An object's photographs follow its trials: all on the side that holds its trials. An object
     split by trial (the only object of its class for an adjective, see ``Split``) has its
@@ -139,6 +140,7 @@ class Visual(Modality):
         size: int = 224,
         mean: str = "imagenet",
         weights: str | None = None,
+        layout: str = "torchvision",
         seed: int = 0,
         batch_size: int = 32,
         device: str = "auto",
@@ -148,6 +150,8 @@ class Visual(Modality):
         super().__init__(dataset, cache_dir)
         if mean not in ("imagenet", "train"):
             raise ValueError(f"modality.mean must be 'imagenet' or 'train', got {mean!r}")
+        if layout not in ("torchvision", "caffe"):
+            raise ValueError(f"modality.layout must be 'torchvision' or 'caffe', got {layout!r}")
         if weights is not None and not Path(weights).is_file():
             raise FileNotFoundError(f"modality.weights: GoogLeNet weights file {weights} not found")
         if batch_size < 1:
@@ -155,6 +159,7 @@ class Visual(Modality):
         self.size = size
         self.mean = mean
         self.weights = None if weights is None else Path(weights)
+        self.layout = layout
         self.seed = seed
         self.batch_size = batch_size
         self.device = resolve_device(device)
@@ -167,7 +172,8 @@ class Visual(Modality):
     def prepare(self) -> None:
         import logging
 
-        from tactile_exp.preprocess.visual import IMAGENET_MEAN_RGB, load_visual_arrays
+        from tactile_exp.models.googlenet import LAYOUT_MEAN_RGB
+        from tactile_exp.preprocess.visual import load_visual_arrays
 
         log = logging.getLogger(__name__)
         self.arrays = load_visual_arrays(self.dataset, self.size, self.cache_dir)
@@ -186,7 +192,9 @@ class Visual(Modality):
                 "features are random projections, not transferred MINC/ImageNet features"
             )
         self._stems = {t.object_id: t.stem for t in self.dataset.trials}
-        self._fixed = self._features_for(IMAGENET_MEAN_RGB) if self.mean == "imagenet" else None
+        self._fixed = (
+            self._features_for(LAYOUT_MEAN_RGB[self.layout]) if self.mean == "imagenet" else None
+        )
 
     def _features_for(self, mean: Sequence[float]) -> np.ndarray:
         """The trunk's features of every photograph with channel ``mean`` subtracted, (n, 832);
@@ -194,9 +202,9 @@ class Visual(Modality):
         import hashlib
 
         from tactile_exp.models.googlenet import (
-            IMAGENET_STD_RGB,
             build_trunk,
             file_digest,
+            network_input,
             pooled_features,
         )
         from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
@@ -207,16 +215,15 @@ class Visual(Modality):
             images=hashlib.sha1(self.arrays.images.tobytes()).hexdigest(),
             weights=file_digest(self.weights) if self.weights else f"xavier-seed{self.seed}",
             mean=mean,
+            layout=self.layout,
             version=1,
         )
         path = self.cache_dir / f"googlenet5a-{key}.npz"
         cached = load_arrays(path, ("features",))
         if cached is not None:
             return cached["features"]
-        # V2's mean-subtracted pixels on torchvision's input scale (ImageNet std, 0-1 range)
-        images = self.arrays.prepared(mean=mean)
-        images /= 255.0 * np.asarray(IMAGENET_STD_RGB, np.float32).reshape(1, 3, 1, 1)
-        trunk = build_trunk(self.weights, self.seed)
+        images = network_input(self.arrays.images, mean, self.layout)  # V2, in the trunk's layout
+        trunk = build_trunk(self.weights, self.seed, self.layout)
         features = pooled_features(trunk, images, self.batch_size, self.device)
         save_arrays(path, {"features": features})
         return features
