@@ -299,6 +299,10 @@ def test_wrong_blob_count_and_layer_type(blobs, tmp_path, capsys):
         path.write_bytes(net([first]) + rest)
         expected = "holds 1 blobs, expected 2" if name == "nobias" else "expected a convolution"
         _expect_error(capsys, [str(path), out], expected)
+    twice = tmp_path / "twice.caffemodel"
+    twice.write_bytes(net([layer("conv1/7x7_s2", "Convolution", [blob(w), blob(b)])])
+                      + googlenet_caffemodel(blobs))  # fmt: skip
+    _expect_error(capsys, [str(twice), out], "two layers named 'conv1/7x7_s2' hold weights")
     bad_count = tmp_path / "count.caffemodel"
     bad_count.write_bytes(net([layer("x", "Convolution", [blob(w[:-1], shape=w.shape)])]))
     _expect_error(

@@ -233,13 +233,14 @@ def convert_googlenet(
     """
     by_name: dict[str, Layer] = {}
     for layer in layers:
-        if layer.name in by_name and layer.blobs:
-            raise CaffeModelError(f"{source}: layer {layer.name!r} appears twice")
-        if layer.blobs or layer.name not in by_name:
-            by_name[layer.name] = layer
+        if not layer.blobs:
+            continue  # ReLU, pooling, LRN, concat: nothing to convert
+        if layer.name in by_name:
+            raise CaffeModelError(f"{source}: two layers named {layer.name!r} hold weights")
+        by_name[layer.name] = layer
     own = CaffeGoogLeNet().state_dict()
     mapping = caffe_layer_map()
-    missing = [name for name in mapping if not by_name.get(name, Layer(name, "", [])).blobs]
+    missing = [name for name in mapping if name not in by_name]
     if missing:
         raise CaffeModelError(
             f"{source}: {len(missing)} GoogLeNet layer(s) with weights missing, e.g. "
@@ -270,5 +271,5 @@ def convert_googlenet(
         state[f"{module}.weight"] = torch.from_numpy(weight.data.reshape(w_shape).copy())
         state[f"{module}.bias"] = torch.from_numpy(bias.data.reshape(b_shape).copy())
         mapped.append(f"{name} -> {module} weight {w_shape} bias {b_shape}")
-    ignored = [layer.name for layer in layers if layer.blobs and layer.name not in mapping]
+    ignored = [name for name in by_name if name not in mapping]
     return state, mapped, ignored
