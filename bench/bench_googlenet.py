@@ -1,8 +1,9 @@
-"""GoogLeNet trunk speed on CPU (M3 features): NCHW against channels_last, in one run.
+"""GoogLeNet trunk speed on CPU (M3 features): NCHW against channels_last, and the Caffe layout
+against the torchvision one, in one run.
 
 Times ``pooled_features`` (inception (5a), average pooling, L2 normalisation; inference mode) on
-random 224x224 images, batch 32, and prints images/s per memory format and their ratio, plus the
-one-pass cost of the visual modality on 530 photographs (PHAC-2) that the ratio implies.
+random 224x224 images, batch 32, and prints images/s per memory format and layout and their
+ratios, plus the one-pass cost of the visual modality on 530 photographs (PHAC-2) they imply.
 
 Run: ``.venv/bin/python bench/bench_googlenet.py [--batches 4] [--threads 2]``
 """
@@ -16,12 +17,18 @@ import time
 import numpy as np
 import torch
 
-from tactile_exp.models.googlenet import GoogLeNet, pooled_features, xavier_init
+from tactile_exp.models.googlenet import (
+    CaffeGoogLeNet,
+    GoogLeNet,
+    Trunk,
+    pooled_features,
+    xavier_init,
+)
 
 BATCH, SIZE, PHOTOGRAPHS = 32, 224, 530
 
 
-def images_per_second(model: GoogLeNet, x: np.ndarray, channels_last: bool, batches: int) -> float:
+def images_per_second(model: Trunk, x: np.ndarray, channels_last: bool, batches: int) -> float:
     """Median throughput over ``batches`` timed batches, after one warm-up batch."""
     times = []
     for _ in range(batches + 1):
@@ -45,16 +52,23 @@ def main() -> None:
     ).max()
     print(f"GoogLeNet to inception (5a), batch {BATCH}, {SIZE}x{SIZE}, {args.threads} threads")
     print(f"max |channels_last - NCHW| feature difference: {same:.2e}")
+    caffe = xavier_init(CaffeGoogLeNet(), seed=0).eval()
     rates = {}
-    for name, channels_last in (("NCHW", False), ("channels_last", True)):
-        rates[name] = images_per_second(model, x, channels_last, args.batches)
+    for name, net, channels_last in (
+        ("NCHW", model, False),
+        ("channels_last", model, True),
+        ("caffe layout", caffe, True),
+    ):
+        rates[name] = images_per_second(net, x, channels_last, args.batches)
         print(f"{name:>14}: {rates[name]:6.1f} images/s")
     ratio = rates["channels_last"] / rates["NCHW"]
     print(f"channels_last / NCHW: {ratio:.2f}x")
     print(
-        f"one pass over {PHOTOGRAPHS} photographs: {PHOTOGRAPHS / rates['NCHW']:.0f} s NCHW, "
-        f"{PHOTOGRAPHS / rates['channels_last']:.0f} s channels_last"
+        f"caffe / torchvision layout (both channels_last): "
+        f"{rates['caffe layout'] / rates['channels_last']:.2f}x"
     )
+    for name, rate in rates.items():
+        print(f"one pass over {PHOTOGRAPHS} photographs, {name}: {PHOTOGRAPHS / rate:.0f} s")
 
 
 if __name__ == "__main__":

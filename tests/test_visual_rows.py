@@ -184,3 +184,28 @@ def test_objects_without_photographs_are_left_out(dataset, cache_dir, tmp_path, 
         *train.object_id,
         *test.object_id,
     }
+
+
+def test_caffe_layout_features_come_from_the_caffe_trunk(dataset, cache_dir, tmp_path):
+    """modality.layout=caffe: BGR minus Caffe's mean through the Caffe trunk of the weights
+    file; the same file with the torchvision layout fails before any trunk pass."""
+    path = tmp_path / "caffe.pth"
+    googlenet.save_weights(
+        path, xavier_init(googlenet.CaffeGoogLeNet(), seed=8).state_dict(), layout="caffe"
+    )
+    visual = _small_visual(dataset, cache_dir, weights=str(path), layout="caffe")
+    visual.prepare()
+    train, _ = visual.instances(SPLITS["published"](dataset, "thick", 0))
+    arrays = visual.arrays
+    rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 0))[0])
+            for o in train.object_id[:3]]  # fmt: skip
+    images = googlenet.network_input(arrays.images[rows], (123.0, 117.0, 104.0), "caffe")
+    expected = pooled_features(googlenet.build_trunk(path, layout="caffe"), images)
+    index = [int(np.flatnonzero((train.object_id == o) & np.char.endswith(
+        train.trial.astype(str), "_v00"))[0]) for o in train.object_id[:3]]  # fmt: skip
+    np.testing.assert_allclose(train.X[index], expected, atol=1e-5)
+    wrong = _small_visual(dataset, cache_dir, weights=str(path), layout="torchvision")
+    with pytest.raises(ValueError, match="caffe-layout .* set modality.layout=caffe"):
+        wrong.prepare()
+    with pytest.raises(ValueError, match="modality.layout must be"):
+        _small_visual(dataset, cache_dir, layout="bgr")

@@ -22,8 +22,9 @@ class Visual(Modality):
 
     ``VisualFeatures`` (``preprocess/visual.py``) holds the fit/transform; see
     ``models/googlenet.py`` for why the trunk lives here rather than in the model. ``mean="train"``
-    fits the V2 channel mean on each split's training photographs instead of using ImageNet's
-    (what torchvision-layout weights expect); that costs one trunk pass per adjective.
+    fits the V2 channel mean on each split's training photographs instead of using the one the
+    layout's weights expect; that costs one trunk pass per adjective. ``layout`` picks the trunk
+    (``torchvision`` or ``caffe``, the MINC release's) and its input (``googlenet.network_input``).
     Photographs follow their object's trials (``data.splits.split_photographs``). Instances are
     named ``<group stem>_v<VV>``: the combiner's ``combine=k`` then groups ``k`` views of one
     object. Objects without photographs are left out (a warning gives their count).
@@ -36,6 +37,7 @@ class Visual(Modality):
         size: int = 224,
         mean: str = "imagenet",
         weights: str | None = None,
+        layout: str = "torchvision",
         seed: int = 0,
         batch_size: int = 32,
         device: str = "auto",
@@ -45,6 +47,8 @@ class Visual(Modality):
         super().__init__(dataset, cache_dir)
         if mean not in ("imagenet", "train"):
             raise ValueError(f"modality.mean must be 'imagenet' or 'train', got {mean!r}")
+        if layout not in ("torchvision", "caffe"):
+            raise ValueError(f"modality.layout must be 'torchvision' or 'caffe', got {layout!r}")
         if weights is not None and not Path(weights).is_file():
             raise FileNotFoundError(f"modality.weights: GoogLeNet weights file {weights} not found")
         if batch_size < 1:
@@ -53,6 +57,7 @@ class Visual(Modality):
         self.size = size
         self.mean = mean
         self.weights = None if weights is None else Path(weights)
+        self.layout = layout
         self.seed = seed
         self.batch_size = batch_size
         self.device = device
@@ -86,6 +91,7 @@ class Visual(Modality):
             cache_dir=self.cache_dir,
             mean=self.mean,
             weights=self.weights,
+            layout=self.layout,
             seed=self.seed,
             batch_size=self.batch_size,
             device=self.device,

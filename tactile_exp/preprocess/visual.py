@@ -283,6 +283,7 @@ class VisualFeatures:
         cache_dir: Path,
         mean: str = "imagenet",
         weights: Path | None = None,
+        layout: str = "torchvision",
         seed: int = 0,
         batch_size: int = 32,
         device: str = "auto",
@@ -293,6 +294,7 @@ class VisualFeatures:
         self.cache_dir = cache_dir
         self.mean = mean
         self.weights = weights
+        self.layout = layout
         self.seed = seed
         self.batch_size = batch_size
         self.device = device
@@ -301,7 +303,13 @@ class VisualFeatures:
     def fit(self, index: np.ndarray | None = None) -> VisualFeatures:
         """Learn the channel mean from photographs ``index`` (all when None) if ``mean="train"``,
         and run (or load) the trunk for it."""
-        fitted = IMAGENET_MEAN_RGB if self.mean == "imagenet" else self.arrays.channel_mean(index)
+        from tactile_exp.models.googlenet import LAYOUT_MEAN_RGB
+
+        fitted = (
+            LAYOUT_MEAN_RGB[self.layout]
+            if self.mean == "imagenet"
+            else self.arrays.channel_mean(index)
+        )
         self.mean_ = tuple(round(float(m), 4) for m in fitted)
         if self.mean_ not in self._by_mean:
             self._by_mean = {self.mean_: self._all_features(self.mean_)}  # keep only the latest
@@ -317,9 +325,9 @@ class VisualFeatures:
         import hashlib
 
         from tactile_exp.models.googlenet import (
-            IMAGENET_STD_RGB,
             build_trunk,
             file_digest,
+            network_input,
             pooled_features,
         )
         from tactile_exp.train import resolve_device
@@ -329,16 +337,15 @@ class VisualFeatures:
             images=hashlib.sha1(self.arrays.images.tobytes()).hexdigest(),
             weights=file_digest(self.weights) if self.weights else f"xavier-seed{self.seed}",
             mean=mean,
+            layout=self.layout,
             version=1,
         )
         path = self.cache_dir / f"googlenet5a-{key}.npz"
         cached = load_arrays(path, ("features",))
         if cached is not None:
             return cached["features"]
-        # V2's mean-subtracted pixels on torchvision's input scale (ImageNet std, 0-1 range)
-        images = self.arrays.prepared(mean=mean)
-        images /= 255.0 * np.asarray(IMAGENET_STD_RGB, np.float32).reshape(1, 3, 1, 1)
-        trunk = build_trunk(self.weights, self.seed)
+        images = network_input(self.arrays.images, mean, self.layout)  # V2, in the trunk's layout
+        trunk = build_trunk(self.weights, self.seed, self.layout)
         features = pooled_features(trunk, images, self.batch_size, resolve_device(self.device))
         save_arrays(path, {"features": features})
         return features
