@@ -55,18 +55,28 @@ label effects of ``_LABEL_EFFECTS``.
 File: gzip level 1 + shuffle (4 % larger than level 4, a third faster to write); objects are
 spread over worker processes, each writing a part file that is copied in without recompression.
 
-Difficulty, measured on the full default file (seed 0, generator version 2) with
-``.venv/bin/python bench/bench_difficulty.py``: per-trial mean/std features per EP and finger,
-StandardScaler + LogisticRegression on the published train split, ROC AUC on its test split.
+Difficulty, measured on the full default file (seed 0, published splits). ``bench_difficulty``:
+per-trial mean/std features per EP and finger, StandardScaler + LogisticRegression on the train
+split, ROC AUC on its test split (``PYTHONPATH=$PWD .venv/bin/python bench/bench_difficulty.py
+--cache-dir DIR``). Generator version 2 -> 3 (3: dynamics carry the physics, issue 13):
 
-- haptic: mean AUC 0.849 over the 24 adjectives (0.829 over the 21 with a visual score);
-  weakest smooth 0.56, soft 0.64, bumpy 0.64, textured 0.64; strongest rough, sticky 1.00.
+- haptic: mean AUC 0.849 -> 0.774 over the 24 adjectives (0.829 -> 0.751 over the 21 with a
+  visual score). Version 3: weakest springy 0.18, smooth 0.33, thick 0.45, bumpy 0.54; strongest
+  porous, sticky 1.00. Lower because amplitudes now carry nuisances (temperature difference,
+  contact area) while time constants and spectra, which these features do not see, carry the
+  properties.
 - visual (mean colour, colour std, edge density and height of the crop): mean AUC 0.50 over 21
-  adjectives (nice, sticky, unpleasant have one positive object, split by trial). Such tiny
-  features miss most of the appearance cues (random hue dominates the colour mean), and
+  adjectives in both (nice, sticky, unpleasant have one positive object, split by trial). Such
+  tiny features miss most of the appearance cues (random hue dominates the colour mean), and
   material confounds invert some small test sets (hard 0.02, fuzzy 0.00).
-- touch-only absorbent/squishy/springy: haptic 0.72 vs visual 0.35; thick/thin: haptic 0.66 vs
-  visual 0.80.
+- touch-only absorbent/squishy/springy: haptic 0.72 -> 0.55 vs visual 0.35; thick/thin: haptic
+  0.66 -> 0.64 vs visual 0.80.
+
+Levels vs dynamics (``PYTHONPATH=$PWD .venv/bin/python bench/bench_dynamics.py``): logistic
+regressions on the P1-P6 ConvNet inputs (normaliser and PCA fitted per split), mean test AUC over
+24 adjectives, version 2 -> 3: levels (per-channel mean/std) 0.824 -> 0.745; first-difference
+mean/std 0.842 -> 0.794; level- and amplitude-free shape (band energy fractions, block means)
+0.771 -> 0.820; both dynamic sets 0.809 -> 0.831; the flattened input 0.695 -> 0.706.
 """
 
 from __future__ import annotations
