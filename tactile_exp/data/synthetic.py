@@ -22,15 +22,25 @@ Every signal then follows from the properties through simple physics:
   squeeze closes at 2.5 mm/s until max PDC over the fingers reaches baseline + 500, then reopens
   until it falls to +10; hold closes to 50 % of that travel, slides to 20 % / 10 %. Stiff objects
   therefore give a steep PDC rise and little travel; thick ones a slightly wider aperture.
-- PDC: 500 * (indentation / indent_500) ** 1.1 per finger (per-trial finger share), then porous
-  creep (slow decay under load and a dip after release), sticky slow release, hysteresis of
-  non-springy soft objects and a damped rebound ringing for springy ones.
+- PDC: 500 * (indentation / indent_500) ** n per finger (per-trial finger share), n = 1.3 (near
+  Hertz, solids) up to 1.8 for soft porous foams (cell collapse, then densification), so the
+  squeeze rise *shape* carries the material. Then a standard linear solid: 2 ... 37 % of the
+  load relaxes (porosity, viscous softness) with a time constant of 0.7 s (open cells) ... 4.2 s
+  (dense); non-springy soft objects recover slowly after unloading (0.2 ... 2.2 s, pressure falls
+  faster than it rose), sticky ones release late, springy soft ones ring at 1 ... 3.5 Hz.
 - PAC (2200 Hz, 22 per row, column offsets of §1.5): rest noise, contact noise, make/break
-  transients and rare full-scale spikes; while sliding, texture noise (roughness, hairiness),
-  bump impulses (bumpiness, spaced along the slide) and stick-slip bursts (stickiness,
-  friction); crackle while squeezing crinkly objects. Impulses ring through a 250 Hz resonator.
-- TAC: contact-onset heat-flux transient, +60 ... +160 counts by effusivity, negative at release.
-  TDC: drift over the run from +8 (insulating) to -13 (metal, glass), plus sensor random walk.
+  transients and rare full-scale spikes; while sliding, a random surface profile swept at the
+  slide speed (asperity spacing 0.3 mm fine ... 3 mm coarse by roughness, so the vibration sits
+  near speed / spacing: 3-33 Hz in the slow slide, 8-83 Hz in the fast one; 10 Hz AC coupling),
+  broadband fibre noise (hairiness), bump impulses (bumpiness, spaced along the slide) and
+  stick-slip bursts (stickiness, friction); crackle while squeezing crinkly objects. Impulses
+  ring through a 250 Hz resonator. The vibration's amplitude scales with the label-free contact
+  area and the pressure; its frequency content does not.
+- TAC: contact heat-flux transient, +60 ... +160 counts by effusivity times a per-trial
+  sensor-minus-object temperature factor (0.6 ... 1.4), negative at release; it decays with the
+  thermal time constant, 0.8 s (metal, glass draw heat fast) ... 4.8 s (insulators). TDC: drift
+  over the run from +8 (insulating) to -13 (metal, glass), a per-contact cooling step with the
+  same time constant, plus sensor random walk.
 - electrodes: per-finger baseline pattern of §5, a pressure-driven pattern (E7-E10, E17 down;
   E1, E4, E6, E11, E14, E16 up) and a large local drop at the contact edge, mirrored between the
   fingers (E1..E6 <-> E11..E16); shear by friction and a bump pattern while sliding.
@@ -50,7 +60,11 @@ nice and unpleasant only through the weak label effects of ``_LABEL_EFFECTS``.
 File: gzip level 1 + shuffle (4 % larger than level 4, a third faster to write); objects are
 spread over worker processes, each writing a part file that is copied in without recompression.
 
-Difficulty, measured on the full default file (seed 0, generator version 3) with
+Generator version 4 = version 3's photographs (what sight can tell) + version 3's dynamics
+(issue 13), developed side by side; the two sections below were measured on each change
+alone (the other part at version 2) and are re-measured on version 4 at their end.
+
+Photographs. Difficulty, measured on the full default file (seed 0, generator version 3) with
 ``TACTILE_EXP_CACHE=... .venv/bin/python bench/bench_difficulty.py``: per-trial mean/std features
 per EP and finger, and simple features of the object in each photograph's V1 crop (height,
 width, saturation, value, specular fraction, texture energy at three scales, edge density,
@@ -73,6 +87,29 @@ single objects; CV is steadier.
   0.73/0.68/0.76/0.82), CV 0.74/0.51/0.75/0.58. Nothing of porosity, stiffness or springiness is
   drawn; what sight finds is the material (foam: thick, saturated), and on the published split
   that cue inverts (springy's one test positive is a thin, glossy silicone block).
+
+Haptic dynamics. Difficulty, measured on the full default file (seed 0, published splits). ``bench_difficulty``:
+per-trial mean/std features per EP and finger, StandardScaler + LogisticRegression on the train
+split, ROC AUC on its test split (``PYTHONPATH=$PWD .venv/bin/python bench/bench_difficulty.py
+--cache-dir DIR``). Generator version 2 -> 3 (3: dynamics carry the physics, issue 13):
+
+- haptic: mean AUC 0.849 -> 0.774 over the 24 adjectives (0.829 -> 0.751 over the 21 with a
+  visual score). Version 3: weakest springy 0.18, smooth 0.33, thick 0.45, bumpy 0.54; strongest
+  porous, sticky 1.00. Lower because amplitudes now carry nuisances (temperature difference,
+  contact area) while time constants and spectra, which these features do not see, carry the
+  properties.
+- visual (mean colour, colour std, edge density and height of the crop): mean AUC 0.50 over 21
+  adjectives in both (nice, sticky, unpleasant have one positive object, split by trial). Such
+  tiny features miss most of the appearance cues (random hue dominates the colour mean), and
+  material confounds invert some small test sets (hard 0.02, fuzzy 0.00).
+- touch-only absorbent/squishy/springy: haptic 0.72 -> 0.55 vs visual 0.35; thick/thin: haptic
+  0.66 -> 0.64 vs visual 0.80.
+
+Levels vs dynamics (``PYTHONPATH=$PWD .venv/bin/python bench/bench_dynamics.py``): logistic
+regressions on the P1-P6 ConvNet inputs (normaliser and PCA fitted per split), mean test AUC over
+24 adjectives, version 2 -> 3: levels (per-channel mean/std) 0.824 -> 0.745; first-difference
+mean/std 0.842 -> 0.794; level- and amplitude-free shape (band energy fractions, block means)
+0.771 -> 0.820; both dynamic sets 0.809 -> 0.831; the flattened input 0.695 -> 0.706.
 """
 
 from __future__ import annotations
@@ -107,7 +144,7 @@ from tactile_exp.data.layout import (
     published_test_split,
 )
 
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4
 log = logging.getLogger(__name__)
 
 
@@ -301,18 +338,31 @@ def _resonator(x: np.ndarray, freq: float, zeta: float, rate: float) -> np.ndarr
 
 
 def _pressure(delta: np.ndarray, p: dict[str, float], shares: np.ndarray, rows_s: float):
-    """Noise-free PDC above baseline, (n, 2), for an indentation trajectory (m per row)."""
-    el = 500 * (np.clip(delta, 0, None) / p["indent_500"]) ** 1.1
-    el = el[:, None] * shares[None, :]
-    slow = _lowpass(el, 3.0 * rows_s)
-    lag = _lowpass(el, 1.0 * rows_s) - el
-    unload = np.clip(lag, 0, None)
+    """Noise-free PDC above baseline, (n, 2), for an indentation trajectory (m per row).
+
+    Elastic law 500 * u ** n (u = indentation / indent_500): n = 1.3 near Hertz for solids, up
+    to 1.8 for soft porous foams (cell collapse, then densification), so the squeeze rise shape
+    depends on the material, not only its duration. Then a standard linear solid: a fraction of
+    the load relaxes with a time constant set by porosity (air leaving open cells is quick) and
+    viscous softness; non-springy soft objects recover slowly after unloading (pressure falls
+    faster than it rose); sticky ones release late; springy soft ones ring at a frequency that
+    rises with springiness.
+    """
     soft = 1 - p["stiffness"]
-    rebound = _resonator(np.diff(el, axis=0, prepend=0), 1.5 / rows_s, 0.15, 1.0)
+    n_exp = 1.3 + 0.5 * p["porosity"] * soft
+    el = 500 * (np.clip(delta, 0, None) / p["indent_500"]) ** n_exp
+    el = el[:, None] * shares[None, :]
+    relaxed = 0.02 + 0.25 * p["porosity"] + 0.1 * (1 - p["springiness"]) * soft
+    tau_relax = (0.7 + 3.5 * (1 - p["porosity"])) * rows_s
+    recover = (0.2 + 2.0 * (1 - p["springiness"])) * rows_s
+    unload = np.clip(_lowpass(el, recover) - el, 0, None)
+    release = np.clip(_lowpass(el, 1.0 * rows_s) - el, 0, None)
+    ring_hz = 1.0 + 2.5 * p["springiness"]
+    rebound = _resonator(np.diff(el, axis=0, prepend=0), ring_hz / rows_s, 0.12, 1.0)
     return (
         el
-        - 0.35 * p["porosity"] * slow
-        + 0.8 * p["stickiness"] * unload
+        - relaxed * _lowpass(el, tau_relax)
+        + 0.8 * p["stickiness"] * release
         - 0.5 * (1 - p["springiness"]) * soft * unload
         + 2.0 * p["springiness"] * soft * rebound
     )
@@ -406,6 +456,23 @@ def _controller(p: dict[str, float], w: float, shares: np.ndarray, tl: _Timeline
     return travel
 
 
+def _texture(p: dict[str, float], pos: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Unit-variance skin vibration from a random surface profile swept at positions ``pos``.
+
+    The profile's asperities are spaced ~``wavelength`` apart (0.3 mm fine ... 3 mm coarse, by
+    roughness), so sliding at speed v puts the vibration near v / wavelength: 3-33 Hz in the
+    slow slide (1 cm/s), 8-83 Hz in the fast one (2.5 cm/s), as Fishel & Loeb's fineness (the
+    spectral centroid) follows texture spacing and speed. PAC is AC-coupled (10 Hz high-pass).
+    """
+    wavelength = 0.3e-3 * math.exp(2.3 * p["roughness"])
+    dx = wavelength / 8
+    lo = float(pos.min())
+    grid = rng.standard_normal(int((float(pos.max()) - lo) / dx) + 2)
+    profile = _resonator(grid, 1 / 8, 0.15, 1.0)
+    h = np.interp(pos, lo + dx * np.arange(len(grid)), profile / (profile.std() + 1e-12))
+    return h - _lowpass(h, _PAC_RATE / (2 * math.pi * 10.0))
+
+
 def _pac(
     p: dict[str, float],
     finger: int,
@@ -422,10 +489,11 @@ def _pac(
     speed = np.abs(np.diff(pos, prepend=pos[0])) * _PAC_RATE  # m/s
     sliding = c22 * np.clip(speed / 0.01, 0, 3)
     press = np.sqrt(np.clip(np.repeat(pdc, PAC_PER_ROW) / 100.0, 0, 1.5))
-    texture = (4 + 120 * p["roughness"] ** 1.5 + 30 * p["hairiness"]) * p["contact_area"]
-    texture = texture * np.sqrt(sliding) * press
-    sigma = rng.uniform(3.0, 4.5) + 2.5 * c22 + texture
+    gain = p["contact_area"] * np.sqrt(sliding) * press
+    fibres = (4 + 30 * p["hairiness"]) * gain  # broadband: hairs and fibres flicking
+    sigma = rng.uniform(3.0, 4.5) + 2.5 * c22 + fibres
     x = rng.standard_normal(len(c22), dtype=np.float32) * sigma
+    x += (6 + 100 * p["roughness"] ** 1.5) * gain * _texture(p, pos, rng)
 
     kicks = np.zeros(len(c22))
     edges = np.flatnonzero(np.diff((contact > 0.5).astype(int))) + 1
@@ -479,17 +547,20 @@ def _trial(p: dict[str, float], scale: float, rng: np.random.Generator) -> dict[
     pos = np.cumsum(np.abs(np.diff(slide_pos, prepend=slide_pos[0])))
     sliding = np.abs(np.diff(slide_pos, prepend=slide_pos[0])) * rows_s > 1e-3
     edge = np.clip(0.6 + rng.normal(0, 0.25), 0.1, 1.3)
+    # contact cooling: effusive (metal, glass) objects draw heat fast, insulators slowly
+    tau_heat = (0.8 + 4.0 * (1 - p["effusivity"])) * rows_s
     for f in range(2):
         pf = pdc[:, f]
         contact = np.clip(pf / 40.0, 0, 1)
         base_pdc = rng.normal((857, 797)[f], (3, 8)[f])
         drift = np.cumsum(rng.normal(0, 0.02, n))
         out[f"biotacs/finger_{f}/pdc"] = base_pdc + pf + 0.2 * drift + rng.normal(0, 0.3, n)
-        tac_amp = (60 + 100 * p["effusivity"]) * p["contact_area"] * rng.uniform(0.7, 1.3)
-        tac = tac_amp * (contact - _lowpass(contact, 1.5 * rows_s))
+        warmth = rng.uniform(0.6, 1.4)  # sensor-minus-object temperature: room, warm-up
+        tac_amp = (60 + 100 * p["effusivity"]) * p["contact_area"] * warmth
+        tac = tac_amp * (contact - _lowpass(contact, tau_heat))
         out[f"biotacs/finger_{f}/tac"] = rng.normal(2040, 15) + tac + rng.normal(0, 1.25, n)
         tdc = (8 - 21 * p["effusivity"]) * p["contact_area"] * _lowpass(heat[:, f], 3 * rows_s)
-        tdc += 4 * (0.3 - p["effusivity"]) * _lowpass(contact, 2 * rows_s)
+        tdc += (3 - 14 * p["effusivity"]) * warmth * _lowpass(contact, tau_heat)
         out[f"biotacs/finger_{f}/tdc"] = (
             rng.uniform(1850, 2080) + tdc + drift + rng.normal(0, 0.35, n)
         )
