@@ -88,10 +88,11 @@ single objects; CV is steadier.
   drawn; what sight finds is the material (foam: thick, saturated), and on the published split
   that cue inverts (springy's one test positive is a thin, glossy silicone block).
 
-Haptic dynamics. Difficulty, measured on the full default file (seed 0, published splits). ``bench_difficulty``:
-per-trial mean/std features per EP and finger, StandardScaler + LogisticRegression on the train
-split, ROC AUC on its test split (``PYTHONPATH=$PWD .venv/bin/python bench/bench_difficulty.py
---cache-dir DIR``). Generator version 2 -> 3 (3: dynamics carry the physics, issue 13):
+Haptic dynamics. Difficulty, measured on the full default file (seed 0, published splits).
+``bench_difficulty``: per-trial mean/std features per EP and finger, StandardScaler +
+LogisticRegression on the train split, ROC AUC on its test split (``PYTHONPATH=$PWD
+.venv/bin/python bench/bench_difficulty.py --cache-dir DIR``). Generator version 2 -> 3
+(3: dynamics carry the physics, issue 13):
 
 - haptic: mean AUC 0.849 -> 0.774 over the 24 adjectives (0.829 -> 0.751 over the 21 with a
   visual score). Version 3: weakest springy 0.18, smooth 0.33, thick 0.45, bumpy 0.54; strongest
