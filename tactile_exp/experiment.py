@@ -88,6 +88,13 @@ def _epoch_logger(adjective: str) -> EpochCallback:
 
 def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
     """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
+    dataset, modality, splits = open_data(settings)
+    modality.prepare()
+    return dataset, modality, splits
+
+
+def open_data(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
+    """Open the data and check ``combine`` and every split, cheaply (before a run is created)."""
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
     modality = MODALITIES.build(
         settings.modality.name,
@@ -102,7 +109,6 @@ def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
             f"most {limit} {unit}; allowed 1..{limit}"
         )
     splits = {a: make_split(dataset, a, settings.split, settings.seed) for a in settings.adjectives}
-    modality.prepare()
     return dataset, modality, splits
 
 
@@ -116,6 +122,8 @@ def run(settings: Settings) -> JobResult:
                 "skipping %s: run %s already FINISHED with this config", settings.run_name, done
             )
             return JobResult(done, float("nan"), {}, skipped=True)
+    tracker.end_stale_runs(settings.config_hash)
+    dataset, modality, splits = open_data(settings)
 
     params = flatten(settings.resolved)
     params.update({f"choice.{k}": v for k, v in settings.choices.items()})
@@ -127,7 +135,7 @@ def run(settings: Settings) -> JobResult:
     with tracker.run(settings.run_name, params, tags) as parent_id:
         log.info("MLflow run %s (%s) in %s", settings.run_name, parent_id, tracker.uri)
         _log_config(tracker, parent_id, settings)
-        dataset, modality, splits = load(settings)
+        modality.prepare()
         results: dict[str, AdjectiveResult] = {}
         for i, adjective in enumerate(settings.adjectives, start=1):
             log.info("[%d/%d] %s", i, len(settings.adjectives), adjective)
