@@ -102,7 +102,7 @@ def _check_data(data: Any) -> None:
             raise ConfigError(f"data.path: {path}: no such file; expected the PHAC-2 HDF5 file")
 
 
-def _param_error(group: str, params: dict[str, Any], err: Exception) -> ConfigError:
+def param_error(group: str, params: dict[str, Any], err: Exception) -> ConfigError:
     """A component's ValueError as ``group.key: ...`` when it names one of its parameters."""
     message = str(err)
     words = message.replace("=", " ").replace(":", " ").split()
@@ -218,7 +218,14 @@ def check_components(settings: Settings) -> None:
     try:
         model = MODELS.build(settings.model.name, **settings.model.params)
     except (TypeError, ValueError) as err:
-        raise _param_error("model", settings.model.params, err) from err
+        raise param_error("model", settings.model.params, err) from err
+    steps = settings.modality.params.get("steps")
+    if hasattr(model, "check_steps") and isinstance(steps, int) and steps >= 1:
+        try:
+            model.check_steps(steps)
+        except ValueError as err:
+            message = f"modality.steps: {steps} with model={settings.model.name}: {err}"
+            raise ConfigError(message) from err
     if model.modalities and settings.modality.name not in model.modalities:
         raise ConfigError(
             f"modality: model={settings.model.name} takes modality "

@@ -16,7 +16,7 @@ import numpy as np
 
 from tactile_exp import evaluate
 from tactile_exp.combine import COMBINERS
-from tactile_exp.config import ConfigError, Settings
+from tactile_exp.config import ConfigError, Settings, param_error
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
@@ -96,12 +96,15 @@ def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
 def open_data(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
     """Open the data and check ``combine`` and every split, cheaply (before a run is created)."""
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
-    modality = MODALITIES.build(
-        settings.modality.name,
-        dataset=dataset,
-        cache_dir=settings.cache_dir / "preprocessed",
-        **settings.modality.params,
-    )
+    try:
+        modality = MODALITIES.build(
+            settings.modality.name,
+            dataset=dataset,
+            cache_dir=settings.cache_dir / "preprocessed",
+            **settings.modality.params,
+        )
+    except (TypeError, ValueError) as err:
+        raise param_error("modality", settings.modality.params, err) from err
     limit, unit = modality.max_combine()
     if settings.combine > limit:
         raise ConfigError(

@@ -26,6 +26,14 @@ class Haptic(Modality):
         fit_on: str = "train",
     ) -> None:
         super().__init__(dataset, cache_dir)
+        from tactile_exp.preprocess.haptic import N_ELECTRODES, check_settings
+
+        check_settings(steps, offsets, pac_downsample)  # before any run, not in prepare()
+        if not isinstance(pca_components, int) or not 1 <= pca_components <= N_ELECTRODES:
+            raise ValueError(
+                f"pca_components must be an integer in 1..{N_ELECTRODES} (electrodes per "
+                f"BioTac), got {pca_components!r}"
+            )
         if fit_on not in ("train", "all"):
             raise ValueError(f"modality.fit_on must be 'train' or 'all', got {fit_on!r}")
         self.settings = dict(steps=steps, offsets=offsets, pac_downsample=pac_downsample)
