@@ -125,7 +125,7 @@ class ObjectCVLinearSVM:
             self.C_ = self.Cs[len(self.Cs) // 2]
             if len(self.Cs) > 1:
                 warnings.warn(
-                    f"no leave-{self.p_out}-objects-out draw gives both classes; C={self.C_:g}",
+                    f"no draw of held-out objects gives both classes; middle C={self.C_:g}",
                     UserWarning,
                     2,
                 )
