@@ -66,7 +66,7 @@ def validate_sgd_args(
             isinstance(batch_size, int) and batch_size >= 1,
             f"batch_size must be an int >= 1, got {batch_size!r}",
         ),
-        (_finite(lr) and lr > 0, f"lr must be a finite number > 0, got {lr!r}"),
+        (_finite(lr) and lr > 0, f"lr must be > 0 and finite, got {lr!r}"),
         (_finite(momentum) and 0 <= momentum < 1, f"momentum must be in [0, 1), got {momentum!r}"),
         (loss in known_losses, f"loss must be one of {losses}, got {loss!r}"),
         (
