@@ -146,3 +146,37 @@ def test_killed_job_reuses_its_finished_adjectives(tiny_config, mlflow_uri, monk
     )
     assert rerun["hard"].data.tags["reused_from"] == done[0].info.run_id
     assert "reused_from" not in rerun["soft"].data.tags
+
+
+@pytest.mark.slow  # three tiny jobs, one of them preparing photographs
+def test_multimodal_rows_train_only_the_classification_layer(tiny_config, mlflow_uri):
+    small = ["modality.visual.size=32", "modality.visual.batch_size=128"]  # 5a at 1x1: fast
+    row_m = run(
+        settings_from_config(tiny_config(["experiment=table1_m_multimodal_i_l", *small], ONE))
+    )
+    part = _children(mlflow_uri, row_m.run_id, "part")["hard"]  # no ConvNet yet: trained here
+    child = _children(mlflow_uri, row_m.run_id)["hard"]
+    assert child.info.status == part.info.status == "FINISHED"
+    assert child.data.tags["part.haptic"] == part.info.run_id
+    assert child.data.metrics["n_objects_without_photographs"] == 0
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    trained, _ = store.load_model(tracker, part.info.run_id, "model").state()
+    used, _ = store.load_model(tracker, child.info.run_id, "parts/haptic").state()
+    assert trained.keys() == used.keys()
+    for name, tensor in trained.items():
+        torch.testing.assert_close(used[name], tensor, rtol=0, atol=0)
+    layer = store.load_model(tracker, child.info.run_id, "model")
+    # one trial's 10 conv3 maps (128 x 19 each) beside 8 views of 832 inception (5a) features
+    assert layer.input_shape_ == (10 * 128 * 19 + 8 * 832,)
+    assert (layer.loss, layer.pretrain_loss) == ("hinge", None)
+    assert "finetune_loss" not in child.data.metrics
+
+    row_i = run(settings_from_config(tiny_config([], ONE)))
+    assert _children(mlflow_uri, row_i.run_id)["hard"].data.tags["reused_from"] == part.info.run_id
+    overrides = ["experiment=table1_n_multimodal_j_l", "modality.trials=2", *small]
+    row_n = run(settings_from_config(tiny_config(overrides, ONE)))
+    child_n = _children(mlflow_uri, row_n.run_id)["hard"]
+    assert child_n.data.tags["reused_from.haptic"] == part.info.run_id
+    assert not _children(mlflow_uri, row_n.run_id, "part")
+    layer_n = store.load_model(tracker, child_n.info.run_id, "model")
+    assert layer_n.input_shape_ == (2 * 10 * 128 * 19 + 8 * 832,)
