@@ -51,16 +51,11 @@ class Haptic(Modality):
 
     def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """P1's normaliser and P4's PCA as fitted for the last split, with the P2-P6 settings."""
-        pre = self.fitted_
         settings = dict(
             modality="haptic", **self.settings, pca_components=self.pca_components,
             per_finger=self.per_finger, fit_on=self.fit_on,
         )  # fmt: skip
-        arrays = dict(
-            mean=pre.mean_, scale=pre.scale_, components=pre.components_,
-            pca_mean=pre.pca_mean_, weight=pre._weight, bias=pre._bias,
-        )  # fmt: skip
-        return settings, arrays
+        return settings, self.fitted_.state()
 
     def _instances(self, pre, trials: Sequence[str], split: Split) -> Instances:
         X = pre.transform(trials)  # (n, fingers, offsets, 32, steps)
