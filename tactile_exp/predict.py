@@ -341,7 +341,12 @@ def _apply(
     else:  # a model that learns nothing before its head (visual_googlenet, linear)
         model = MODELS.build(model_name, **model_params)
     if combine_units.keeps_instances:
-        names = [f"{t}#{i % 10}" for i, t in enumerate(instances.trial)]
+        names = [str(t) for t in instances.trial]
+        if len(set(names)) < len(names):  # a trial's instances (fingers x offsets): <trial>#<k>
+            counts: dict[str, int] = {}
+            for i, t in enumerate(names):
+                counts[t] = counts.get(t, -1) + 1
+                names[i] = f"{t}#{counts[t]}"
         return model.decision_function(instances.X), names
     units = combine_units(model.transform(instances.X), instances, combine)
     head = store.load_model(tracker, child, "head")

@@ -103,3 +103,25 @@ def test_photographs_missing_or_not_images(tmp_path):
     (tmp_path / "view.jpg").write_text("not an image")
     with pytest.raises(PredictError, match="view.jpg"):
         read_photographs(tmp_path, 32)
+
+
+@pytest.mark.slow  # prepares photographs and runs the GoogLeNet trunk
+def test_predict_from_photographs_equals_the_logged_scores(tiny_config, mlflow_uri, tmp_path):
+    small = ["data.views=2", "modality.size=32", "modality.batch_size=64"]
+    overrides = ["experiment=table1_k_image_googlenet_1view", *small]
+    settings = settings_from_config(tiny_config(overrides, "[hard]"))
+    result = run(settings)
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+    logged = _logged(mlflow_uri, result.run_id)["hard"]
+    stem = sorted(logged)[0].rsplit("_v", 1)[0]  # a test object's photographs
+    obj = next(t.object_id for t in dataset.trials if t.stem == stem)
+    folder = tmp_path / stem
+    folder.mkdir()
+    for path in dataset.photographs()[obj]:
+        shutil.copy(path, folder / path.name)
+    got = predict(run_id=result.run_id, tracking_uri=mlflow_uri, photos=folder)
+    assert got.units == [f"{stem}_v00", f"{stem}_v01"]
+    for unit, score in zip(got.units, got.scores[:, 0], strict=True):
+        assert score == pytest.approx(logged[unit], abs=1e-5)
+    with pytest.raises(PredictError, match="visual models"):
+        predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=dataset.path, trials=[stem])
