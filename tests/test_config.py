@@ -70,7 +70,16 @@ def test_every_option_composes_and_builds(compose_config, group, option, tmp_pat
 
 def test_experiments_read_like_table1(compose_config):
     rows = {p.stem.split("_")[1] for p in (CONF / "experiment").glob("table1_*.yaml")}
-    assert rows == set("abcdefghijklo")  # m, n (multimodal) are not built yet
+    assert rows == set("abcdefghijklmno")
+    m = settings_from_config(compose_config(["experiment=table1_m_multimodal_i_l"]))
+    n = settings_from_config(compose_config(["experiment=table1_n_multimodal_j_l"]))
+    for row, trials in ((m, 1), (n, 10)):
+        assert (row.modality.name, row.model.name, row.combiner) == (
+            "multimodal",
+            "linear",
+            "separate",
+        )
+        assert row.modality.params["trials"] == trials and row.model.params["pretrain_loss"] is None
     j = settings_from_config(compose_config(["experiment=table1_j_haptic_cnn_10trials"]))
     assert (j.model.name, j.combiner, j.combine) == ("haptic_cnn", "concat", 10)
     a = settings_from_config(compose_config(["experiment=table1_a_haptic_static_1trial"]))

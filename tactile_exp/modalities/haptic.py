@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
@@ -51,7 +54,16 @@ class Haptic(Modality):
 
         pre = HapticPreprocessor(self.arrays, self.pca_components, self.per_finger)
         pre.fit(split.train if self.fit_on == "train" else self.arrays.trials)
+        self.fitted_ = pre
         return self._instances(pre, split.train, split), self._instances(pre, split.test, split)
+
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """P1's normaliser and P4's PCA as fitted for the last split, with the P2-P6 settings."""
+        settings = dict(
+            modality="haptic", **self.settings, pca_components=self.pca_components,
+            per_finger=self.per_finger, fit_on=self.fit_on,
+        )  # fmt: skip
+        return settings, self.fitted_.state()
 
     def _instances(self, pre, trials: Sequence[str], split: Split) -> Instances:
         X = pre.transform(trials)  # (n, fingers, offsets, 32, steps)
