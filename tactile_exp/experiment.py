@@ -9,7 +9,7 @@ from __future__ import annotations
 import io
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +25,7 @@ from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
 from tactile_exp.tracking import Tracker, flatten
+from tactile_exp.validation import take_trials, validation_split
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +40,7 @@ class AdjectiveResult:
     objects: np.ndarray
     sizes: dict[str, float]
     history: History = field(default_factory=dict)
+    diagnostics: dict[str, float] = field(default_factory=dict)  # train_auc, val_auc
 
 
 @dataclass
@@ -61,18 +63,44 @@ def classify(
 
     Returns the test scores, the test units they belong to, and the training curves.
     """
+    scored, history = train_and_score(
+        model_factory, combiner, combine, train, {"test": test}, on_epoch
+    )
+    scores, units = scored["test"]
+    return scores, units, history
+
+
+def train_and_score(
+    model_factory: Callable[[], Model],
+    combiner: str,
+    combine: int,
+    train: Instances,
+    sets: Mapping[str, Instances],
+    on_epoch: EpochCallback | None = None,
+) -> tuple[dict[str, tuple[np.ndarray, Instances]], History]:
+    """Train on ``train``, then score each of ``sets`` (e.g. test, validation, train itself).
+
+    Returns, per set, the scores and the units they belong to, and the training curves.
+    """
     model = model_factory()
     combine_units = COMBINERS.build(combiner)
     if combine_units.keeps_instances:
         history = model.fit(train, on_epoch)
-        return model.decision_function(test.X), test, history
+        return {k: (model.decision_function(s.X), s) for k, s in sets.items()}, history
     history = model.fit(train, on_epoch) if model.learns_representation else {}
     train_units = combine_units(model.transform(train.X), train, combine)
-    test_units = combine_units(model.transform(test.X), test, combine)
     head = model.head()
     head_history = head.fit(train_units)
     history.update({f"head_{k}": v for k, v in head_history.items()})
-    return head.decision_function(test_units.X), test_units, history
+    scored = {}
+    for name, instances in sets.items():
+        units = (
+            train_units
+            if instances is train
+            else combine_units(model.transform(instances.X), instances, combine)
+        )
+        scored[name] = (head.decision_function(units.X), units)
+    return scored, history
 
 
 def _epoch_logger(adjective: str) -> EpochCallback:
@@ -145,7 +173,8 @@ def run(settings: Settings) -> JobResult:
         aucs = {a: r.auc for a, r in results.items()}
         mean = evaluate.mean_auc(aucs)
         tracker.log_metrics(
-            parent_id, {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}}
+            parent_id,
+            {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}, **_means(results)},
         )
         _log_summary(tracker, parent_id, settings, dataset, results)
         log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)
@@ -159,28 +188,40 @@ def _run_adjective(
     tags = {"config_hash": settings.config_hash, "run_level": "child", "adjective": adjective}
     with tracker.run(f"adj={adjective}", {"adjective": adjective}, tags, parent_id) as run_id:
         start = time.perf_counter()
-        train, test = modality.instances(split)
-        scores, units, history = classify(
+        fit_split, val_trials = validation_split(
+            split, fraction=settings.validation_fraction, seed=settings.seed
+        )
+        train, rest = modality.instances(
+            Split(adjective, fit_split.train, split.test + val_trials, split.labels)
+        )
+        val, test = take_trials(rest, val_trials)
+        sets = {"test": test, "train": train, **({"val": val} if len(val) else {})}
+        scored, history = train_and_score(
             lambda: MODELS.build(settings.model.name, **settings.model.params),
             settings.combiner,
             settings.combine,
             train,
-            test,
+            sets,
             _epoch_logger(adjective),
         )
+        scores, units = scored["test"]
         auc = evaluate.auc(units.y, scores)
+        diagnostics = _diagnostics(scored)
         sizes = {
             "n_train_instances": len(train),
             "n_test_instances": len(test),
-            "n_train_trials": len(split.train),
+            "n_train_trials": len(fit_split.train),
             "n_test_trials": len(split.test),
-            "n_train_objects": len(split.objects("train")),
+            "n_train_objects": len(fit_split.objects("train")),
             "n_test_objects": len(split.objects("test")),
             "n_test_units": len(units),
             "n_test_positive_units": int(units.y.sum()),
+            "n_val_objects": len(np.unique(val.object_id)),
+            "n_val_positive_objects": len(np.unique(val.object_id[val.y == 1])),
             "seconds": time.perf_counter() - start,
         }
-        tracker.log_metrics(run_id, {"auc": auc, **sizes})
+        tracker.log_metrics(run_id, {"auc": auc, **sizes, **diagnostics})
+        log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in diagnostics.items()))
         tracker.log_curves(run_id, history)
         table = io.StringIO()
         np.savetxt(
@@ -193,8 +234,29 @@ def _run_adjective(
         )
         tracker.log_text(run_id, table.getvalue(), "scores.csv")
     return AdjectiveResult(
-        adjective, auc, units.y, scores, units.trial, units.object_id, sizes, history
+        adjective, auc, units.y, scores, units.trial, units.object_id, sizes, history, diagnostics
     )
+
+
+def _means(results: Mapping[str, AdjectiveResult]) -> dict[str, float]:
+    """mean_train_auc and mean_val_auc over the adjectives that have them (val: both classes)."""
+    out = {}
+    for name in ("train_auc", "val_auc"):
+        values = [r.diagnostics[name] for r in results.values() if name in r.diagnostics]
+        if values:
+            out[f"mean_{name}"] = float(np.mean(values))
+            out[f"n_{name}"] = len(values)
+    return out
+
+
+def _diagnostics(scored: Mapping[str, tuple[np.ndarray, Instances]]) -> dict[str, float]:
+    """Training AUC, and the held-out training objects' AUC when they hold both classes."""
+    out = {}
+    for name in ("train", "val"):
+        if name in scored and len(np.unique(scored[name][1].y)) == 2:
+            scores, units = scored[name]
+            out[f"{name}_auc"] = evaluate.auc(units.y, scores)
+    return out
 
 
 def _log_config(tracker: Tracker, run_id: str, settings: Settings) -> None:
