@@ -51,25 +51,6 @@ class JobResult:
     skipped: bool = False
 
 
-def classify(
-    model_factory: Callable[[], Model],
-    combiner: str,
-    combine: int,
-    train: Instances,
-    test: Instances,
-    on_epoch: EpochCallback | None = None,
-) -> tuple[np.ndarray, Instances, History]:
-    """Train on ``train`` and score ``test``, combining instances into units first if asked.
-
-    Returns the test scores, the test units they belong to, and the training curves.
-    """
-    scored, history = train_and_score(
-        model_factory, combiner, combine, train, {"test": test}, on_epoch
-    )
-    scores, units = scored["test"]
-    return scores, units, history
-
-
 def train_and_score(
     model_factory: Callable[[], Model],
     combiner: str,
