@@ -62,6 +62,9 @@ class Settings:
     run_name: str
     sweep_id: str = ""
     output_dir: Path | None = None  # Hydra's job folder (holds .hydra/)
+    validation_fraction: float = (
+        0.0  # training objects held out for val_auc (tactile_exp.validation)
+    )
 
 
 def config_hash(resolved: dict[str, Any]) -> str:
@@ -155,6 +158,10 @@ def settings_from_config(
     _check_missing(resolved)
     _check_data(resolved["data"])
 
+    fraction = (resolved.get("validation") or {}).get("fraction", 0.0)
+    if isinstance(fraction, bool) or not isinstance(fraction, int | float) or not 0 <= fraction < 1:
+        raise ConfigError(f"validation.fraction: must be a number in [0, 1), got {fraction!r}")
+
     tracking = resolved["tracking"]
     experiment = choices.get("experiment")
     model = choices["model"]
@@ -185,6 +192,7 @@ def settings_from_config(
         run_name=run_name,
         sweep_id=sweep_id,
         output_dir=output_dir,
+        validation_fraction=float(fraction),
     )
     check_components(settings)
     return settings

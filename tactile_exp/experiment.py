@@ -10,7 +10,7 @@ import functools
 import io
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,6 +28,7 @@ from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
 from tactile_exp.tracking import Tracker, flatten
+from tactile_exp.validation import take_trials, validation_split
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +43,7 @@ class AdjectiveResult:
     objects: np.ndarray
     sizes: dict[str, float]
     history: History = field(default_factory=dict)
+    diagnostics: dict[str, float] = field(default_factory=dict)  # train_auc, val_auc
 
 
 @dataclass
@@ -62,21 +64,29 @@ def fit_model(
 
 
 def score(
-    model: Model, combiner: str, combine: int, train: Instances, test: Instances
-) -> tuple[np.ndarray, Instances, Model | None, History]:
-    """Score ``test`` with a fitted ``model``, or with a head retrained on combined units (T4).
+    model: Model, combiner: str, combine: int, train: Instances, sets: Mapping[str, Instances]
+) -> tuple[dict[str, tuple[np.ndarray, Instances]], Model | None, History]:
+    """Score each of ``sets`` (test, validation, the training set itself) with a fitted ``model``,
+    or with a head retrained once on combined training units (T4).
 
-    Returns the test scores, the units they belong to, the head (None when the model scores
-    instances itself) and the head's training curves.
+    Returns, per set, the scores and the units they belong to; the head (None when the model
+    scores instances itself) and the head's training curves.
     """
     combine_units = COMBINERS.build(combiner)
     if combine_units.keeps_instances:
-        return model.decision_function(test.X), test, None, {}
+        return {k: (model.decision_function(s.X), s) for k, s in sets.items()}, None, {}
     train_units = combine_units(model.transform(train.X), train, combine)
-    test_units = combine_units(model.transform(test.X), test, combine)
     head = model.head()
     head_history = {f"head_{k}": v for k, v in head.fit(train_units).items()}
-    return head.decision_function(test_units.X), test_units, head, head_history
+    scored = {}
+    for name, instances in sets.items():
+        units = (
+            train_units
+            if instances is train
+            else combine_units(model.transform(instances.X), instances, combine)
+        )
+        scored[name] = (head.decision_function(units.X), units)
+    return scored, head, head_history
 
 
 def classify(
@@ -93,9 +103,9 @@ def classify(
     """
     model = model_factory()
     history = fit_model(model, combiner, train, on_epoch) or {}
-    scores, units, _, head_history = score(model, combiner, combine, train, test)
+    scored, _, head_history = score(model, combiner, combine, train, {"test": test})
     history.update(head_history)
-    return scores, units, history
+    return *scored["test"], history
 
 
 def _epoch_logger(adjective: str) -> EpochCallback:
@@ -179,7 +189,8 @@ def run(settings: Settings) -> JobResult:
         aucs = {a: r.auc for a, r in results.items()}
         mean = evaluate.mean_auc(aucs)
         tracker.log_metrics(
-            parent_id, {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}}
+            parent_id,
+            {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}, **_means(results)},
         )
         _log_summary(tracker, parent_id, settings, dataset, results)
         log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)
@@ -197,6 +208,7 @@ def _run_adjective(
         modality=settings.modality,
         model=settings.model,
         split=settings.split,
+        validation=settings.validation_fraction,
         seed=settings.seed,
         adjective=adjective,
     )
@@ -210,7 +222,15 @@ def _run_adjective(
         start = time.perf_counter()
         parts: dict[str, tuple[str, Model]] = {}
         modality.use_parts(_part_provider(settings, tracker, parent_id, run_id, modality, parts))
-        train, test = modality.instances(split)
+        # Held-out training objects score the model without touching the test objects (issue 13).
+        fit_split, val_trials = validation_split(
+            split, fraction=settings.validation_fraction, seed=settings.seed
+        )
+        train, rest = modality.instances(
+            Split(adjective, fit_split.train, split.test + val_trials, split.labels)
+        )
+        val, test = take_trials(rest, val_trials)
+        sets = {"test": test, "train": train, **({"val": val} if len(val) else {})}
         source = store.find_trained(tracker, key) if reuse and trains else None
         if source is not None:
             log.info("  %s: reusing the model trained in run %s", adjective, source)
@@ -221,11 +241,11 @@ def _run_adjective(
             history: History = {}
         else:
             history = fit_model(model, settings.combiner, train, _epoch_logger(adjective)) or {}
-        scores, units, head, head_history = score(
-            model, settings.combiner, settings.combine, train, test
-        )
+        scored, head, head_history = score(model, settings.combiner, settings.combine, train, sets)
         history.update(head_history)
+        scores, units = scored["test"]
         auc = evaluate.auc(units.y, scores)
+        diagnostics = _diagnostics(scored)
         sizes = {
             "n_train_instances": len(train),
             "n_test_instances": len(test),
@@ -235,9 +255,12 @@ def _run_adjective(
             "n_test_objects": len(split.objects("test")),
             "n_test_units": len(units),
             "n_test_positive_units": int(units.y.sum()),
+            "n_val_objects": len(np.unique(val.object_id)),
+            "n_val_positive_objects": len(np.unique(val.object_id[val.y == 1])),
             "seconds": time.perf_counter() - start,
         }
-        tracker.log_metrics(run_id, {"auc": auc, **sizes, **modality.metrics()})
+        tracker.log_metrics(run_id, {"auc": auc, **sizes, **diagnostics, **modality.metrics()})
+        log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in diagnostics.items()))
         tracker.log_curves(run_id, history)
         table = io.StringIO()
         np.savetxt(
@@ -251,7 +274,7 @@ def _run_adjective(
         tracker.log_text(run_id, table.getvalue(), "scores.csv")
         _keep_models(settings, tracker, run_id, modality, model if trains else None, head, parts)
     return AdjectiveResult(
-        adjective, auc, units.y, scores, units.trial, units.object_id, sizes, history
+        adjective, auc, units.y, scores, units.trial, units.object_id, sizes, history, diagnostics
     )
 
 
@@ -278,6 +301,7 @@ def _part_provider(
             modality=part_modality,
             model=part_model,
             split=settings.split,
+            validation=settings.validation_fraction,
             seed=settings.seed,
             adjective=split.adjective,
         )
@@ -339,6 +363,27 @@ def _keep_models(
         store.log_folder(
             tracker, run_id, "preprocess", lambda f: store.write_state(f, state, arrays)
         )
+
+
+def _means(results: Mapping[str, AdjectiveResult]) -> dict[str, float]:
+    """mean_train_auc and mean_val_auc over the adjectives that have them (val: both classes)."""
+    out = {}
+    for name in ("train_auc", "val_auc"):
+        values = [r.diagnostics[name] for r in results.values() if name in r.diagnostics]
+        if values:
+            out[f"mean_{name}"] = float(np.mean(values))
+            out[f"n_{name}"] = len(values)
+    return out
+
+
+def _diagnostics(scored: Mapping[str, tuple[np.ndarray, Instances]]) -> dict[str, float]:
+    """Training AUC, and the held-out training objects' AUC when they hold both classes."""
+    out = {}
+    for name in ("train", "val"):
+        if name in scored and len(np.unique(scored[name][1].y)) == 2:
+            scores, units = scored[name]
+            out[f"{name}_auc"] = evaluate.auc(units.y, scores)
+    return out
 
 
 def _log_config(tracker: Tracker, run_id: str, settings: Settings) -> None:

@@ -45,16 +45,21 @@ def training_key(
     modality: Component,
     model: Component,
     split: str,
+    validation: float,
     seed: int,
     adjective: str,
 ) -> str:
-    """Hash of what determines one adjective's trained model (not combine/combine_instances)."""
+    """Hash of what determines one adjective's trained model (not combine/combine_instances).
+
+    ``validation`` is the fraction of training objects held out for the validation score: they
+    are left out of training, so it changes the model."""
     keyed = {
         "format": FORMAT,
         "dataset": dataset,
         "modality": [modality.name, _without(modality.params, MODALITY_UNKEYED)],
         "model": [model.name, _without(model.params, MODEL_UNKEYED)],
         "split": split,
+        "validation": validation,
         "seed": seed,
         "adjective": adjective,
     }

@@ -14,7 +14,7 @@ from mlflow.tracking import MlflowClient
 from sklearn.metrics import roc_auc_score
 
 from tactile_exp.config import ConfigError, settings_from_config
-from tactile_exp.experiment import run
+from tactile_exp.experiment import load, run
 from tactile_exp.models import MODELS
 
 
@@ -216,3 +216,28 @@ def test_sigterm_marks_the_runs_failed(cache_dir, mlflow_uri):
     assert (parent.info.status, child.info.status) == ("FAILED", "FAILED")
     assert "signal 15" in parent.data.tags["error"]
     assert client.get_run(child.info.run_id).info.end_time is not None
+
+
+def test_children_log_train_and_validation_auc_without_test_objects(tiny_config, mlflow_uri):
+    """Issue 13: every child logs train_auc and, when its held-out training objects hold both
+    classes, val_auc; those objects are left out of training and are never test objects."""
+    settings = settings_from_config(tiny_config(["seed=5"], adjectives="[hard,smooth]"))
+    assert settings.validation_fraction == 0.15
+    result = run(settings)
+    splits = load(settings)[2]
+    client, runs = _runs(mlflow_uri, settings.config_hash)
+    children = {r.data.tags["adjective"]: r for r in runs if r.data.tags["run_level"] == "child"}
+    for adjective, child in children.items():
+        metrics = child.data.metrics
+        assert 0 <= metrics["train_auc"] <= 1 and 0 <= metrics["val_auc"] <= 1
+        assert metrics["n_val_objects"] >= 2 and metrics["n_val_positive_objects"] >= 1
+        res = result.results[adjective]
+        assert res.diagnostics == {k: metrics[k] for k in ("train_auc", "val_auc")}
+        split = splits[adjective]
+        assert set(res.objects) <= split.objects("test")  # test AUC: test objects only
+        n_train = metrics["n_train_objects"] + metrics["n_val_objects"]
+        assert n_train == len(split.objects("train"))  # held out of the final training
+    parent = next(r for r in runs if r.data.tags["run_level"] == "parent")
+    assert parent.data.metrics["mean_val_auc"] == pytest.approx(
+        np.mean([c.data.metrics["val_auc"] for c in children.values()])
+    )
