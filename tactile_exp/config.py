@@ -59,6 +59,7 @@ class Settings:
     choices: dict[str, str]  # config-group choices, e.g. {"model": "haptic_cnn", ...}
     resolved: dict[str, Any]  # the whole resolved config, logged as params
     config_hash: str
+    row_hash: str  # config_hash with the seed blanked: what the report groups by
     run_name: str
     sweep_id: str = ""
     output_dir: Path | None = None  # Hydra's job folder (holds .hydra/)
@@ -93,6 +94,11 @@ def settings_from_config(
     """Resolve ``cfg`` and validate every value a job depends on."""
     ours = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])  # hydra.* is Hydra's
     resolved: dict[str, Any] = OmegaConf.to_container(ours, resolve=True)  # type: ignore[assignment]
+    # A Table I row is its config up to the seed (and every value interpolating it): runs that
+    # differ only in seed, or with split=random in the split it draws, repeat one row.
+    unseeded = OmegaConf.masked_copy(ours, list(ours))
+    unseeded.seed = None
+    row_config: dict[str, Any] = OmegaConf.to_container(unseeded, resolve=True)  # type: ignore[assignment]
     choices = dict(choices or {})
     for group in ("data", "modality", "model", "combine_instances", "split"):
         choices.setdefault(group, str(resolved[group]["name"]))
@@ -150,6 +156,7 @@ def settings_from_config(
         choices=choices,
         resolved=resolved,
         config_hash=config_hash(resolved),
+        row_hash=config_hash(row_config),
         run_name=run_name,
         sweep_id=sweep_id,
         output_dir=output_dir,
