@@ -28,7 +28,9 @@ def main(cfg: DictConfig) -> float:
     hc = HydraConfig.get()
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
     sweep_id = Path(hc.sweep.dir).name if hc.mode == RunMode.MULTIRUN else ""
-    settings = settings_from_config(cfg, choices, sweep_id, Path(hc.runtime.output_dir))
+    settings = settings_from_config(
+        cfg, choices, sweep_id, Path(hc.runtime.output_dir), tuple(hc.overrides.task)
+    )
     return run(settings).mean_auc
 
 

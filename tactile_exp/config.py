@@ -63,6 +63,7 @@ class Settings:
     run_name: str
     sweep_id: str = ""
     output_dir: Path | None = None  # Hydra's job folder (holds .hydra/)
+    overrides: tuple[str, ...] = ()  # the job's command-line overrides (Hydra's task overrides)
 
 
 def config_hash(resolved: dict[str, Any]) -> str:
@@ -90,6 +91,7 @@ def settings_from_config(
     choices: dict[str, str] | None = None,
     sweep_id: str = "",
     output_dir: Path | None = None,
+    overrides: tuple[str, ...] = (),
 ) -> Settings:
     """Resolve ``cfg`` and validate every value a job depends on."""
     ours = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])  # hydra.* is Hydra's
@@ -160,6 +162,7 @@ def settings_from_config(
         run_name=run_name,
         sweep_id=sweep_id,
         output_dir=output_dir,
+        overrides=overrides,
     )
     check_components(settings)
     return settings

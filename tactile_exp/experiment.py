@@ -124,6 +124,7 @@ def run(settings: Settings) -> JobResult:
         "row_hash": settings.row_hash,
         "run_level": "parent",
         "sweep_id": settings.sweep_id,
+        "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
     }
     with tracker.run(settings.run_name, params, tags) as parent_id:
         log.info("MLflow run %s (%s) in %s", settings.run_name, parent_id, tracker.uri)

@@ -220,5 +220,8 @@ class Tracker:
     def log_figure(self, run_id: str, figure: Any, path: str) -> None:
         self.client.log_figure(run_id, figure, path)
 
+    def log_file(self, run_id: str, file: Path, path: str) -> None:
+        self.client.log_artifact(run_id, str(file), path)
+
     def log_dir(self, run_id: str, folder: Path, path: str) -> None:
         self.client.log_artifacts(run_id, str(folder), path)
