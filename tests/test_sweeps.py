@@ -48,7 +48,7 @@ def test_smoke_grid_is_every_row_on_tiny_data():
             "config", overrides=["sweep=smoke", "experiment=table1_j_haptic_cnn_10trials"]
         )
     assert cfg.schedule.epochs == 2 and cfg.tracking.experiment == "tactile_exp_smoke"
-    assert cfg.combine == 10 and cfg.data.trials == 10  # every row runs as its file says
+    assert cfg.combine == cfg.data.trials == 2  # row J combines all of an object's trials
 
 
 @pytest.mark.slow
@@ -56,7 +56,7 @@ def test_smoke_sweep_and_report(cache_dir, mlflow_uri, tmp_path):
     args = [f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}"]
     args += [f"hydra.sweep.dir={tmp_path}/multirun"]
     subprocess.run(
-        [sys.executable, "-m", "tactile_exp", "-m", "sweep=smoke", *args], check=True, timeout=1200
+        [sys.executable, "-m", "tactile_exp", "-m", "sweep=smoke", *args], check=True, timeout=900
     )
     out = tmp_path / "report"
     report.main(["--tracking-uri", mlflow_uri, "--experiment", "tactile_exp_smoke"] + [
