@@ -36,7 +36,9 @@ def main(cfg: DictConfig) -> float:
     sweep_id = Path(hc.sweep.dir).name if hc.mode == RunMode.MULTIRUN else ""
     try:
         with reported():
-            settings = settings_from_config(cfg, choices, sweep_id, Path(hc.runtime.output_dir))
+            settings = settings_from_config(
+                cfg, choices, sweep_id, Path(hc.runtime.output_dir), tuple(hc.overrides.task)
+            )
             return run(settings).mean_auc
     except Terminated:
         if hc.mode != RunMode.MULTIRUN:

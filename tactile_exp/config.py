@@ -59,12 +59,14 @@ class Settings:
     choices: dict[str, str]  # config-group choices, e.g. {"model": "haptic_cnn", ...}
     resolved: dict[str, Any]  # the whole resolved config, logged as params
     config_hash: str
+    row_hash: str  # config_hash with the seed blanked: what the report groups by
     run_name: str
     sweep_id: str = ""
     output_dir: Path | None = None  # Hydra's job folder (holds .hydra/)
     validation_fraction: float = (
         0.0  # training objects held out for val_auc (tactile_exp.validation)
     )
+    overrides: tuple[str, ...] = ()  # the job's command-line overrides (Hydra's task overrides)
 
 
 def config_hash(resolved: dict[str, Any]) -> str:
@@ -122,10 +124,16 @@ def settings_from_config(
     choices: dict[str, str] | None = None,
     sweep_id: str = "",
     output_dir: Path | None = None,
+    overrides: tuple[str, ...] = (),
 ) -> Settings:
     """Resolve ``cfg`` and validate every value a job depends on."""
     ours = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])  # hydra.* is Hydra's
     resolved: dict[str, Any] = OmegaConf.to_container(ours, resolve=True)  # type: ignore[assignment]
+    # A Table I row is its config up to the seed (and every value interpolating it): runs that
+    # differ only in seed, or with split=random in the split it draws, repeat one row.
+    unseeded = OmegaConf.masked_copy(ours, list(ours))
+    unseeded.seed = None
+    row_config: dict[str, Any] = OmegaConf.to_container(unseeded, resolve=True)  # type: ignore[assignment]
     choices = dict(choices or {})
     for group in ("data", "modality", "model", "combine_instances", "split"):
         choices.setdefault(group, str(resolved[group]["name"]))
@@ -189,10 +197,12 @@ def settings_from_config(
         choices=choices,
         resolved=resolved,
         config_hash=config_hash(resolved),
+        row_hash=config_hash(row_config),
         run_name=run_name,
         sweep_id=sweep_id,
         output_dir=output_dir,
         validation_fraction=float(fraction),
+        overrides=overrides,
     )
     check_components(settings)
     return settings

@@ -165,13 +165,22 @@ def run(settings: Settings) -> JobResult:
     params.update({f"choice.{k}": v for k, v in settings.choices.items()})
     tags = {
         "config_hash": settings.config_hash,
+        "row_hash": settings.row_hash,
         "run_level": "parent",
         "sweep_id": settings.sweep_id,
+        "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
     }
     with tracker.run(settings.run_name, params, tags) as parent_id:
         log.info("MLflow run %s (%s) in %s", settings.run_name, parent_id, tracker.uri)
         _log_config(tracker, parent_id, settings)
         modality.prepare()
+        tracker.set_tags(parent_id, {"data.identity": dataset.identity()})
+        tracker.log_dataset(
+            parent_id,
+            name=dataset.path.stem,
+            digest=dataset.digest(),
+            source=dataset.path.resolve().as_uri(),
+        )
         results: dict[str, AdjectiveResult] = {}
         for i, adjective in enumerate(settings.adjectives, start=1):
             log.info("[%d/%d] %s", i, len(settings.adjectives), adjective)

@@ -4,13 +4,20 @@ Uses ``MlflowClient`` explicitly (no global active run) so every run is terminat
 FINISHED on success, FAILED (with the error as a tag) on any exception. Jobs are idempotent: a
 job whose ``config_hash`` already has a FINISHED parent run is skipped, so re-running a crashed
 sweep's command resumes it.
+
+What ``mlflow ui`` needs to show these runs as training runs: the experiment is tagged as
+traditional ML (``mlflow.experimentKind``; without it the UI opens on its GenAI traces page),
+every run carries source tags (entry point, git commit of the checkout), and a job's parent run
+lists its data file as a dataset input (name + digest = the file identity).
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import socket
+import subprocess
 import time
 import urllib.error
 import urllib.request
@@ -25,6 +32,8 @@ log = logging.getLogger(__name__)
 
 MAX_PARAM_LENGTH = 6000  # MLflow's limit on a param value
 MAX_BATCH = 1000  # MLflow's limit on metrics per log_batch call
+# The UI's switch between its traditional-ML run views and its GenAI (traces) views.
+EXPERIMENT_TAGS = {"mlflow.experimentKind": "custom_model_development"}
 
 
 def project_root() -> Path:
@@ -40,6 +49,34 @@ def resolve_uri(uri: str | None) -> str:
     if os.environ.get("MLFLOW_TRACKING_URI"):
         return os.environ["MLFLOW_TRACKING_URI"]
     return f"sqlite:///{project_root() / 'mlflow.db'}"
+
+
+@functools.cache
+def git_commit(root: Path) -> str | None:
+    """The commit of the source checkout at ``root``, once per process; None outside one (an
+    installed wheel, no git) rather than the commit of whatever repository the cwd is in."""
+    if not (root / "pyproject.toml").exists():
+        return None
+    try:
+        out = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    commit = out.stdout.strip()
+    return commit if out.returncode == 0 and commit else None
+
+
+def source_tags(entry_point: str) -> dict[str, str]:
+    """The run tags that make the UI's Source column say which code produced a run."""
+    tags = {"mlflow.source.name": entry_point, "mlflow.source.type": "LOCAL"}
+    commit = git_commit(Path(__file__).resolve().parents[1])
+    if commit is not None:
+        tags["mlflow.source.git.commit"] = commit
+    return tags
 
 
 def _artifact_root(uri: str) -> str | None:
@@ -104,27 +141,52 @@ def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
     return out
 
 
+class ExperimentNotFound(LookupError):
+    """Reading an experiment that the tracking store does not hold."""
+
+
 class Tracker:
     """Thin wrapper over ``MlflowClient`` with the run tree this project uses."""
 
-    def __init__(self, uri: str | None, experiment: str) -> None:
+    def __init__(
+        self,
+        uri: str | None,
+        experiment: str,
+        *,
+        entry_point: str = "python -m tactile_exp",
+        create: bool = True,
+    ) -> None:
         from mlflow.tracking import MlflowClient
 
         self.uri = resolve_uri(uri)
         if self.uri.startswith(("http://", "https://")):
             check_server(self.uri)
         self.client = MlflowClient(tracking_uri=self.uri)
-        self.experiment_id = self._experiment(experiment)
+        self.source_tags = source_tags(entry_point)
+        if create:
+            self.experiment_id = self._experiment(experiment)
+            return
+        found = self.client.get_experiment_by_name(experiment)
+        if found is None:
+            names = sorted(e.name for e in self.client.search_experiments())
+            raise ExperimentNotFound(
+                f"no MLflow experiment {experiment!r} in {self.uri}; "
+                f"experiments there: {', '.join(names) or 'none'}"
+            )
+        self.experiment_id = found.experiment_id
 
     def _experiment(self, name: str) -> str:
         # Parallel jobs on one sqlite file race on creation: retry, then read what won.
         for attempt in range(5):
             found = self.client.get_experiment_by_name(name)
             if found is not None:
+                for key, value in EXPERIMENT_TAGS.items():  # made before the tag existed
+                    if key not in found.tags:
+                        self.client.set_experiment_tag(found.experiment_id, key, value)
                 return found.experiment_id
             try:
                 return self.client.create_experiment(
-                    name, artifact_location=_artifact_root(self.uri)
+                    name, artifact_location=_artifact_root(self.uri), tags=EXPERIMENT_TAGS
                 )
             except Exception:
                 if attempt == 4:
@@ -181,7 +243,7 @@ class Tracker:
         """A run that ends FINISHED, or FAILED with the error recorded, whatever happens inside."""
         from mlflow.entities import Param, RunTag
 
-        all_tags = {"mlflow.runName": name, **process_tags(), **tags}
+        all_tags = {"mlflow.runName": name, **process_tags(), **self.source_tags, **tags}
         if parent_id is not None:
             all_tags["mlflow.parentRunId"] = parent_id
         run = self.client.create_run(self.experiment_id, run_name=name, tags=all_tags)
@@ -198,6 +260,18 @@ class Tracker:
             self.client.set_terminated(run_id, status=status)
             raise
         self.client.set_terminated(run_id, status="FINISHED")
+
+    def set_tags(self, run_id: str, tags: Mapping[str, str]) -> None:
+        from mlflow.entities import RunTag
+
+        self.client.log_batch(run_id, tags=[RunTag(k, v) for k, v in tags.items()])
+
+    def log_dataset(self, run_id: str, *, name: str, digest: str, source: str) -> None:
+        """A data file as the run's dataset input: the UI's Dataset column (name + digest)."""
+        from mlflow.entities import Dataset, DatasetInput
+
+        dataset = Dataset(name=name, digest=digest, source_type="local", source=source)
+        self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)])
 
     def log_metrics(self, run_id: str, values: Mapping[str, float], step: int = 0) -> None:
         self.log_curves(run_id, {k: [v] for k, v in values.items()}, start=step)
@@ -220,6 +294,9 @@ class Tracker:
 
     def log_figure(self, run_id: str, figure: Any, path: str) -> None:
         self.client.log_figure(run_id, figure, path)
+
+    def log_file(self, run_id: str, file: Path, path: str) -> None:
+        self.client.log_artifact(run_id, str(file), path)
 
     def log_dir(self, run_id: str, folder: Path, path: str) -> None:
         self.client.log_artifacts(run_id, str(folder), path)

@@ -118,9 +118,14 @@ class PHAC2:
 
     def identity(self) -> str:
         """Short key that changes whenever the file does (for caches of derived data)."""
+        return f"{self.path.stem}-{self.digest()}"
+
+    def digest(self) -> str:
+        """The file's path, size and modification time, hashed: the part of ``identity`` that
+        tells two files of one name apart (MLflow's dataset digest)."""
         st = self.path.stat()
         raw = f"{self.path.resolve()}|{st.st_size}|{st.st_mtime_ns}"
-        return f"{self.path.stem}-{hashlib.sha1(raw.encode()).hexdigest()[:12]}"
+        return hashlib.sha1(raw.encode()).hexdigest()[:12]
 
     # ---------------------------------------------------------------- labels
     def labels(self) -> dict[int, dict[str, int]]:
