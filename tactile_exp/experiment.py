@@ -56,9 +56,12 @@ def classify(
     train: Instances,
     test: Instances,
     on_epoch: EpochCallback | None = None,
+    *,
+    pad: bool = True,
 ) -> tuple[np.ndarray, Instances, History]:
     """Train on ``train`` and score ``test``, combining instances into units first if asked.
 
+    ``pad``: whether an object's last short group of instances is padded (``unit_members``).
     Returns the test scores, the test units they belong to, and the training curves.
     """
     model = model_factory()
@@ -67,8 +70,8 @@ def classify(
         history = model.fit(train, on_epoch)
         return model.decision_function(test.X), test, history
     history = model.fit(train, on_epoch) if model.learns_representation else {}
-    train_units = combine_units(model.transform(train.X), train, combine)
-    test_units = combine_units(model.transform(test.X), test, combine)
+    train_units = combine_units(model.transform(train.X), train, combine, pad=pad)
+    test_units = combine_units(model.transform(test.X), test, combine, pad=pad)
     head = model.head()
     head_history = head.fit(train_units)
     history.update({f"head_{k}": v for k, v in head_history.items()})
@@ -167,6 +170,7 @@ def _run_adjective(
             train,
             test,
             _epoch_logger(adjective),
+            pad=modality.pad_units,
         )
         auc = evaluate.auc(units.y, scores)
         sizes = {
