@@ -66,6 +66,16 @@ class LinearModel(SGDModel):
         self.mean_ = flat.mean(axis=0).astype(np.float32) if standardize else None
         self.scale_ = np.where(std > 0, std, 1.0).astype(np.float32) if standardize else None
 
+    def _state_arrays(self) -> dict[str, np.ndarray]:
+        return {"mean": self.mean_, "scale": self.scale_} if self.standardize else {}
+
+    def _set_state_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        if not self.standardize:
+            self.mean_ = self.scale_ = None
+            return
+        self.mean_ = np.asarray(arrays["mean"], dtype=np.float32)
+        self.scale_ = np.asarray(arrays["scale"], dtype=np.float32)
+
     def _preprocess(self, X: np.ndarray) -> np.ndarray:
         flat = X.reshape(len(X), -1)
         return (flat - self.mean_) / self.scale_ if self.standardize else flat
