@@ -43,8 +43,9 @@ def unit_members(instances: Instances, combine: int, *, pad: bool = True) -> lis
 
     Instances keep their order within a trial. A last group with fewer trials is, with ``pad``,
     filled by repeating its own trials in order, so concatenated units always have the same
-    width; without ``pad`` it is dropped (an object with fewer than ``combine`` trials then has
-    no unit, and a warning names it).
+    width; without ``pad`` it is dropped (10 views at ``combine=8``: one unit, views 0-7), except
+    for an object with fewer than ``combine`` trials in all (e.g. one whose views a split shares
+    between train and test), which keeps one unit padded that way, and a warning names it.
     """
     if combine < 1:
         raise ValueError(f"combine must be >= 1, got {combine}")
@@ -52,15 +53,16 @@ def unit_members(instances: Instances, combine: int, *, pad: bool = True) -> lis
     too_few = []
     for obj in np.unique(instances.object_id):
         trials = np.unique(instances.trial[instances.object_id == obj])
-        if not pad and len(trials) < combine:
+        short = len(trials) < combine
+        if not pad and short:
             too_few.append(int(obj))
-        stop = len(trials) if pad else len(trials) - combine + 1
+        stop = len(trials) if pad or short else len(trials) - combine + 1
         for start in range(0, stop, combine):
             available = trials[start : start + combine]
             chunk = [available[i % len(available)] for i in range(combine)]
             units.append(np.concatenate([np.flatnonzero(instances.trial == t) for t in chunk]))
     if too_few:
-        log.warning("combine=%d: objects %s have fewer and are left out", combine, too_few)
+        log.warning("combine=%d: objects %s have fewer, one padded unit each", combine, too_few)
     return units
 
 
