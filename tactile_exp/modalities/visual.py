@@ -31,8 +31,9 @@ class Visual(Modality):
     object. Objects without photographs are left out (a warning gives their count).
 
     Units of views are never padded (``pad_units``): row L's unit is an object's first 8 views
-    (by file name); further views (PHAC-2 has objects with 10) form no second unit, and an object
-    with fewer than ``combine`` views has no unit (a warning names it).
+    (by file name); further views (PHAC-2 has objects with 10) form no second unit. An object with
+    fewer than ``combine`` views on one side of a split keeps one unit padded with its own views
+    (a warning names it).
     """
 
     pad_units = False
