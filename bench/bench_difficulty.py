@@ -28,7 +28,7 @@ from sklearn.preprocessing import StandardScaler
 from tactile_exp.data.layout import ADJECTIVES, BASELINE_STATE, EPS, TrialName, objects
 from tactile_exp.data.phac2 import default_cache_dir
 from tactile_exp.data.synthetic import SyntheticSpec, default_file
-from tactile_exp.preprocess.visual import crop_box, find_plate
+from tactile_exp.preprocess.visual import crop_box, crop_plate, find_plate
 
 TOUCH_ONLY = ("absorbent", "squishy", "springy", "compressible")
 SIGHT_MOSTLY = ("thick", "thin")
@@ -70,8 +70,8 @@ def image_features(path: Path) -> np.ndarray:
     """
     img = cv2.imread(str(path))
     plate = find_plate(cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
-    x0, y0, x1, y1 = crop_box(img.shape, plate)
-    crop = img[y0:y1, x0:x1]
+    x0 = crop_box(img.shape, plate)[0]
+    crop = crop_plate(img, plate)  # padded at the image border, as V1
     f = crop.astype(np.float32)
     side = np.concatenate([f[:, :3], f[:, -3:]], axis=1).mean(axis=1)  # (rows, 3)
     differs = np.abs(f - side[:, None]).sum(axis=2) > 60

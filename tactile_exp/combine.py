@@ -4,17 +4,22 @@ An instance is what a model classifies on its own: one finger x one sub-sampled 
 for the haptic signals (10 per trial), one trial for hand-designed features. ``combine=k`` groups
 the instances of ``k`` trials of one object (on one side of a split) into one unit; ``concat``
 joins their features as the paper does, ``mean`` averages them. ``separate`` keeps every instance
-as its own unit (rows G, H).
+as its own unit (rows G, H). A modality whose objects may hold fewer instances than ``combine``
+chooses what happens to the remainder (``Modality.pad_units``): haptic trials pad it by repeating
+the object's own trials, views (row L) drop it, so an object's unit holds its first 8 views.
 """
 
 from __future__ import annotations
 
+import logging
 from abc import ABC, abstractmethod
 
 import numpy as np
 
 from tactile_exp.data.layout import Instances
 from tactile_exp.registry import Registry
+
+log = logging.getLogger(__name__)
 
 
 class Combiner(ABC):
@@ -25,27 +30,39 @@ class Combiner(ABC):
     keeps_instances: bool = False
 
     @abstractmethod
-    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances: ...
+    def __call__(
+        self, features: np.ndarray, instances: Instances, combine: int, *, pad: bool = True
+    ) -> Instances: ...
 
 
 COMBINERS: Registry[Combiner] = Registry("combine_instances", Combiner)
 
 
-def unit_members(instances: Instances, combine: int) -> list[np.ndarray]:
+def unit_members(instances: Instances, combine: int, *, pad: bool = True) -> list[np.ndarray]:
     """Row indices of each unit: ``combine`` consecutive trials (by name) of one object.
 
-    Instances keep their order within a trial. A last group with fewer trials is filled by
-    repeating its own trials in order, so concatenated units always have the same width.
+    Instances keep their order within a trial. A last group with fewer trials is, with ``pad``,
+    filled by repeating its own trials in order, so concatenated units always have the same
+    width; without ``pad`` it is dropped (10 views at ``combine=8``: one unit, views 0-7), except
+    for an object with fewer than ``combine`` trials in all (e.g. one whose views a split shares
+    between train and test), which keeps one unit padded that way, and a warning names it.
     """
     if combine < 1:
         raise ValueError(f"combine must be >= 1, got {combine}")
     units: list[np.ndarray] = []
+    too_few = []
     for obj in np.unique(instances.object_id):
         trials = np.unique(instances.trial[instances.object_id == obj])
-        for start in range(0, len(trials), combine):
+        short = len(trials) < combine
+        if not pad and short:
+            too_few.append(int(obj))
+        stop = len(trials) if pad or short else len(trials) - combine + 1
+        for start in range(0, stop, combine):
             available = trials[start : start + combine]
             chunk = [available[i % len(available)] for i in range(combine)]
             units.append(np.concatenate([np.flatnonzero(instances.trial == t) for t in chunk]))
+    if too_few:
+        log.warning("combine=%d: objects %s have fewer, one padded unit each", combine, too_few)
     return units
 
 
@@ -59,8 +76,10 @@ def _units(instances: Instances, members: list[np.ndarray], X: np.ndarray) -> In
 
 @COMBINERS.register("concat")
 class Concat(Combiner):
-    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances:
-        members = unit_members(instances, combine)
+    def __call__(
+        self, features: np.ndarray, instances: Instances, combine: int, *, pad: bool = True
+    ) -> Instances:
+        members = unit_members(instances, combine, pad=pad)
         widths = {len(m) for m in members}
         if len(widths) != 1:
             raise ValueError(f"units have different numbers of instances {sorted(widths)}")
@@ -70,8 +89,10 @@ class Concat(Combiner):
 
 @COMBINERS.register("mean")
 class Mean(Combiner):
-    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances:
-        members = unit_members(instances, combine)
+    def __call__(
+        self, features: np.ndarray, instances: Instances, combine: int, *, pad: bool = True
+    ) -> Instances:
+        members = unit_members(instances, combine, pad=pad)
         X = np.stack([features[m].mean(axis=0) for m in members])
         return _units(instances, members, X)
 
@@ -82,5 +103,7 @@ class Separate(Combiner):
 
     keeps_instances = True
 
-    def __call__(self, features: np.ndarray, instances: Instances, combine: int) -> Instances:
+    def __call__(
+        self, features: np.ndarray, instances: Instances, combine: int, *, pad: bool = True
+    ) -> Instances:
         return Instances(features, instances.y, instances.trial, instances.object_id)

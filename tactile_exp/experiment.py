@@ -64,18 +64,25 @@ def fit_model(
 
 
 def score(
-    model: Model, combiner: str, combine: int, train: Instances, sets: Mapping[str, Instances]
+    model: Model,
+    combiner: str,
+    combine: int,
+    train: Instances,
+    sets: Mapping[str, Instances],
+    *,
+    pad: bool = True,
 ) -> tuple[dict[str, tuple[np.ndarray, Instances]], Model | None, History]:
     """Score each of ``sets`` (test, validation, the training set itself) with a fitted ``model``,
     or with a head retrained once on combined training units (T4).
 
+    ``pad``: whether an object's last short group of instances is padded (``unit_members``).
     Returns, per set, the scores and the units they belong to; the head (None when the model
     scores instances itself) and the head's training curves.
     """
     combine_units = COMBINERS.build(combiner)
     if combine_units.keeps_instances:
         return {k: (model.decision_function(s.X), s) for k, s in sets.items()}, None, {}
-    train_units = combine_units(model.transform(train.X), train, combine)
+    train_units = combine_units(model.transform(train.X), train, combine, pad=pad)
     head = model.head()
     head_history = {f"head_{k}": v for k, v in head.fit(train_units).items()}
     scored = {}
@@ -83,7 +90,7 @@ def score(
         units = (
             train_units
             if instances is train
-            else combine_units(model.transform(instances.X), instances, combine)
+            else combine_units(model.transform(instances.X), instances, combine, pad=pad)
         )
         scored[name] = (head.decision_function(units.X), units)
     return scored, head, head_history
@@ -96,14 +103,17 @@ def classify(
     train: Instances,
     test: Instances,
     on_epoch: EpochCallback | None = None,
+    *,
+    pad: bool = True,
 ) -> tuple[np.ndarray, Instances, History]:
     """Train on ``train`` and score ``test``, combining instances into units first if asked.
 
+    ``pad``: whether an object's last short group of instances is padded (``unit_members``).
     Returns the test scores, the test units they belong to, and the training curves.
     """
     model = model_factory()
     history = fit_model(model, combiner, train, on_epoch) or {}
-    scored, _, head_history = score(model, combiner, combine, train, {"test": test})
+    scored, _, head_history = score(model, combiner, combine, train, {"test": test}, pad=pad)
     history.update(head_history)
     return *scored["test"], history
 
@@ -250,7 +260,9 @@ def _run_adjective(
             history: History = {}
         else:
             history = fit_model(model, settings.combiner, train, _epoch_logger(adjective)) or {}
-        scored, head, head_history = score(model, settings.combiner, settings.combine, train, sets)
+        scored, head, head_history = score(
+            model, settings.combiner, settings.combine, train, sets, pad=modality.pad_units
+        )
         history.update(head_history)
         scores, units = scored["test"]
         auc = evaluate.auc(units.y, scores)

@@ -50,3 +50,19 @@ def test_mixed_labels_in_a_unit_are_an_error():
         COMBINERS.build("concat")(inst.X, inst, 1)
     with pytest.raises(ValueError, match="combine must be >= 1"):
         unit_members(inst, 0)
+
+
+def test_unpadded_units_hold_an_objects_first_views_and_drop_the_rest():
+    # row L: 10 views -> one unit of views 0-7 (no second unit of 8, 9 repeated); an object with
+    # only 6 views (shared between train and test) keeps one unit
+    inst = _instances({1: 10, 2: 6, 3: 8}, per_trial=1)
+    members = unit_members(inst, 8, pad=False)
+    assert len(members) == 3
+    assert [inst.object_id[m[0]] for m in members] == [1, 2, 3]
+    members = [members[0], members[2]]
+    first8 = np.unique(inst.trial[inst.object_id == 1])[:8]
+    np.testing.assert_array_equal(inst.trial[members[0]], first8)
+    assert all(len(set(inst.trial[m])) == 8 for m in members)  # no view repeated
+    assert len(unit_members(inst, 1, pad=False)) == 24  # every view its own unit
+    units = COMBINERS.build("concat")(inst.X, inst, 8, pad=False)
+    assert units.X.shape == (3, 8 * inst.X.shape[1])

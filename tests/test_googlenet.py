@@ -65,8 +65,10 @@ def test_weights_round_trip_strictly_through_a_file(images, tmp_path):
         for path in (plain, wrapped):
             other = load_weights(xavier_init(GoogLeNet(transform_input=True), seed=2), path)
             torch.testing.assert_close(other.eval()(images), expected)
-        trunk = build_trunk(plain)
-        torch.testing.assert_close(trunk.features(images), net.features(images))
+        trunk = build_trunk(plain)  # takes network_input's [-1, 1] input: no transform_input
+        assert trunk.transform_input is False
+        mapped = net._transform_input(images)
+        torch.testing.assert_close(trunk.features(mapped), net.features(images))
 
 
 def test_trunk_stops_at_inception_5a_and_is_l2_normalised(net, images):

@@ -79,8 +79,11 @@ def test_crop_geometry():
     crop = crop_plate(image, Plate(200.0, 220.0, 60.0))
     assert crop.shape == (60, 120, 3)  # height R, width 2R
     np.testing.assert_array_equal(crop, image[130:190, 140:260])  # centre R above the plate
-    clipped = crop_plate(image, Plate(30.0, 70.0, 60.0))  # near the top-left corner
-    np.testing.assert_array_equal(clipped, image[0:40, 0:90])
+    padded = crop_plate(image, Plate(30.0, 70.0, 60.0))  # near the top-left corner
+    assert padded.shape == (60, 120, 3)  # still 2R x R: padded, not clipped
+    np.testing.assert_array_equal(padded[20:, 30:], image[0:40, 0:90])  # the part inside
+    np.testing.assert_array_equal(padded[:20, 30:], np.broadcast_to(image[0, 0:90], (20, 90, 3)))
+    np.testing.assert_array_equal(padded[20:, :30], np.repeat(image[0:40, :1], 30, axis=1))
     with pytest.raises(ValueError, match="outside"):
         crop_plate(image, Plate(200.0, -100.0, 50.0))
 

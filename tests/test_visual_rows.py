@@ -129,9 +129,8 @@ def test_features_are_the_frozen_trunks_and_cached(dataset, cache_dir, monkeypat
     arrays = visual.arrays
     rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 1))[0])
             for o in train.object_id[:3]]  # fmt: skip
-    scale = 255 * np.array(googlenet.IMAGENET_STD_RGB, np.float32).reshape(1, 3, 1, 1)
-    trunk = xavier_init(GoogLeNet(transform_input=True), seed=4)
-    expected = pooled_features(trunk, arrays.prepared(np.array(rows)) / scale)
+    trunk = xavier_init(GoogLeNet(), seed=4)
+    expected = pooled_features(trunk, arrays.prepared(np.array(rows)) / googlenet.TORCHVISION_SCALE)
     index = [int(np.flatnonzero((train.object_id == o) & np.char.endswith(
         train.trial.astype(str), "_v01"))[0]) for o in train.object_id[:3]]  # fmt: skip
     np.testing.assert_allclose(train.X[index], expected, atol=1e-5)

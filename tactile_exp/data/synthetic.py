@@ -208,6 +208,7 @@ _MATERIAL_BASE: dict[str, tuple[float, ...]] = {  # in the order of _PROPS
     "glass":   (.97, .02, .80, .20, .45, .00, .00, .00, .05, .00, .00, .30, .70, .90, .05, .50),
     "metal":   (1.0, .10, 1.0, .25, .50, .00, .00, .00, .00, .00, .05, .10, .60, .85, .10, .55),
 }  # fmt: skip
+MATERIALS: tuple[str, ...] = tuple(_MATERIAL_BASE)  # draw_object_properties accepts these
 _LABEL_EFFECTS: dict[str, dict[str, float]] = {
     "absorbent": {"porosity": 0.25},
     "bumpy": {"bumpiness": 0.5, "texture_contrast": 0.15},

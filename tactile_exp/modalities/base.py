@@ -25,6 +25,10 @@ PartProvider = Callable[[str, Split, Instances], Model]
 
 
 class Modality(ABC):
+    # Capability, declared: whether combining pads an object's last short group of instances by
+    # repeating its own (True, haptic trials) or drops it (``combine.unit_members``).
+    pad_units: bool = True
+
     def __init__(self, dataset: PHAC2, cache_dir: Path) -> None:
         self.dataset = dataset
         self.cache_dir = cache_dir

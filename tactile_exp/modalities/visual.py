@@ -29,7 +29,14 @@ class Visual(Modality):
     Photographs follow their object's trials (``data.splits.split_photographs``). Instances are
     named ``<group stem>_v<VV>``: the combiner's ``combine=k`` then groups ``k`` views of one
     object. Objects without photographs are left out (a warning gives their count).
+
+    Units of views are never padded (``pad_units``): row L's unit is an object's first 8 views
+    (by file name); further views (PHAC-2 has objects with 10) form no second unit. An object with
+    fewer than ``combine`` views on one side of a split keeps one unit padded with its own views
+    (a warning names it).
     """
+
+    pad_units = False
 
     def __init__(
         self,

@@ -6,7 +6,8 @@ Two layouts of the trunk, chosen by ``modality.layout``:
   torchvision's module names and quirks, so a torchvision-layout ``state_dict`` loads with
   ``strict=True``: convolutions without bias followed by ``BatchNorm2d(eps=0.001)``, a 3x3 (not
   5x5) convolution in branch 3 (pytorch/vision#906), ``ceil_mode`` max-pools, a 2x2 ``maxpool4``
-  and ``transform_input``.
+  and ``transform_input`` (kept for torchvision's input convention, off in ``build_trunk``: V2's
+  mean subtraction happens in ``network_input``).
 - ``caffe``: ``CaffeGoogLeNet``, bvlc_googlenet's deploy.prototxt as the MINC release uses it:
   biased convolutions, no batch norm, LRN after pool1 and after conv2, a true 5x5 branch, Caffe's
   ceil-mode pooling (3x3 stride 2 pool4) and BGR 0-255 input minus Caffe's mean.
@@ -42,6 +43,8 @@ from tactile_exp.preprocess.visual import IMAGENET_MEAN_RGB
 from tactile_exp.train import caffe_xavier_
 
 INCEPTION5A_CHANNELS = 832
+# torchvision's GoogLeNet weights take input on the [-1, 1] scale: (img - mean) / 127.5
+TORCHVISION_SCALE = 127.5
 # torchvision's transform_input: ImageNet-normalised input -> the [-1, 1] scale of the weights
 IMAGENET_STD_RGB = (0.229, 0.224, 0.225)
 _IMAGENET_MEAN01 = (0.485, 0.456, 0.406)
@@ -86,8 +89,9 @@ class Inception(nn.Module):
 class GoogLeNet(nn.Module):
     """Inception v1 in torchvision's layout, without the auxiliary heads (344 state_dict keys).
 
-    Input: (n, 3, H, W) RGB normalised with the ImageNet mean and std, as torchvision expects;
-    with ``transform_input`` it is mapped to the (x / 255 - 0.5) / 0.5 scale the weights use.
+    Input: ``network_input``'s (img - mean) / 127.5, the [-1, 1] scale the weights use. With
+    ``transform_input`` it takes torchvision's convention instead (RGB normalised with the
+    ImageNet mean and std, mapped to (x / 255 - 0.5) / 0.5, whatever mean was subtracted).
     """
 
     def __init__(self, num_classes: int = 1000, transform_input: bool = False) -> None:
@@ -260,11 +264,14 @@ LAYOUT_MEAN_RGB = {"torchvision": IMAGENET_MEAN_RGB, "caffe": CAFFE_MEAN_BGR[::-
 
 
 def network_input(images: np.ndarray, mean_rgb: Sequence[float], layout: str) -> np.ndarray:
-    """(n, 3, H, W) uint8 RGB images -> the trunk's float32 input in ``layout``.
+    """(n, 3, H, W) uint8 RGB images -> the trunk's float32 input in ``layout`` (V2).
 
-    ``caffe``: BGR on the 0-255 scale minus the mean, no std division, as Caffe's data layer
-    feeds bvlc_googlenet. ``torchvision``: RGB minus the mean, divided by 255 x ImageNet's std,
-    the scale torchvision's weights expect (``transform_input`` then rescales it).
+    V2 subtracts the per-channel mean and divides by no per-channel std. ``caffe``: BGR on the
+    0-255 scale minus the mean, as Caffe's data layer feeds bvlc_googlenet. ``torchvision``: RGB
+    minus the mean, divided by ``TORCHVISION_SCALE`` (one number for all channels), the [-1, 1]
+    range torchvision's GoogLeNet weights were trained on. The trunk then skips
+    ``transform_input``, which would map any ImageNet-normalised input back to
+    ``img / 127.5 - 1`` and so undo the mean subtraction.
     """
     if images.ndim != 4 or images.shape[1] != 3:
         raise ValueError(f"expected images of shape (n, 3, H, W), got {images.shape}")
@@ -275,7 +282,7 @@ def network_input(images: np.ndarray, mean_rgb: Sequence[float], layout: str) ->
     x = images.astype(np.float32) - mean.reshape(1, 3, 1, 1)
     if layout == "caffe":
         return np.ascontiguousarray(x[:, ::-1])
-    x /= 255.0 * np.asarray(IMAGENET_STD_RGB, np.float32).reshape(1, 3, 1, 1)
+    x /= TORCHVISION_SCALE
     return x
 
 
@@ -366,17 +373,18 @@ def _load_state(
 
 def build_trunk(weights: str | Path | None, seed: int = 0, layout: str = "torchvision") -> Trunk:
     """A GoogLeNet trunk of ``layout`` in eval mode with ``weights`` (for torchvision: any class
-    count), or Caffe-Xavier random init when ``weights`` is None."""
+    count), or Caffe-Xavier random init when ``weights`` is None. It takes ``network_input``:
+    the torchvision trunk is built without ``transform_input`` (see there)."""
     _check_layout(layout)
     if weights is None:
-        model = CaffeGoogLeNet() if layout == "caffe" else GoogLeNet(transform_input=True)
+        model = CaffeGoogLeNet() if layout == "caffe" else GoogLeNet()
         return xavier_init(model, seed).eval()
     state, recorded = read_state_dict(weights)
     if layout == "caffe":
         model = CaffeGoogLeNet()
     else:
         fc = state.get("fc.weight")
-        model = GoogLeNet(num_classes=1000 if fc is None else fc.shape[0], transform_input=True)
+        model = GoogLeNet(num_classes=1000 if fc is None else fc.shape[0])
     return _load_state(model, state, recorded, weights).eval()
 
 
@@ -425,10 +433,12 @@ class VisualGoogLeNet(SGDModel):
 
     Unlike ``linear`` it does not standardise its input: the paper puts the loss directly after
     the L2 normalisation. Trained by the two-stage SGD schedule (T2, T3); ``head()`` gives the
-    ``linear`` model for concatenated views (row L).
+    ``linear`` model for concatenated views (row L), without standardisation either. Unit-norm
+    rows need a larger step than T3's (conf/model/visual_googlenet.yaml says which and why).
     """
 
     learns_representation = False  # the representation is the frozen trunk's, computed upstream
+    head_standardize = False  # row L's head: the loss directly on the concatenated unit-norm rows
     modalities = ("visual",)
 
     def _check_input(self, X: np.ndarray) -> None:

@@ -1,9 +1,11 @@
 """The linear "loss layer" (registered as ``linear``): an ``SGDModel`` with an identity body on
-standardised inputs, and what ``SGDModel.head()`` returns for combined instances (T4)."""
+(by default) standardised inputs, and what ``SGDModel.head()`` returns for combined instances
+(T4)."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from torch import nn
@@ -14,30 +16,69 @@ from tactile_exp.models.sgd import SGDModel
 
 @MODELS.register("linear")
 class LinearModel(SGDModel):
-    """A linear classifier on flattened, standardised features (the paper's loss layer).
+    """A linear classifier on flattened features (the paper's loss layer).
 
-    Inputs are standardised with the training rows' mean and std (constant columns keep std 1),
-    so one learning rate suits concatenated activations of any size and scale. With the default
-    schedule the same layer is trained with logistic loss, then fine-tuned with hinge loss.
+    With ``standardize`` (the default) inputs are standardised with the training rows' mean and
+    std (constant columns keep std 1), so one learning rate suits concatenated activations of any
+    size and scale (not in the paper). Without it the layer sees its input as it comes: the
+    visual rows' head (``VisualGoogLeNet.head_standardize``), which the paper puts directly on the
+    L2-normalised features. With the default schedule the same layer is trained with logistic
+    loss, then fine-tuned with hinge loss.
     """
 
     learns_representation = False
 
+    def __init__(
+        self,
+        *,
+        standardize: bool = True,
+        epochs: int = 200,
+        finetune_epochs: int = 100,
+        batch_size: int = 1000,
+        lr: float = 0.01,
+        momentum: float = 0.9,
+        loss: str = "hinge",
+        pretrain_loss: str | None = "logistic",
+        head_schedule: Mapping[str, Any] | None = None,
+        seed: int = 0,
+        device: str = "auto",
+    ) -> None:
+        if not isinstance(standardize, bool):
+            raise ValueError(f"standardize must be true or false, got {standardize!r}")
+        self.standardize = standardize
+        super().__init__(
+            epochs=epochs,
+            finetune_epochs=finetune_epochs,
+            batch_size=batch_size,
+            lr=lr,
+            momentum=momentum,
+            loss=loss,
+            pretrain_loss=pretrain_loss,
+            head_schedule=head_schedule,
+            seed=seed,
+            device=device,
+        )
+
     def _fit_preprocessing(self, X: np.ndarray) -> None:
         flat = X.reshape(len(X), -1).astype(np.float64)
         std = flat.std(axis=0)
-        self.mean_ = flat.mean(axis=0).astype(np.float32)
-        self.scale_ = np.where(std > 0, std, 1.0).astype(np.float32)
+        standardize = self.standardize
+        self.mean_ = flat.mean(axis=0).astype(np.float32) if standardize else None
+        self.scale_ = np.where(std > 0, std, 1.0).astype(np.float32) if standardize else None
 
     def _state_arrays(self) -> dict[str, np.ndarray]:
-        return {"mean": self.mean_, "scale": self.scale_}
+        return {"mean": self.mean_, "scale": self.scale_} if self.standardize else {}
 
     def _set_state_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        if not self.standardize:
+            self.mean_ = self.scale_ = None
+            return
         self.mean_ = np.asarray(arrays["mean"], dtype=np.float32)
         self.scale_ = np.asarray(arrays["scale"], dtype=np.float32)
 
     def _preprocess(self, X: np.ndarray) -> np.ndarray:
-        return (X.reshape(len(X), -1) - self.mean_) / self.scale_
+        flat = X.reshape(len(X), -1)
+        return (flat - self.mean_) / self.scale_ if self.standardize else flat
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         return nn.Identity(), int(np.prod(input_shape))

@@ -46,6 +46,8 @@ class SGDModel(Model):
     """A body plus a linear classification layer, trained by the two-stage SGD schedule."""
 
     storable = True
+    # Capability, declared: whether head() standardises the combined features (LinearModel)
+    head_standardize: bool = True
 
     def __init__(
         self,
@@ -249,6 +251,7 @@ class SGDModel(Model):
         """A fresh ``linear`` model with the head's schedule, for combined features (T4)."""
         return MODELS.build(
             "linear",
+            standardize=self.head_standardize,
             **self._head_settings(),
             loss=self.loss,
             pretrain_loss=self.pretrain_loss,

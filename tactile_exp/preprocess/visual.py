@@ -20,7 +20,7 @@ from tactile_exp.data.layout import TrialName
 from tactile_exp.data.phac2 import default_cache_dir, load_photograph
 from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
 
-CODE_VERSION = 1  # bump when the cached arrays' meaning changes
+CODE_VERSION = 2  # bump when the cached arrays' meaning changes (2: crops padded, not clipped)
 IMAGENET_MEAN_RGB = (123.675, 116.28, 103.53)  # per-channel mean, RGB, 0-255 scale
 _ARRAY_KEYS = ("object_id", "view", "name", "plate", "images", "missing")
 
@@ -129,21 +129,31 @@ def _fit_rim(component: np.ndarray) -> tuple[float, float, float]:
 
 
 def crop_box(shape: tuple[int, ...], plate: Plate) -> tuple[int, int, int, int]:
-    """(x0, y0, x1, y1) of the 2R x R rectangle centred R above the plate centre, clipped."""
+    """(x0, y0, x1, y1) of the 2R x R rectangle centred R above the plate centre, in image
+    coordinates; it may reach past the image border (``crop_plate`` pads there)."""
     h, w = shape[:2]
-    x0 = int(np.clip(round(plate.cx - plate.r), 0, w))
-    x1 = int(np.clip(round(plate.cx + plate.r), 0, w))
-    y0 = int(np.clip(round(plate.cy - 1.5 * plate.r), 0, h))
-    y1 = int(np.clip(round(plate.cy - 0.5 * plate.r), 0, h))
-    if x1 <= x0 or y1 <= y0:
+    x0, x1 = round(plate.cx - plate.r), round(plate.cx + plate.r)
+    y0, y1 = round(plate.cy - 1.5 * plate.r), round(plate.cy - 0.5 * plate.r)
+    if x1 <= max(x0, 0) or x0 >= min(x1, w) or y1 <= max(y0, 0) or y0 >= min(y1, h):
         raise ValueError(f"crop above {plate} lies outside the {w}x{h} image")
-    return x0, y0, x1, y1
+    return int(x0), int(y0), int(x1), int(y1)
 
 
 def crop_plate(image: np.ndarray, plate: Plate) -> np.ndarray:
-    """V1's crop: width 2R, height R, centre R above the plate centre, clipped to the image."""
-    x0, y0, x1, y1 = crop_box(_check_image(image).shape, plate)
-    return image[y0:y1, x0:x1]
+    """V1's crop: width 2R, height R, centre R above the plate centre.
+
+    Where the rectangle reaches past the image border the crop is padded by repeating the border
+    pixels, so it keeps its 2:1 aspect ratio and the object its proportions (clipping would
+    stretch the object when the crop is resized to a square).
+    """
+    image = _check_image(image)
+    h, w = image.shape[:2]
+    x0, y0, x1, y1 = crop_box(image.shape, plate)
+    inside = image[max(y0, 0) : min(y1, h), max(x0, 0) : min(x1, w)]
+    pad = (max(-y0, 0), max(y1 - h, 0), max(-x0, 0), max(x1 - w, 0))  # top, bottom, left, right
+    if not any(pad):
+        return inside
+    return cv2.copyMakeBorder(inside, *pad, borderType=cv2.BORDER_REPLICATE)
 
 
 def resize_square(image: np.ndarray, size: int = 224) -> np.ndarray:
@@ -338,7 +348,7 @@ class VisualFeatures:
             weights=file_digest(self.weights) if self.weights else f"xavier-seed{self.seed}",
             mean=mean,
             layout=self.layout,
-            version=1,
+            version=2,  # 2: torchvision input without transform_input (the mean counts)
         )
         path = self.cache_dir / f"googlenet5a-{key}.npz"
         cached = load_arrays(path, ("features",))
