@@ -86,8 +86,8 @@ def _epoch_logger(adjective: str) -> EpochCallback:
     return on_epoch
 
 
-def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
-    """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
+def _open(settings: Settings) -> tuple[PHAC2, Modality]:
+    """The data set and the modality; an impossible ``combine`` for this file raises here."""
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
     modality = MODALITIES.build(
         settings.modality.name,
@@ -101,6 +101,25 @@ def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
             f"most {limit} {unit}; allowed 1..{limit}"
         )
+    return dataset, modality
+
+
+def check_combine(settings: Settings) -> None:
+    """Raise ``ConfigError`` for a ``combine`` the file cannot give, before any run is created.
+
+    Other bad input is left to ``load``, inside the job's run, so that the run records it.
+    """
+    try:
+        _open(settings)
+    except ConfigError:
+        raise
+    except Exception:
+        return
+
+
+def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
+    """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
+    dataset, modality = _open(settings)
     splits = {a: make_split(dataset, a, settings.split, settings.seed) for a in settings.adjectives}
     modality.prepare()
     return dataset, modality, splits
@@ -116,6 +135,7 @@ def run(settings: Settings) -> JobResult:
                 "skipping %s: run %s already FINISHED with this config", settings.run_name, done
             )
             return JobResult(done, float("nan"), {}, skipped=True)
+    check_combine(settings)
 
     params = flatten(settings.resolved)
     params.update({f"choice.{k}": v for k, v in settings.choices.items()})
