@@ -1,10 +1,15 @@
 import csv
+import os
 
+import matplotlib
 import numpy as np
 import pytest
 
 from tactile_exp import report
 from tactile_exp.tracking import Tracker
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 
 
 @pytest.fixture()
@@ -49,7 +54,20 @@ def test_table1_groups_seeds_and_skips_failed_runs(tracker, tmp_path):
 
 def test_written_files(tracker, tmp_path):
     paths = report.write(report.collect(tracker), tmp_path / "out")
-    assert all(p.exists() for p in paths)
+    names = ["table1.md", "table1.csv", "per_adjective.csv", "per_adjective.png"]
+    assert [p.name for p in paths] == names
+    assert sorted(os.listdir(tmp_path / "out")) == sorted(names)
+    with open(tmp_path / "out" / "table1.csv") as f:
+        table = {r["method"]: r for r in csv.DictReader(f)}
+    assert table["table1_a_haptic_static_1trial"]["mean AUC %"] == "80.0"
+    cnn = table["haptic_cnn-concat-c10"]
+    assert (cnn["runs"], cnn["row"], cnn["std over runs"]) == ("1", "", "")
+    md = (tmp_path / "out" / "table1.md").read_text().splitlines()
+    assert len(md) == 2 + len(table)
+    assert "| A | table1_a_haptic_static_1trial | 2 | 80.0 | 10.0 | 77.3 |" in md
+    image = plt.imread(tmp_path / "out" / "per_adjective.png")
+    assert image.shape[:2] == (576, 1440)  # figsize (12, 4.5 + 0.15 x 2 methods) at 120 dpi
+    assert image[..., :3].std() > 0.05  # bars drawn, not a blank canvas
     with open(tmp_path / "out" / "per_adjective.csv") as f:
         rows = {r["method"]: r for r in csv.DictReader(f)}
     assert float(rows["table1_a_haptic_static_1trial"]["hard"]) == pytest.approx(0.7)
