@@ -98,8 +98,8 @@ class HapticLSTM(SGDModel):
                 raise ValueError(f"{name} must be an int >= 1, got {value!r}")
         if impl not in IMPLS:
             raise ValueError(f"impl must be one of {', '.join(IMPLS)}, got {impl!r}")
-        if impl == "compiled" and self.device.type != "cpu":
-            raise ValueError(f"impl='compiled' runs on CPU only; device is {self.device}")
+        if impl == "compiled" and self.device_.type != "cpu":
+            raise ValueError(f"impl='compiled' runs on CPU only; device is {self.device_}")
         self.hidden, self.fc_width = hidden, fc_width
         self.impl = impl
 
@@ -110,5 +110,5 @@ class HapticLSTM(SGDModel):
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         impl = self.impl
         if impl == "auto":
-            impl = "compiled" if self.device.type == "cpu" else "torch"
+            impl = "compiled" if self.device_.type == "cpu" else "torch"
         return LSTMBody(input_shape[0], self.hidden, self.fc_width, impl), self.fc_width
