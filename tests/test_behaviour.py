@@ -103,10 +103,10 @@ def test_auc_counts_ties_as_half_against_a_hand_computed_value():
 @pytest.mark.parametrize(
     "y,scores,message",
     [
-        ([1, 1, 1], [0.1, 0.2, 0.3], "positives and negatives"),
-        ([0, 0], [0.1, 0.2], "positives and negatives"),
-        ([0, 1, 1], [0.1, np.nan, 0.3], "NaN or infinite"),
-        ([0, 1, 1], [0.1, np.inf, 0.3], "NaN or infinite"),
+        ([1, 1, 1], [0.1, 0.2, 0.3], r"^AUC needs positives and negatives; labels present: \[1\]$"),
+        ([0, 0], [0.1, 0.2], r"^AUC needs positives and negatives; labels present: \[0\]$"),
+        ([0, 1, 1], [0.1, np.nan, 0.3], "^scores contain NaN or infinite values$"),
+        ([0, 1, 1], [0.1, np.inf, 0.3], "^scores contain NaN or infinite values$"),
     ],
 )
 def test_auc_rejects_one_class_and_non_finite_scores(y, scores, message):
