@@ -84,6 +84,36 @@ def _component(node: Any, group: str) -> Component:
     return Component(str(node["name"]), params)
 
 
+def _check_missing(node: Any, prefix: str = "") -> None:
+    """A mandatory value left at ``???`` (e.g. ``data=phac2`` without ``data.path``)."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            _check_missing(value, f"{prefix}{key}.")
+    elif node == "???":
+        key = prefix.rstrip(".")
+        raise ConfigError(f"{key}: missing; set it on the command line, e.g. {key}=...")
+
+
+def _check_data(data: Any) -> None:
+    """The real file must exist before a run is created for it."""
+    if isinstance(data, dict) and data.get("name") == "phac2":
+        path = Path(str(data.get("path"))).expanduser()
+        if not path.is_file():
+            raise ConfigError(f"data.path: {path}: no such file; expected the PHAC-2 HDF5 file")
+
+
+def param_error(group: str, params: dict[str, Any], err: Exception) -> ConfigError:
+    """A component's ValueError as ``group.key: ...`` when it names one of its parameters."""
+    message = str(err)
+    words = message.replace("=", " ").replace(":", " ").split()
+    first = words[0] if words else ""
+    if first == "device" or message.startswith("device="):
+        return ConfigError(f"device: {message}")
+    if first in params:
+        return ConfigError(f"{group}.{first}: {message}")
+    return ConfigError(f"{group}: {message}")
+
+
 def settings_from_config(
     cfg: DictConfig,
     choices: dict[str, str] | None = None,
@@ -120,8 +150,10 @@ def settings_from_config(
     if not isinstance(device, str) or not DEVICE.fullmatch(device):
         raise ConfigError(f"device: must be auto, cpu, cuda or cuda:N, got {device!r}")
     seed = resolved.get("seed")
-    if not isinstance(seed, int):
-        raise ConfigError(f"seed: must be an integer, got {seed!r}")
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2**32:
+        raise ConfigError(f"seed: must be a whole number in 0..2**32-1, got {seed!r}")
+    _check_missing(resolved)
+    _check_data(resolved["data"])
 
     tracking = resolved["tracking"]
     experiment = choices.get("experiment")
@@ -186,7 +218,14 @@ def check_components(settings: Settings) -> None:
     try:
         model = MODELS.build(settings.model.name, **settings.model.params)
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"model.params ({settings.model.name}): {err}") from err
+        raise param_error("model", settings.model.params, err) from err
+    steps = settings.modality.params.get("steps")
+    if hasattr(model, "check_steps") and isinstance(steps, int) and steps >= 1:
+        try:
+            model.check_steps(steps)
+        except ValueError as err:
+            message = f"modality.steps: {steps} with model={settings.model.name}: {err}"
+            raise ConfigError(message) from err
     if model.modalities and settings.modality.name not in model.modalities:
         raise ConfigError(
             f"modality: model={settings.model.name} takes modality "

@@ -6,22 +6,25 @@ Runs without Hydra: it takes the plain ``Settings`` built by ``tactile_exp.confi
 
 from __future__ import annotations
 
+import functools
 import io
 import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate
+from tactile_exp import evaluate, store
 from tactile_exp.combine import COMBINERS
-from tactile_exp.config import ConfigError, Settings
+from tactile_exp.config import ConfigError, Settings, param_error
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
 from tactile_exp.modalities import MODALITIES, Modality
+from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
 from tactile_exp.tracking import Tracker, flatten
@@ -49,6 +52,33 @@ class JobResult:
     skipped: bool = False
 
 
+def fit_model(
+    model: Model, combiner: str, train: Instances, on_epoch: EpochCallback | None = None
+) -> History | None:
+    """Train ``model`` when its own scores or its learned features are used; None when not."""
+    if COMBINERS.build(combiner).keeps_instances or model.learns_representation:
+        return model.fit(train, on_epoch)
+    return None
+
+
+def score(
+    model: Model, combiner: str, combine: int, train: Instances, test: Instances
+) -> tuple[np.ndarray, Instances, Model | None, History]:
+    """Score ``test`` with a fitted ``model``, or with a head retrained on combined units (T4).
+
+    Returns the test scores, the units they belong to, the head (None when the model scores
+    instances itself) and the head's training curves.
+    """
+    combine_units = COMBINERS.build(combiner)
+    if combine_units.keeps_instances:
+        return model.decision_function(test.X), test, None, {}
+    train_units = combine_units(model.transform(train.X), train, combine)
+    test_units = combine_units(model.transform(test.X), test, combine)
+    head = model.head()
+    head_history = {f"head_{k}": v for k, v in head.fit(train_units).items()}
+    return head.decision_function(test_units.X), test_units, head, head_history
+
+
 def classify(
     model_factory: Callable[[], Model],
     combiner: str,
@@ -62,17 +92,10 @@ def classify(
     Returns the test scores, the test units they belong to, and the training curves.
     """
     model = model_factory()
-    combine_units = COMBINERS.build(combiner)
-    if combine_units.keeps_instances:
-        history = model.fit(train, on_epoch)
-        return model.decision_function(test.X), test, history
-    history = model.fit(train, on_epoch) if model.learns_representation else {}
-    train_units = combine_units(model.transform(train.X), train, combine)
-    test_units = combine_units(model.transform(test.X), test, combine)
-    head = model.head()
-    head_history = head.fit(train_units)
-    history.update({f"head_{k}": v for k, v in head_history.items()})
-    return head.decision_function(test_units.X), test_units, history
+    history = fit_model(model, combiner, train, on_epoch) or {}
+    scores, units, _, head_history = score(model, combiner, combine, train, test)
+    history.update(head_history)
+    return scores, units, history
 
 
 def _epoch_logger(adjective: str) -> EpochCallback:
@@ -86,42 +109,32 @@ def _epoch_logger(adjective: str) -> EpochCallback:
     return on_epoch
 
 
-def _open(settings: Settings) -> tuple[PHAC2, Modality]:
-    """The data set and the modality; an impossible ``combine`` for this file raises here."""
+def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
+    """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
+    dataset, modality, splits = open_data(settings)
+    modality.prepare()
+    return dataset, modality, splits
+
+
+def open_data(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
+    """Open the data and check ``combine`` and every split, cheaply (before a run is created)."""
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
-    modality = MODALITIES.build(
-        settings.modality.name,
-        dataset=dataset,
-        cache_dir=settings.cache_dir / "preprocessed",
-        **settings.modality.params,
-    )
+    try:
+        modality = MODALITIES.build(
+            settings.modality.name,
+            dataset=dataset,
+            cache_dir=settings.cache_dir / "preprocessed",
+            **settings.modality.params,
+        )
+    except (TypeError, ValueError) as err:
+        raise param_error("modality", settings.modality.params, err) from err
     limit, unit = modality.max_combine()
     if settings.combine > limit:
         raise ConfigError(
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
             f"most {limit} {unit}; allowed 1..{limit}"
         )
-    return dataset, modality
-
-
-def check_combine(settings: Settings) -> None:
-    """Raise ``ConfigError`` for a ``combine`` the file cannot give, before any run is created.
-
-    Other bad input is left to ``load``, inside the job's run, so that the run records it.
-    """
-    try:
-        _open(settings)
-    except ConfigError:
-        raise
-    except Exception:
-        return
-
-
-def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
-    """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
-    dataset, modality = _open(settings)
     splits = {a: make_split(dataset, a, settings.split, settings.seed) for a in settings.adjectives}
-    modality.prepare()
     return dataset, modality, splits
 
 
@@ -135,7 +148,8 @@ def run(settings: Settings) -> JobResult:
                 "skipping %s: run %s already FINISHED with this config", settings.run_name, done
             )
             return JobResult(done, float("nan"), {}, skipped=True)
-    check_combine(settings)
+    tracker.end_stale_runs(settings.config_hash)
+    dataset, modality, splits = open_data(settings)
 
     params = flatten(settings.resolved)
     params.update({f"choice.{k}": v for k, v in settings.choices.items()})
@@ -147,7 +161,7 @@ def run(settings: Settings) -> JobResult:
     with tracker.run(settings.run_name, params, tags) as parent_id:
         log.info("MLflow run %s (%s) in %s", settings.run_name, parent_id, tracker.uri)
         _log_config(tracker, parent_id, settings)
-        dataset, modality, splits = load(settings)
+        modality.prepare()
         results: dict[str, AdjectiveResult] = {}
         for i, adjective in enumerate(settings.adjectives, start=1):
             log.info("[%d/%d] %s", i, len(settings.adjectives), adjective)
@@ -176,18 +190,41 @@ def _run_adjective(
     settings: Settings, tracker: Tracker, parent_id: str, modality: Modality, split: Split
 ) -> AdjectiveResult:
     adjective = split.adjective
+    reuse = store.reuse_enabled(settings.resolved)
+    model = MODELS.build(settings.model.name, **settings.model.params)
+    key = store.training_key(
+        dataset=modality.dataset.identity(),
+        modality=settings.modality,
+        model=settings.model,
+        split=settings.split,
+        seed=settings.seed,
+        adjective=adjective,
+    )
     tags = {"config_hash": settings.config_hash, "run_level": "child", "adjective": adjective}
+    trains = model.storable and (
+        model.learns_representation or COMBINERS.build(settings.combiner).keeps_instances
+    )
+    if trains:
+        tags["training_key"] = key
     with tracker.run(f"adj={adjective}", {"adjective": adjective}, tags, parent_id) as run_id:
         start = time.perf_counter()
+        parts: dict[str, tuple[str, Model]] = {}
+        modality.use_parts(_part_provider(settings, tracker, parent_id, run_id, modality, parts))
         train, test = modality.instances(split)
-        scores, units, history = classify(
-            lambda: MODELS.build(settings.model.name, **settings.model.params),
-            settings.combiner,
-            settings.combine,
-            train,
-            test,
-            _epoch_logger(adjective),
+        source = store.find_trained(tracker, key) if reuse and trains else None
+        if source is not None:
+            log.info("  %s: reusing the model trained in run %s", adjective, source)
+            tracker.client.set_tag(run_id, "reused_from", source)
+            model = store.load_model(
+                tracker, source, "model", overrides=_unkeyed(settings.model.params)
+            )
+            history: History = {}
+        else:
+            history = fit_model(model, settings.combiner, train, _epoch_logger(adjective)) or {}
+        scores, units, head, head_history = score(
+            model, settings.combiner, settings.combine, train, test
         )
+        history.update(head_history)
         auc = evaluate.auc(units.y, scores)
         sizes = {
             "n_train_instances": len(train),
@@ -200,7 +237,7 @@ def _run_adjective(
             "n_test_positive_units": int(units.y.sum()),
             "seconds": time.perf_counter() - start,
         }
-        tracker.log_metrics(run_id, {"auc": auc, **sizes})
+        tracker.log_metrics(run_id, {"auc": auc, **sizes, **modality.metrics()})
         tracker.log_curves(run_id, history)
         table = io.StringIO()
         np.savetxt(
@@ -212,9 +249,96 @@ def _run_adjective(
             comments="",
         )
         tracker.log_text(run_id, table.getvalue(), "scores.csv")
+        _keep_models(settings, tracker, run_id, modality, model if trains else None, head, parts)
     return AdjectiveResult(
         adjective, auc, units.y, scores, units.trial, units.object_id, sizes, history
     )
+
+
+def _unkeyed(params: dict[str, Any]) -> dict[str, Any]:
+    """The model settings a reused model takes from this job (not from where it was trained)."""
+    return {k: params[k] for k in store.MODEL_UNKEYED if k in params}
+
+
+def _part_provider(
+    settings: Settings,
+    tracker: Tracker,
+    parent_id: str,
+    run_id: str,
+    modality: Modality,
+    parts: dict[str, tuple[str, Model]],
+) -> PartProvider:
+    """A modality's trained parts (row M's ConvNet): found by training key, else trained here
+    in a run of their own (run_level=part, tagged with the key), so any later job finds them."""
+
+    def provide(part: str, split: Split, train: Instances) -> Model:
+        part_modality, part_model = modality.parts()[part]
+        key = store.training_key(
+            dataset=modality.dataset.identity(),
+            modality=part_modality,
+            model=part_model,
+            split=settings.split,
+            seed=settings.seed,
+            adjective=split.adjective,
+        )
+        name = f"{split.adjective}/{part}"
+        reuse = store.reuse_enabled(settings.resolved)
+        source = store.find_trained(tracker, key) if reuse else None
+        if source is not None:
+            log.info("  %s: reusing the model trained in run %s", name, source)
+            tracker.client.set_tag(run_id, f"reused_from.{part}", source)
+            model = store.load_model(
+                tracker, source, "model", overrides=_unkeyed(part_model.params)
+            )
+        else:
+            model = MODELS.build(part_model.name, **part_model.params)
+            tags = {
+                "config_hash": settings.config_hash,
+                "run_level": "part",
+                "adjective": split.adjective,
+                "part": part,
+                "training_key": key,
+            }
+            with tracker.run(f"adj={name}", {"adjective": split.adjective}, tags, parent_id) as rid:
+                tracker.log_curves(rid, model.fit(train, _epoch_logger(name)))
+                store.log_folder(
+                    tracker, rid, "model", lambda f: store.write_model(f, part_model.name, model)
+                )
+            source = rid
+        tracker.client.set_tag(run_id, f"part.{part}", source)
+        parts[part] = (part_model.name, model)
+        return model
+
+    return provide
+
+
+def _keep_models(
+    settings: Settings,
+    tracker: Tracker,
+    run_id: str,
+    modality: Modality,
+    model: Model | None,
+    head: Model | None,
+    parts: dict[str, tuple[str, Model]],
+) -> None:
+    """What applies this adjective's classifier to new data, as artifacts of its run: the model
+    (``model/``), the head (``head/``), the parts (``parts/<part>/``) and the fitted
+    preprocessing (``preprocess/``). The run turns FINISHED only after all are written, and
+    lookups take FINISHED runs only, so a job killed while writing leaves nothing reusable."""
+    if model is not None:
+        store.log_folder(
+            tracker, run_id, "model", lambda f: store.write_model(f, settings.model.name, model)
+        )
+    if head is not None and head.storable:
+        store.log_folder(tracker, run_id, "head", lambda f: store.write_model(f, "linear", head))
+    for part, (name, fitted) in parts.items():
+        write = functools.partial(store.write_model, name=name, model=fitted)
+        store.log_folder(tracker, run_id, f"parts/{part}", write)
+    state, arrays = modality.state()
+    if state:
+        store.log_folder(
+            tracker, run_id, "preprocess", lambda f: store.write_state(f, state, arrays)
+        )
 
 
 def _log_config(tracker: Tracker, run_id: str, settings: Settings) -> None:

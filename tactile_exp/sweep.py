@@ -5,21 +5,84 @@ Kept apart from ``tracking.py`` so that the MLflow layer imports neither Hydra n
 
 from __future__ import annotations
 
+import logging
+import os
+import signal
+import time
+from pathlib import Path
 from typing import Any
 
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
+log = logging.getLogger(__name__)
+
+WORKER_GRACE_S = 60.0  # how long a terminated sweep waits for its workers to mark runs FAILED
+
+
+def _children(pid: int) -> list[int]:
+    """Direct child processes of ``pid`` (Linux /proc; none found elsewhere)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _gone(pid: int) -> bool:
+    try:
+        waited, _ = os.waitpid(pid, os.WNOHANG)
+        if waited == pid:
+            return True
+    except ChildProcessError:
+        pass
+    return not Path(f"/proc/{pid}").exists() or _zombie(pid)
+
+
+def _zombie(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
+def terminate_workers(signum: int, frame: object) -> None:
+    """SIGTERM to a sweep's launcher: pass it on to the worker processes (each unwinds its job,
+    marks its runs FAILED and exits), wait for them, then exit. Without this the launcher died
+    alone and its joblib workers went on with parent PID 1."""
+    workers = _children(os.getpid())
+    log.warning("terminated: stopping %d worker process(es)", len(workers))
+    for pid in workers:
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except ProcessLookupError:
+            continue
+    deadline = time.monotonic() + WORKER_GRACE_S
+    while time.monotonic() < deadline and not all(_gone(pid) for pid in workers):
+        time.sleep(0.2)
+    for pid in workers:
+        if not _gone(pid):
+            os.kill(pid, signal.SIGKILL)  # its runs are ended as stale by the next run
+    raise SystemExit(128 + signum)
+
 
 class PrepareSweep(Callback):
     """Before a multirun launches parallel jobs: create the MLflow experiment, the data and the
-    shared preprocessed arrays once, so jobs neither race on the sqlite schema nor repeat work."""
+    shared preprocessed arrays once, so jobs neither race on the sqlite schema nor repeat work;
+    and make SIGTERM to the launcher stop its workers."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         from tactile_exp.config import settings_from_config
+        from tactile_exp.errors import reported
         from tactile_exp.experiment import load
         from tactile_exp.tracking import Tracker
 
-        settings = settings_from_config(config)
-        Tracker(settings.tracking.uri, settings.tracking.experiment)
-        load(settings)
+        signal.signal(signal.SIGTERM, terminate_workers)
+        with reported():
+            settings = settings_from_config(config)
+            Tracker(settings.tracking.uri, settings.tracking.experiment)
+            load(settings)

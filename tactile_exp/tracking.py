@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 import time
+import urllib.error
+import urllib.request
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -46,6 +49,49 @@ def _artifact_root(uri: str) -> str | None:
     return None
 
 
+class TrackingError(RuntimeError):
+    """The tracking store cannot be used (e.g. the server is down): reported before any work."""
+
+
+def check_server(uri: str, timeout: float = 5.0) -> None:
+    """One short request to an HTTP tracking server's ``/health`` instead of MLflow's retries."""
+    try:
+        with urllib.request.urlopen(f"{uri.rstrip('/')}/health", timeout=timeout) as response:
+            response.read()
+    except (urllib.error.URLError, OSError, ValueError) as err:
+        reason = getattr(err, "reason", err)
+        raise TrackingError(
+            f"tracking.uri: no MLflow server answers at {uri} ({reason}); start one "
+            "(`mlflow server`) or use tracking=local"
+        ) from err
+
+
+def _process_start(pid: int) -> str:
+    """The process's start time in clock ticks since boot (/proc), "" where unknown: a PID
+    reused by a later process has a different start time."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return ""
+    return stat.rsplit(")", 1)[1].split()[19]
+
+
+def _alive(pid: int, started: str) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return not started or _process_start(pid) in ("", started)
+
+
+def process_tags() -> dict[str, str]:
+    """Who runs this run: stale RUNNING runs are told apart from live ones by these."""
+    pid = os.getpid()
+    return {"host": socket.gethostname(), "pid": str(pid), "pid_start": _process_start(pid)}
+
+
 def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
     """Nested config -> {"model.params.lr": "0.01", ...} as MLflow params."""
     out: dict[str, str] = {}
@@ -65,6 +111,8 @@ class Tracker:
         from mlflow.tracking import MlflowClient
 
         self.uri = resolve_uri(uri)
+        if self.uri.startswith(("http://", "https://")):
+            check_server(self.uri)
         self.client = MlflowClient(tracking_uri=self.uri)
         self.experiment_id = self._experiment(experiment)
 
@@ -95,6 +143,33 @@ class Tracker:
         )
         return runs[0].info.run_id if runs else None
 
+    def end_stale_runs(self, config_hash: str) -> list[str]:
+        """Mark KILLED the RUNNING runs of ``config_hash`` whose process on this host is gone
+        (``kill -9``, a crash of the machine's jobs): they would otherwise stay RUNNING forever.
+        Runs of other hosts are left alone (their liveness cannot be checked from here)."""
+        from mlflow.entities import RunTag
+
+        host = socket.gethostname()
+        runs = self.client.search_runs(
+            [self.experiment_id],
+            filter_string=f"tags.config_hash = '{config_hash}' and attributes.status = 'RUNNING'",
+            max_results=1000,
+        )
+        ended = []
+        for r in runs:
+            tags = r.data.tags
+            if tags.get("host") != host or not tags.get("pid", "").isdigit():
+                continue
+            if _alive(int(tags["pid"]), tags.get("pid_start", "")):
+                continue
+            message = f"stale: process {tags['pid']} on {host} ended without closing this run"
+            self.client.log_batch(r.info.run_id, tags=[RunTag("error", message)])
+            self.client.set_terminated(r.info.run_id, status="KILLED")
+            ended.append(r.info.run_id)
+        if ended:
+            log.warning("marked %d stale RUNNING run(s) of this config KILLED", len(ended))
+        return ended
+
     @contextmanager
     def run(
         self,
@@ -106,7 +181,7 @@ class Tracker:
         """A run that ends FINISHED, or FAILED with the error recorded, whatever happens inside."""
         from mlflow.entities import Param, RunTag
 
-        all_tags = {"mlflow.runName": name, **tags}
+        all_tags = {"mlflow.runName": name, **process_tags(), **tags}
         if parent_id is not None:
             all_tags["mlflow.parentRunId"] = parent_id
         run = self.client.create_run(self.experiment_id, run_name=name, tags=all_tags)

@@ -6,6 +6,7 @@ import cycle; the two-stage schedule that uses it lives in ``models/sgd.py`` (``
 
 from __future__ import annotations
 
+import math
 import random
 from collections.abc import Callable, Collection
 
@@ -37,6 +38,10 @@ def seed_everything(seed: int) -> torch.Generator:
     return torch.Generator().manual_seed(seed)
 
 
+def _finite(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def validate_sgd_args(
     *,
     epochs: int,
@@ -61,8 +66,8 @@ def validate_sgd_args(
             isinstance(batch_size, int) and batch_size >= 1,
             f"batch_size must be an int >= 1, got {batch_size!r}",
         ),
-        (lr > 0, f"lr must be > 0, got {lr!r}"),
-        (0 <= momentum < 1, f"momentum must be in [0, 1), got {momentum!r}"),
+        (_finite(lr) and lr > 0, f"lr must be > 0 and finite, got {lr!r}"),
+        (_finite(momentum) and 0 <= momentum < 1, f"momentum must be in [0, 1), got {momentum!r}"),
         (loss in known_losses, f"loss must be one of {losses}, got {loss!r}"),
         (
             pretrain_loss is None or pretrain_loss in known_losses,

@@ -58,7 +58,7 @@ def test_fit_on_a_user_matrix_beats_chance_on_separable_data():
 def test_no_usable_draw_falls_back_with_a_warning():
     X, y, groups = _objects_data(n_objects=6)
     y = (groups == 0).astype(int)  # one positive object: a draw holding it out is one-class
-    with pytest.warns(UserWarning, match="no leave-3-objects-out draw"):
+    with pytest.warns(UserWarning, match="no draw of held-out objects gives both classes"):
         svm = ObjectCVLinearSVM(Cs=[0.1, 1.0, 10.0], n_draws=5).fit(X, y, groups)
     assert svm.C_ == 1.0 and svm.cv_scores_ is None
 

@@ -52,10 +52,11 @@ def test_option_names_equal_registry_names(group):
     + [("experiment", o) for o in _options("experiment")]
     + [("sweep", o) for o in _options("sweep")],
 )
-def test_every_option_composes_and_builds(compose_config, group, option):
+def test_every_option_composes_and_builds(compose_config, group, option, tmp_path):
     overrides = [f"{group}={option}"]
     if group == "data" and option == "phac2":
-        overrides.append("data.path=/nonexistent/phac.h5")
+        (tmp_path / "phac.h5").touch()  # only its existence is checked before a job
+        overrides.append(f"data.path={tmp_path / 'phac.h5'}")
     if group == "modality":
         overrides.append(f"model={_model_for(option)}")
     if group == "model" and MODELS[option].modalities:
@@ -124,7 +125,16 @@ def test_tracking_options(compose_config, monkeypatch):
 
 def test_experiments_read_like_table1(compose_config):
     rows = {p.stem.split("_")[1] for p in (CONF / "experiment").glob("table1_*.yaml")}
-    assert rows == set("abcdefghijklo")  # m, n (multimodal) are not built yet
+    assert rows == set("abcdefghijklmno")
+    m = settings_from_config(compose_config(["experiment=table1_m_multimodal_i_l"]))
+    n = settings_from_config(compose_config(["experiment=table1_n_multimodal_j_l"]))
+    for row, trials in ((m, 1), (n, 10)):
+        assert (row.modality.name, row.model.name, row.combiner) == (
+            "multimodal",
+            "linear",
+            "separate",
+        )
+        assert row.modality.params["trials"] == trials and row.model.params["pretrain_loss"] is None
     j = settings_from_config(compose_config(["experiment=table1_j_haptic_cnn_10trials"]))
     assert (j.model.name, j.combiner, j.combine) == ("haptic_cnn", "concat", 10)
     a = settings_from_config(compose_config(["experiment=table1_a_haptic_static_1trial"]))
@@ -155,7 +165,7 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("adjectives=[]", "adjectives: must list at least one"),
         ("adjectives=[hard,fluffy]", "adjectives: unknown ['fluffy']"),
         ("device=tpu", "device: must be auto, cpu, cuda or cuda:N"),
-        ("model.lr=0", "model.params (haptic_cnn)"),
+        ("model.lr=0", "model.lr: "),
         ("model.lr=-1", "lr"),
         ("model.epochs=0", "epochs"),
         ("schedule.head.lr=0", "head_schedule.lr must be > 0"),

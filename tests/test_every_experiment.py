@@ -12,7 +12,9 @@ EXPERIMENTS = sorted(p.stem for p in (Path(__file__).parents[1] / "conf/experime
 # Tiny data has 2 trials and 2 views per object: shrink the rows that combine more.
 SHRINK = {"table1_j_haptic_cnn_10trials": ["combine=2"], "table1_b_haptic_static_10trials": [
     "combine=2"], "table1_d_haptic_dynamic_10trials": ["combine=2"],
-    "table1_l_image_googlenet_8views": ["combine=2"]}  # fmt: skip
+    "table1_l_image_googlenet_8views": ["combine=2"],
+    "table1_m_multimodal_i_l": ["modality.visual.size=32"],
+    "table1_n_multimodal_j_l": ["modality.trials=2", "modality.visual.size=32"]}  # fmt: skip
 
 
 @pytest.mark.slow

@@ -50,7 +50,7 @@ def table1_rows(conf: Path) -> list[str]:
 
 def test_table1_sweep_is_every_table1_file_and_nothing_else():
     rows = table1_rows(CONF)
-    assert [r.split("_")[1] for r in rows] == list("abcdefghijklo")
+    assert [r.split("_")[1] for r in rows] == list("abcdefghijklmno")
     assert "quick_table1_i" not in rows
 
 

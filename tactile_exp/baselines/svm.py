@@ -1,5 +1,9 @@
 """The baselines' classifier: StandardScaler -> linear SVM, C chosen by leave-3-objects-out CV.
 
+On a small data set (3 training objects or fewer) C is chosen by leave-1-object-out, and with
+one training object (or no draw with both classes) the middle C of the grid is used, each with a
+warning.
+
 The authors (BASELINES.md §1.3) drew 100 random sets of 3 training objects, held out all their
 trials, skipped draws whose training part had one class, and scored F1. Gao et al. report AUC, so
 here C is scored by ROC AUC of the held-out decision values, pooled over the draws (a single
@@ -76,8 +80,24 @@ class ObjectCVLinearSVM:
         return make_pipeline(StandardScaler(), svc)
 
     def cv_scores(self, X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> np.ndarray | None:
-        """Pooled held-out AUC per C; ``None`` when the pooled held-out part has one class."""
-        splitter = LeavePObjectsOut(self.p_out, self.n_draws, self.seed)
+        """Pooled held-out AUC per C; ``None`` when the pooled held-out part has one class.
+
+        With ``p_out`` or fewer training objects (a small data set) it holds out one object per
+        draw instead, with a warning; with a single object there is nothing to hold out (None).
+        """
+        n_objects = len(np.unique(groups))
+        if n_objects < 2:
+            return None
+        p_out = self.p_out
+        if n_objects <= p_out:
+            p_out = 1
+            warnings.warn(
+                f"only {n_objects} training objects: C chosen by leave-1-object-out instead of "
+                f"leave-{self.p_out}-objects-out",
+                UserWarning,
+                2,
+            )
+        splitter = LeavePObjectsOut(p_out, self.n_draws, self.seed)
         draws = list(splitter.split(X, y, groups))
         if not draws:
             return None
@@ -105,7 +125,7 @@ class ObjectCVLinearSVM:
             self.C_ = self.Cs[len(self.Cs) // 2]
             if len(self.Cs) > 1:
                 warnings.warn(
-                    f"no leave-{self.p_out}-objects-out draw gives both classes; C={self.C_:g}",
+                    f"no draw of held-out objects gives both classes; middle C={self.C_:g}",
                     UserWarning,
                     2,
                 )

@@ -8,14 +8,20 @@ over the file that every adjective shares (cached on disk), before any training 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, Split, TrialName
 from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.models.base import Model
 from tactile_exp.registry import Registry
+
+# provide(part, split, training instances of the part's modality) -> the part's fitted model
+PartProvider = Callable[[str, Split, Instances], Model]
 
 
 class Modality(ABC):
@@ -35,6 +41,25 @@ class Modality(ABC):
     def instances(self, split: Split) -> tuple[Instances, Instances]:
         """Training and test instances of one adjective's split."""
 
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """Settings and arrays of what the last ``instances`` call fitted (kept with the model)."""
+        return {}, {}
+
+    def metrics(self) -> dict[str, float]:
+        """Counts of the last ``instances`` call worth logging on the adjective's run."""
+        return {}
+
+    def parts(self) -> dict[str, tuple[Component, Component]]:
+        """Trained models this modality's features come from: part -> (modality, model).
+
+        The engine finds or trains each per adjective and hands it over through ``use_parts``.
+        """
+        return {}
+
+    def use_parts(self, provide: PartProvider) -> None:
+        """Receive the engine's ``provide(part, split, train) -> fitted model``."""
+        self.provide = provide
+
 
 MODALITIES: Registry[Modality] = Registry(
     "modality",
@@ -42,6 +67,7 @@ MODALITIES: Registry[Modality] = Registry(
     modules=(
         "tactile_exp.modalities.haptic",
         "tactile_exp.modalities.haptic_features",
+        "tactile_exp.modalities.multimodal",
         "tactile_exp.modalities.visual",
     ),
 )

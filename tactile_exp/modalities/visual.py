@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -98,6 +99,14 @@ class Visual(Modality):
         )
         if self.mean == "imagenet":
             self.features.fit()  # one trunk pass shared by every adjective, before any training
+
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """V2's channel mean as fitted, and the crop and trunk settings."""
+        settings = dict(
+            modality="visual", size=self.size, mean=self.mean, layout=self.layout,
+            weights=None if self.weights is None else str(self.weights), seed=self.seed,
+        )  # fmt: skip
+        return settings, {"channel_mean": np.asarray(self.features.mean_, dtype=np.float64)}
 
     def instances(self, split: Split) -> tuple[Instances, Instances]:
         train_idx, test_idx, labels = split_photographs(split, self.arrays.object_id)

@@ -34,6 +34,8 @@ class Model(ABC):
     # takes; empty: any (it flattens rows).
     learns_representation: bool = True
     modalities: tuple[str, ...] = ()
+    # storable: ``state()``/``restore()`` keep the fitted model as tensors and arrays (store.py).
+    storable: bool = False
 
     def get_params(self) -> dict[str, Any]:
         """The constructor's keyword arguments as this model holds them."""

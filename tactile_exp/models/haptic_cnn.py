@@ -74,6 +74,11 @@ class GroupedTemporalConvNet(nn.Module):
             self.weights.append(weight)
             self.biases.append(nn.Parameter(torch.zeros(groups * width)))
             c_in, length = width, _conv_out_len(length, k, stride)
+        if length < 1:
+            raise ValueError(
+                f"kernel_sizes {list(kernel_sizes)} with strides {list(strides)} leave no time "
+                f"step of a {n_steps}-step input"
+            )
         self.out_shape = (groups * widths[-1], length)  # conv3: channels x time
         self.n_features = int(np.prod(self.out_shape))
 
@@ -153,8 +158,12 @@ class HapticCNN(SGDModel):
             strides=tuple(strides),
             impl=impl,
         )
-        GroupedTemporalConvNet(groups, 150, **self.net_args)  # validate the architecture now
+        self.check_steps(150)  # validate the architecture now (P3's 150 steps)
         self.conv3_shape_: tuple[int, int] | None = None
+
+    def check_steps(self, n_steps: int) -> None:
+        """Raise ValueError unless the conv stack leaves time steps of an ``n_steps`` input."""
+        GroupedTemporalConvNet(self.net_args["groups"], n_steps, **self.net_args)
 
     def _check_input(self, X: np.ndarray) -> None:
         groups = self.net_args["groups"]

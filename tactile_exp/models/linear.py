@@ -3,6 +3,8 @@ standardised inputs, and what ``SGDModel.head()`` returns for combined instances
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from torch import nn
 
@@ -26,6 +28,13 @@ class LinearModel(SGDModel):
         std = flat.std(axis=0)
         self.mean_ = flat.mean(axis=0).astype(np.float32)
         self.scale_ = np.where(std > 0, std, 1.0).astype(np.float32)
+
+    def _state_arrays(self) -> dict[str, np.ndarray]:
+        return {"mean": self.mean_, "scale": self.scale_}
+
+    def _set_state_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        self.mean_ = np.asarray(arrays["mean"], dtype=np.float32)
+        self.scale_ = np.asarray(arrays["scale"], dtype=np.float32)
 
     def _preprocess(self, X: np.ndarray) -> np.ndarray:
         return (X.reshape(len(X), -1) - self.mean_) / self.scale_

@@ -45,6 +45,8 @@ HEAD_KEYS = ("epochs", "finetune_epochs", "batch_size", "lr", "momentum")  # its
 class SGDModel(Model):
     """A body plus a linear classification layer, trained by the two-stage SGD schedule."""
 
+    storable = True
+
     def __init__(
         self,
         *,
@@ -199,6 +201,46 @@ class SGDModel(Model):
     def decision_function(self, X: np.ndarray) -> np.ndarray:
         scores = self.classifier_(self._features(self._tensor(X))).squeeze(1)
         return scores.double().cpu().numpy()
+
+    def _state_arrays(self) -> dict[str, np.ndarray]:
+        """Fitted input statistics kept beside the weights (none by default)."""
+        return {}
+
+    def _set_state_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Restore what ``_state_arrays`` gave."""
+
+    def state(self) -> tuple[dict[str, torch.Tensor], dict[str, np.ndarray]]:
+        """The fitted model as tensors (body, classifier) and arrays: what ``restore`` takes."""
+        if self.body_ is None or self.classifier_ is None:
+            raise RuntimeError(f"{type(self).__name__} is not fitted; nothing to save")
+        tensors = {f"body.{k}": v.detach().cpu() for k, v in self.body_.state_dict().items()}
+        tensors.update(
+            {f"classifier.{k}": v.detach().cpu() for k, v in self.classifier_.state_dict().items()}
+        )
+        return tensors, self._state_arrays()
+
+    def restore(
+        self,
+        input_shape: tuple[int, ...],
+        tensors: Mapping[str, torch.Tensor],
+        arrays: Mapping[str, np.ndarray],
+    ) -> SGDModel:
+        """Rebuild the fitted model from ``state()``'s output for rows of ``input_shape``.
+
+        Raises ValueError when a tensor is missing, unexpected or of the wrong shape."""
+        self._set_state_arrays(arrays)
+        body, width = self._build_body(tuple(input_shape))
+        classifier = nn.Linear(width, 1)
+        for prefix, module in (("body.", body), ("classifier.", classifier)):
+            part = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
+            try:
+                module.load_state_dict(part, strict=True)
+            except RuntimeError as err:
+                raise ValueError(f"{prefix.rstrip('.')} weights do not fit: {err}") from None
+        self.body_ = body.to(self.device_)
+        self.classifier_ = classifier.to(self.device_)
+        self.input_shape_ = tuple(input_shape)
+        return self
 
     def _head_settings(self) -> dict[str, Any]:
         return {key: (self.head_schedule or {}).get(key, getattr(self, key)) for key in HEAD_KEYS}

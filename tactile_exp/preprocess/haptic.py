@@ -11,7 +11,7 @@ statistics and ``transform`` one batched matrix product on the cached arrays.
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -311,6 +311,32 @@ class HapticPreprocessor:
             z_offset = self.mean_[f, el] * inv[el] + self.pca_mean_  # (4, 19)
             bias[f, :, N_SCALAR:] = -np.einsum("ekj,ej->ek", self.components_, z_offset)
         self._weight, self._bias = weight, bias
+        return self
+
+    STATE = ("mean", "scale", "components", "pca_mean", "weight", "bias")
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The fitted statistics and affine map, for ``restore`` (kept with a trained model)."""
+        return dict(
+            mean=self.mean_, scale=self.scale_, components=self.components_,
+            pca_mean=self.pca_mean_, weight=self._weight, bias=self._bias,
+        )  # fmt: skip
+
+    def restore(self, state: Mapping[str, np.ndarray]) -> HapticPreprocessor:
+        """Take ``state()``'s arrays instead of fitting; ValueError when one is missing or off."""
+        k, c = N_SCALAR + self.n_components, len(SIGNALS)
+        shapes = {"weight": (2, len(EPS), k, c), "bias": (2, len(EPS), k)}
+        for name in self.STATE:
+            if name not in state:
+                raise ValueError(f"haptic preprocessing state lacks {name!r}")
+            if name in shapes and np.shape(state[name]) != shapes[name]:
+                raise ValueError(
+                    f"haptic preprocessing {name!r} has shape {np.shape(state[name])}, "
+                    f"expected {shapes[name]} for {self.n_components} electrode PCs"
+                )
+        self.mean_, self.scale_ = state["mean"], state["scale"]
+        self.components_, self.pca_mean_ = state["components"], state["pca_mean"]
+        self._weight, self._bias = state["weight"], state["bias"]
         return self
 
     def transform(self, trials: Sequence[str | TrialName]) -> np.ndarray:

@@ -1,0 +1,28 @@
+"""One line per user error at the edges (the CLI job and the sweep callback): ``error: ...``
+and exit status 2, with no traceback unless ``HYDRA_FULL_ERROR=1``."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from tactile_exp.config import ConfigError
+from tactile_exp.data.layout import DataError
+from tactile_exp.tracking import TrackingError
+
+USER_ERRORS = (ConfigError, DataError, TrackingError)
+EXIT_USER_ERROR = 2
+
+
+@contextmanager
+def reported() -> Iterator[None]:
+    """Turn a bad value, bad file or unreachable store into one line and exit 2."""
+    try:
+        yield
+    except USER_ERRORS as err:
+        if os.environ.get("HYDRA_FULL_ERROR") == "1":
+            raise
+        print(f"error: {err}", file=sys.stderr, flush=True)
+        sys.exit(EXIT_USER_ERROR)

@@ -1,0 +1,147 @@
+"""The ``multimodal`` modality (M4, rows M and N): a haptic unit beside its object's photographs.
+
+One instance per haptic unit: the frozen haptic ConvNet's conv3 activations of ``trials`` trials
+of one object (row I's unit at 1, row J's at 10, concatenated as T4 does) followed by the
+L2-normalised inception (5a) features of the object's first ``views`` photographs (row L's unit).
+The ConvNet is the ``haptic`` part: the engine finds it by its training key (the model rows H, I
+and J train) or trains it in the job when absent, per adjective. The visual trunk is frozen and
+untrained (its features are cached on disk by weights file), so it needs no lookup. The model on
+top is only a classification layer (``experiment=table1_m_*``: ``linear``, hinge loss).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tactile_exp.combine import COMBINERS
+from tactile_exp.config import Component
+from tactile_exp.data.layout import Instances, Split
+from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.splits import split_photographs
+from tactile_exp.modalities.base import MODALITIES, Modality
+from tactile_exp.modalities.haptic import Haptic
+from tactile_exp.modalities.visual import Visual
+
+log = logging.getLogger(__name__)
+
+
+def _component(node: dict[str, Any], key: str) -> Component:
+    if not isinstance(node, dict) or "name" not in node:
+        raise ValueError(f"modality.{key}: expected a mapping with a 'name' key, got {node!r}")
+    params = {k: v for k, v in node.items() if k not in ("name", "_module_")}
+    return Component(str(node["name"]), params)
+
+
+@MODALITIES.register("multimodal")
+class Multimodal(Modality):
+    """Haptic units (``trials`` trials of an object) with their object's ``views`` photographs."""
+
+    def __init__(
+        self,
+        dataset: PHAC2,
+        cache_dir: Path,
+        *,
+        haptic: dict[str, Any],
+        visual: dict[str, Any],
+        haptic_model: dict[str, Any],
+        trials: int = 1,
+        views: int = 8,
+    ) -> None:
+        super().__init__(dataset, cache_dir)
+        if not isinstance(trials, int) or trials < 1:
+            raise ValueError(f"modality.trials must be an integer >= 1, got {trials!r}")
+        if not isinstance(views, int) or views < 1:
+            raise ValueError(f"modality.views must be an integer >= 1, got {views!r}")
+        self.haptic_part = _component(haptic, "haptic")
+        self.visual_part = _component(visual, "visual")
+        self.model_part = _component(haptic_model, "haptic_model")
+        if self.haptic_part.name != "haptic" or self.visual_part.name != "visual":
+            raise ValueError(
+                "modality.haptic and modality.visual must be the haptic and visual modalities, "
+                f"got {self.haptic_part.name!r} and {self.visual_part.name!r}"
+            )
+        self.haptic = Haptic(dataset, cache_dir, **self.haptic_part.params)
+        self.visual = Visual(dataset, cache_dir, **self.visual_part.params)
+        self.trials = trials
+        self.views = views
+
+    def parts(self) -> dict[str, tuple[Component, Component]]:
+        return {"haptic": (self.haptic_part, self.model_part)}
+
+    def max_combine(self) -> tuple[int, str]:
+        return 1, "multimodal units (set modality.trials for trials per unit)"
+
+    def prepare(self) -> None:
+        self.haptic.prepare()
+        self.visual.prepare()
+        limit, _ = self.haptic.max_combine()
+        if self.trials > limit:
+            raise ValueError(
+                f"modality.trials: {self.trials} trials per unit, but objects in "
+                f"{self.dataset.path} have at most {limit}; allowed 1..{limit}"
+            )
+        self.missing_ = set(int(o) for o in self.visual.arrays.missing)
+
+    def _visual_units(self, split: Split) -> dict[int, np.ndarray]:
+        """Each object's first ``views`` photographs' features concatenated (repeated if fewer)."""
+        arrays = self.visual.arrays
+        if self.visual.mean == "train":
+            train_idx, _, _ = split_photographs(split, arrays.object_id)
+            self.visual.features.fit(train_idx)
+        features = self.visual.features.transform(np.arange(len(arrays.object_id)))
+        units = {}
+        for obj in np.unique(arrays.object_id):
+            rows = np.flatnonzero(arrays.object_id == obj)
+            rows = rows[np.argsort(arrays.view[rows], kind="stable")][: self.views]
+            chosen = [rows[i % len(rows)] for i in range(self.views)]
+            units[int(obj)] = features[chosen].reshape(-1)
+        return units
+
+    def instances(self, split: Split) -> tuple[Instances, Instances]:
+        train, test = self.haptic.instances(split)
+        net = self.provide("haptic", split, train)
+        visual = self._visual_units(split)
+        concat = COMBINERS.build("concat")
+        out = []
+        left_out: set[int] = set()
+        for part, inst in (("train", train), ("test", test)):
+            keep = np.array([o not in self.missing_ for o in inst.object_id], dtype=bool)
+            left_out |= {int(o) for o in inst.object_id[~keep]}
+            kept = Instances(inst.X[keep], inst.y[keep], inst.trial[keep], inst.object_id[keep])
+            if len(np.unique(kept.y)) != 2:
+                raise ValueError(
+                    f"multimodal split of {split.adjective!r}: the {part} units with "
+                    f"photographs hold labels {np.unique(kept.y).tolist()}, expected positives "
+                    f"and negatives (objects without photographs: {sorted(self.missing_)})"
+                )
+            units = concat(net.transform(kept.X), kept, self.trials)
+            seen = np.stack([visual[int(o)] for o in units.object_id])
+            X = np.hstack([units.X, seen]).astype(np.float32)
+            out.append(Instances(X, units.y, units.trial, units.object_id))
+        self.left_out_ = sorted(left_out)
+        if left_out:
+            log.warning(
+                "multimodal %s: %d objects without photographs left out: %s",
+                split.adjective,
+                len(left_out),
+                self.left_out_,
+            )
+        return out[0], out[1]
+
+    def metrics(self) -> dict[str, float]:
+        return {"n_objects_without_photographs": float(len(self.left_out_))}
+
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """The haptic and visual preprocessing as fitted, keys prefixed by part."""
+        settings: dict[str, Any] = {"modality": "multimodal", "trials": self.trials}
+        settings["views"] = self.views
+        arrays: dict[str, np.ndarray] = {}
+        for name, modality in (("haptic", self.haptic), ("visual", self.visual)):
+            part_settings, part_arrays = modality.state()
+            settings[name] = part_settings
+            arrays.update({f"{name}.{k}": v for k, v in part_arrays.items()})
+        return settings, arrays

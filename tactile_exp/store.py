@@ -1,0 +1,196 @@
+"""Trained models kept as MLflow artifacts, found again by their training key, and loaded.
+
+One model is a folder: ``settings.json`` (registry name, ``get_params()``, input shape),
+``weights.pt`` (a flat ``state_dict``: ``body.*`` and ``classifier.*``) and ``arrays.npz`` (fitted
+input statistics). Preprocessing state is a folder of ``settings.json`` and ``arrays.npz``.
+Loading never runs stored code: JSON, ``torch.load(weights_only=True)``, ``np.load(allow_pickle=
+False)``; every file is checked and an error names the run id and the artifact.
+
+The training key hashes exactly what determines a learned representation (data identity, modality
+and preprocessing settings, architecture, the network's schedule, loss, split rule, seed,
+adjective), not what only the head, the evaluation or the machine uses, so rows H, I and J share
+one ConvNet per adjective.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tempfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tactile_exp.config import Component, ConfigError
+from tactile_exp.tracking import Tracker
+
+FORMAT = 1  # bump when the artifact layout changes: older artifacts then no longer match keys
+# Model settings that change neither the representation nor the instance classifier.
+MODEL_UNKEYED = ("head_schedule", "impl", "device")
+# Modality settings that change only where or how fast features are computed.
+MODALITY_UNKEYED = ("device", "batch_size")
+MODEL_FILES = ("settings.json", "weights.pt", "arrays.npz")
+STATE_FILES = ("settings.json", "arrays.npz")
+
+
+class ArtifactError(RuntimeError):
+    """A stored model is missing, unreadable or does not fit; names the run and artifact."""
+
+
+def training_key(
+    *,
+    dataset: str,
+    modality: Component,
+    model: Component,
+    split: str,
+    seed: int,
+    adjective: str,
+) -> str:
+    """Hash of what determines one adjective's trained model (not combine/combine_instances)."""
+    keyed = {
+        "format": FORMAT,
+        "dataset": dataset,
+        "modality": [modality.name, _without(modality.params, MODALITY_UNKEYED)],
+        "model": [model.name, _without(model.params, MODEL_UNKEYED)],
+        "split": split,
+        "seed": seed,
+        "adjective": adjective,
+    }
+    raw = json.dumps(keyed, sort_keys=True, default=str)
+    return hashlib.sha256(raw.encode()).hexdigest()[:20]
+
+
+def _without(params: Mapping[str, Any], dropped: tuple[str, ...]) -> dict[str, Any]:
+    return {k: v for k, v in params.items() if k not in dropped}
+
+
+def reuse_enabled(resolved: Mapping[str, Any]) -> bool:
+    """``tracking.reuse`` (default true): look up trained models before training."""
+    value = resolved.get("tracking", {}).get("reuse", True)
+    if not isinstance(value, bool):
+        raise ConfigError(f"tracking.reuse: must be true or false, got {value!r}")
+    return value
+
+
+def find_trained(tracker: Tracker, key: str) -> str | None:
+    """The run that trained the model with training key ``key`` in this experiment: the newest
+    FINISHED run with the key, or, when that run reused it, the run it names in ``reused_from``
+    (every copy holds the same weights; provenance points at the training)."""
+    runs = tracker.client.search_runs(
+        [tracker.experiment_id],
+        filter_string=f"tags.training_key = '{key}' and attributes.status = 'FINISHED'",
+        order_by=["attributes.start_time DESC"],
+        max_results=1,
+    )
+    return runs[0].data.tags.get("reused_from", runs[0].info.run_id) if runs else None
+
+
+def log_folder(tracker: Tracker, run_id: str, path: str, write: Callable[[Path], None]) -> None:
+    """``write`` fills a temporary folder, which is then logged whole as artifact ``path``."""
+    with tempfile.TemporaryDirectory(prefix="tactile_exp-artifact-") as tmp:
+        write(Path(tmp))
+        tracker.log_dir(run_id, Path(tmp), path)
+
+
+def write_model(folder: Path, name: str, model: Any) -> None:
+    """``model`` (a fitted ``SGDModel`` registered as ``name``) into ``folder``."""
+    import torch
+
+    tensors, arrays = model.state()
+    settings = {
+        "format": FORMAT,
+        "model": name,
+        "params": model.get_params(),
+        "input_shape": list(model.input_shape_),
+    }
+    (folder / "settings.json").write_text(json.dumps(settings, indent=1, default=_jsonable))
+    torch.save(tensors, folder / "weights.pt")
+    np.savez(folder / "arrays.npz", **arrays)
+
+
+def write_state(folder: Path, settings: Mapping[str, Any], arrays: Mapping[str, Any]) -> None:
+    """Fitted preprocessing: its settings as JSON and its arrays as npz."""
+    (folder / "settings.json").write_text(
+        json.dumps({"format": FORMAT, **settings}, indent=1, default=_jsonable)
+    )
+    np.savez(folder / "arrays.npz", **{k: np.asarray(v) for k, v in arrays.items()})
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, tuple | np.ndarray):
+        return list(value)
+    raise TypeError(f"cannot store {type(value).__name__} as JSON")
+
+
+def download(tracker: Tracker, run_id: str, path: str, files: tuple[str, ...]) -> Path:
+    """Artifact folder ``path`` of ``run_id`` as a local folder holding every one of ``files``."""
+    try:
+        local = Path(tracker.client.download_artifacts(run_id, path))
+    except Exception as err:
+        raise ArtifactError(f"run {run_id}: artifact {path}/ cannot be read ({err})") from None
+    missing = [f for f in files if not (local / f).is_file()]
+    if missing:
+        raise ArtifactError(f"run {run_id}: artifact {path}/ lacks {', '.join(missing)}")
+    return local
+
+
+def read_json(folder: Path, where: str) -> dict[str, Any]:
+    try:
+        settings = json.loads((folder / "settings.json").read_text())
+    except (OSError, ValueError) as err:
+        raise ArtifactError(f"{where}/settings.json is not readable JSON ({err})") from None
+    if not isinstance(settings, dict) or settings.get("format") != FORMAT:
+        raise ArtifactError(f"{where}/settings.json: expected a mapping with format {FORMAT}")
+    return settings
+
+
+def read_arrays(folder: Path, where: str) -> dict[str, np.ndarray]:
+    try:
+        with np.load(folder / "arrays.npz", allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except (OSError, ValueError) as err:
+        raise ArtifactError(f"{where}/arrays.npz is not a readable npz file ({err})") from None
+
+
+def read_model(folder: Path, where: str, overrides: Mapping[str, Any] | None = None) -> Any:
+    """The fitted model stored in ``folder`` (``where`` names it in errors: run id and path).
+
+    ``overrides``: settings that change no learned weight (``MODEL_UNKEYED``: the head's schedule,
+    the kernels, the device) taken from the caller instead of the stored ones."""
+    import torch
+
+    from tactile_exp.models.registry import MODELS
+
+    settings = read_json(folder, where)
+    try:
+        name, params = str(settings["model"]), dict(settings["params"])
+        shape = tuple(int(n) for n in settings["input_shape"])
+    except (KeyError, TypeError, ValueError) as err:
+        raise ArtifactError(f"{where}/settings.json: missing or bad entry ({err})") from None
+    params.update(overrides or {})
+    try:
+        tensors = torch.load(folder / "weights.pt", map_location="cpu", weights_only=True)
+    except Exception as err:
+        raise ArtifactError(f"{where}/weights.pt is not a readable state_dict ({err})") from None
+    if not isinstance(tensors, dict) or not all(
+        isinstance(v, torch.Tensor) for v in tensors.values()
+    ):
+        raise ArtifactError(f"{where}/weights.pt: expected a mapping of names to tensors")
+    arrays = read_arrays(folder, where)
+    try:
+        model = MODELS.build(name, **params)
+        return model.restore(shape, tensors, arrays)
+    except (KeyError, TypeError, ValueError) as err:
+        raise ArtifactError(f"{where}: the stored {name} model does not load ({err})") from None
+
+
+def load_model(
+    tracker: Tracker, run_id: str, path: str, overrides: Mapping[str, Any] | None = None
+) -> Any:
+    """The model kept as artifact ``path`` of run ``run_id`` (see ``read_model``)."""
+    folder = download(tracker, run_id, path, MODEL_FILES)
+    return read_model(folder, f"run {run_id}: artifact {path}", overrides)

@@ -1,0 +1,182 @@
+"""Trained models kept as artifacts, found again by training key, and composed (rows M, N)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from mlflow.tracking import MlflowClient
+
+from tactile_exp import store
+from tactile_exp.config import settings_from_config
+from tactile_exp.data.layout import Instances
+from tactile_exp.experiment import run
+from tactile_exp.models import MODELS
+from tactile_exp.models.haptic_cnn import HapticCNN
+from tactile_exp.tracking import Tracker
+
+ONE = "[hard]"
+REPEAT = ["tracking.skip_finished=false"]  # run a config again (the engine would skip it)
+
+
+def _instances(n: int = 40, shape: tuple[int, ...] = (64, 20), seed: int = 0) -> Instances:
+    rng = np.random.default_rng(seed)
+    y = np.arange(n) % 2
+    X = rng.normal(size=(n, *shape)).astype(np.float32) + y[:, None, None].astype(np.float32)
+    return Instances(X, y, np.array([f"t{i}" for i in range(n)], dtype=object), np.arange(n))
+
+
+@pytest.mark.parametrize(
+    ("name", "shape", "params"),
+    [
+        ("haptic_cnn", (64, 20), {"widths": (2, 2, 2), "impl": "torch"}),
+        ("linear", (7,), {}),
+    ],
+)
+def test_saved_model_loads_with_identical_scores(tmp_path, name, shape, params):
+    model = MODELS.build(name, epochs=2, finetune_epochs=2, batch_size=16, **params)
+    data = _instances(shape=shape)
+    model.fit(data)
+    store.write_model(tmp_path, name, model)
+    loaded = store.read_model(tmp_path, "here")
+    assert type(loaded) is type(model)
+    assert loaded.get_params() == json.loads(json.dumps(model.get_params()))
+    np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
+    np.testing.assert_array_equal(loaded.transform(data.X), model.transform(data.X))
+
+
+def test_corrupt_or_missing_model_files_name_the_file(tmp_path):
+    model = HapticCNN(widths=(2, 2, 2), epochs=1, finetune_epochs=0, impl="torch")
+    model.fit(_instances())
+    store.write_model(tmp_path, "haptic_cnn", model)
+    (tmp_path / "weights.pt").write_bytes(b"not a state dict")
+    with pytest.raises(store.ArtifactError, match=r"run X: artifact model/weights.pt"):
+        store.read_model(tmp_path, "run X: artifact model")
+    torch.save({"body.weights.0": torch.zeros(3)}, tmp_path / "weights.pt")
+    with pytest.raises(store.ArtifactError, match="does not load"):
+        store.read_model(tmp_path, "run X: artifact model")
+    (tmp_path / "settings.json").write_text("{")
+    with pytest.raises(store.ArtifactError, match="settings.json is not readable JSON"):
+        store.read_model(tmp_path, "run X: artifact model")
+
+
+def _children(uri: str, parent_id: str, level: str = "child") -> dict[str, object]:
+    client = MlflowClient(uri)
+    exp = client.get_experiment_by_name("tactile_exp")
+    runs = client.search_runs(
+        [exp.experiment_id],
+        f"tags.mlflow.parentRunId = '{parent_id}' and tags.run_level = '{level}'",
+    )
+    return {r.data.tags["adjective"]: r for r in runs}
+
+
+def _scores(uri: str, child) -> list[float]:
+    local = MlflowClient(uri).download_artifacts(child.info.run_id, "scores.csv")
+    with open(local) as f:
+        return [float(r["score"]) for r in csv.DictReader(io.StringIO(f.read()))]
+
+
+@pytest.mark.slow  # ten tiny jobs
+def test_training_settings_retrain_while_head_settings_reuse(tiny_config, mlflow_uri):
+    first = run(settings_from_config(tiny_config(REPEAT, ONE)))
+    trained = _children(mlflow_uri, first.run_id)["hard"]
+    assert "reused_from" not in trained.data.tags
+    key = trained.data.tags["training_key"]
+
+    again = _children(mlflow_uri, run(settings_from_config(tiny_config(REPEAT, ONE))).run_id)
+    assert again["hard"].data.tags["reused_from"] == trained.info.run_id
+    assert _scores(mlflow_uri, again["hard"]) == _scores(mlflow_uri, trained)
+
+    for head_only in (["combine=2"], ["combine_instances=mean"], ["schedule.head.lr=0.5"]):
+        job = run(settings_from_config(tiny_config(REPEAT + head_only, ONE)))
+        child = _children(mlflow_uri, job.run_id)["hard"]
+        assert child.data.tags["training_key"] == key, head_only
+        assert child.data.tags["reused_from"] == trained.info.run_id, head_only
+
+    for training in (["model.lr=0.02"], ["schedule.epochs=1"], ["seed=3"], ["split=random"]):
+        job = run(settings_from_config(tiny_config(REPEAT + training, ONE)))
+        child = _children(mlflow_uri, job.run_id)["hard"]
+        assert child.data.tags["training_key"] != key, training
+        assert "reused_from" not in child.data.tags, training
+
+    off = run(settings_from_config(tiny_config([*REPEAT, "+tracking.reuse=false"], ONE)))
+    child = _children(mlflow_uri, off.run_id)["hard"]
+    assert "reused_from" not in child.data.tags
+    assert _scores(mlflow_uri, child) == _scores(mlflow_uri, trained)  # retrained: same seed
+
+
+def test_missing_artifact_of_a_found_run_is_a_clear_error(tiny_config, mlflow_uri):
+    first = run(settings_from_config(tiny_config(REPEAT, ONE)))
+    trained = _children(mlflow_uri, first.run_id)["hard"]
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    assert store.load_model(tracker, trained.info.run_id, "model") is not None
+    # the local artifact store is a folder: remove the stored weights behind MLflow's back
+    Path(trained.info.artifact_uri.removeprefix("file://"), "model", "weights.pt").unlink()
+    with pytest.raises(store.ArtifactError, match=rf"run {trained.info.run_id}.*weights.pt"):
+        run(settings_from_config(tiny_config(REPEAT, ONE)))
+
+
+def test_killed_job_reuses_its_finished_adjectives(tiny_config, mlflow_uri, monkeypatch):
+    calls = []
+    fit = HapticCNN.fit
+
+    def dies_on_second(self, train, on_epoch=None):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt("killed")
+        return fit(self, train, on_epoch)
+
+    monkeypatch.setattr(HapticCNN, "fit", dies_on_second)
+    with pytest.raises(KeyboardInterrupt):
+        run(settings_from_config(tiny_config(REPEAT, "[hard,soft]")))
+    monkeypatch.setattr(HapticCNN, "fit", fit)
+    client = MlflowClient(mlflow_uri)
+    exp = client.get_experiment_by_name("tactile_exp")
+    done = client.search_runs(
+        [exp.experiment_id], "tags.adjective = 'hard' and attributes.status = 'FINISHED'"
+    )
+    assert len(done) == 1
+    rerun = _children(
+        mlflow_uri, run(settings_from_config(tiny_config(REPEAT, "[hard,soft]"))).run_id
+    )
+    assert rerun["hard"].data.tags["reused_from"] == done[0].info.run_id
+    assert "reused_from" not in rerun["soft"].data.tags
+
+
+@pytest.mark.slow  # three tiny jobs, one of them preparing photographs
+def test_multimodal_rows_train_only_the_classification_layer(tiny_config, mlflow_uri):
+    small = ["modality.visual.size=32", "modality.visual.batch_size=128"]  # 5a at 1x1: fast
+    row_m = run(
+        settings_from_config(tiny_config(["experiment=table1_m_multimodal_i_l", *small], ONE))
+    )
+    part = _children(mlflow_uri, row_m.run_id, "part")["hard"]  # no ConvNet yet: trained here
+    child = _children(mlflow_uri, row_m.run_id)["hard"]
+    assert child.info.status == part.info.status == "FINISHED"
+    assert child.data.tags["part.haptic"] == part.info.run_id
+    assert child.data.metrics["n_objects_without_photographs"] == 0
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    trained, _ = store.load_model(tracker, part.info.run_id, "model").state()
+    used, _ = store.load_model(tracker, child.info.run_id, "parts/haptic").state()
+    assert trained.keys() == used.keys()
+    for name, tensor in trained.items():
+        torch.testing.assert_close(used[name], tensor, rtol=0, atol=0)
+    layer = store.load_model(tracker, child.info.run_id, "model")
+    # one trial's 10 conv3 maps (128 x 19 each) beside 8 views of 832 inception (5a) features
+    assert layer.input_shape_ == (10 * 128 * 19 + 8 * 832,)
+    assert (layer.loss, layer.pretrain_loss) == ("hinge", None)
+    assert "finetune_loss" not in child.data.metrics
+
+    row_i = run(settings_from_config(tiny_config([], ONE)))
+    assert _children(mlflow_uri, row_i.run_id)["hard"].data.tags["reused_from"] == part.info.run_id
+    overrides = ["experiment=table1_n_multimodal_j_l", "modality.trials=2", *small]
+    row_n = run(settings_from_config(tiny_config(overrides, ONE)))
+    child_n = _children(mlflow_uri, row_n.run_id)["hard"]
+    assert child_n.data.tags["reused_from.haptic"] == part.info.run_id
+    assert not _children(mlflow_uri, row_n.run_id, "part")
+    layer_n = store.load_model(tracker, child_n.info.run_id, "model")
+    assert layer_n.input_shape_ == (2 * 10 * 128 * 19 + 8 * 832,)
