@@ -33,7 +33,10 @@ def numba_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tmp_path_factory.mktemp("cache")
+    """Generated data and preprocessed arrays; ``$TACTILE_EXP_TEST_CACHE`` keeps them across
+    sessions (mutation testing runs pytest once per mutant; entries are keyed by content)."""
+    kept = os.environ.get("TACTILE_EXP_TEST_CACHE")
+    return Path(kept) if kept else tmp_path_factory.mktemp("cache")
 
 
 @pytest.fixture(scope="session")

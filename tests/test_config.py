@@ -1,9 +1,14 @@
 """Every YAML composes and builds; option names are registry names; bad values fail early."""
 
 import inspect
+import re
+from fnmatch import fnmatch
 from pathlib import Path
 
 import pytest
+import yaml
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
 from tactile_exp.combine import COMBINERS
 from tactile_exp.config import ConfigError, settings_from_config
@@ -58,7 +63,10 @@ def test_every_option_composes_and_builds(compose_config, group, option, tmp_pat
         overrides.append(f"modality={MODELS[option].modalities[0]}")
     cfg = compose_config(overrides)
     settings = settings_from_config(cfg)  # builds the model through its registry
-    assert settings.choices.get(group, option) == option or group in ("experiment", "sweep")
+    if group in REGISTRIES:
+        assert cfg[group].name == option
+    if group == "experiment":
+        _assert_experiment_applied(compose_config, cfg, option)
     for component, registry in (
         (settings.data, DATA_SOURCES),
         (settings.modality, MODALITIES),
@@ -66,6 +74,53 @@ def test_every_option_composes_and_builds(compose_config, group, option, tmp_pat
         extra = {"dataset": None, "cache_dir": None} if registry is MODALITIES else {}
         inspect.signature(registry[component.name]).bind(**extra, **component.params)
     assert cfg.loss.name in LOSSES
+
+
+def _leaves(node: dict, prefix: str = "") -> dict[str, object]:
+    out: dict[str, object] = {}
+    for key, value in node.items():
+        if isinstance(value, dict):
+            out |= _leaves(value, f"{prefix}{key}.")
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def _assert_experiment_applied(compose_config, cfg, option: str) -> None:
+    """Every group the experiment file overrides, and every value it sets, is in the config."""
+    text = yaml.safe_load((CONF / "experiment" / f"{option}.yaml").read_text())
+    for entry in text.pop("defaults", []):
+        [(key, chosen)] = entry.items()
+        group = key.removeprefix("override /")
+        alone = compose_config([f"{group}={chosen}"])[group]
+        if "name" in alone:
+            assert cfg[group].name == chosen, (option, group)
+        else:
+            assert cfg[group] == alone, (option, group)
+    for key, value in _leaves(text).items():
+        assert OmegaConf.select(cfg, key) == value, (option, key)
+
+
+def test_table1_sweep_runs_every_row_and_nothing_else():
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=["sweep=table1"], return_hydra_config=True)
+    pattern = cfg.hydra.sweeper.params.experiment
+    assert pattern.startswith("glob(") and pattern.endswith(")")
+    matched = {o for o in _options("experiment") if fnmatch(o, pattern[5:-1])}
+    assert matched == {o for o in _options("experiment") if re.fullmatch(r"table1_[a-z]_.+", o)}
+    assert len(matched) == 13 and "quick_table1_i" not in matched
+
+
+def test_tracking_options(compose_config, monkeypatch):
+    assert _options("tracking") == ["local", "server"]
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    local = settings_from_config(compose_config(["tracking=local"])).tracking
+    assert local.uri is None and local.skip_finished  # resolve_uri: env, else the checkout
+    server = settings_from_config(compose_config(["tracking=server"])).tracking
+    assert server.uri == "http://127.0.0.1:5000" and server.experiment == "tactile_exp"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", "http://tracking.example:5000")
+    server = settings_from_config(compose_config(["tracking=server"])).tracking
+    assert server.uri == "http://tracking.example:5000"
 
 
 def test_experiments_read_like_table1(compose_config):

@@ -176,7 +176,9 @@ def test_baseline_rows_run_from_their_experiment_configs(tiny_config, row, extra
     result = run(settings)
     assert set(result.results) == {"hard", "soft"}
     for r in result.results.values():
-        assert 0.0 <= r.auc <= 1.0 and np.all(np.isfinite(r.scores))
+        assert np.all(np.isfinite(r.scores)) and len(r.scores) == len(r.y) == len(r.units)
+        assert r.auc == pytest.approx(roc_auc_score(r.y, r.scores), abs=1e-12)
+        assert set(r.objects) and r.sizes["n_test_objects"] == len(set(r.objects))
     pooled = settings.combine > 1
     assert all((len(set(r.objects)) == len(r.units)) == pooled for r in result.results.values())
 

@@ -105,18 +105,26 @@ def test_sgd_epochs_lowers_the_loss_and_reports_each_epoch():
 
 
 def test_sgd_epochs_batch_larger_than_data_is_one_full_batch():
-    X, y = torch.randn(7, 2), torch.ones(7)
+    """One epoch = one step on the gradient of the mean loss over all 7 rows."""
+    torch.manual_seed(0)
+    X, y = torch.randn(7, 2), torch.tensor([1.0, 0, 1, 0, 1, 1, 0])
     layer = torch.nn.Linear(2, 1)
+    w0, b0 = layer.weight.detach().clone(), layer.bias.detach().clone()
+    loss = LOSSES["logistic"]
+    before = loss(layer(X).squeeze(1), y)
+    gw, gb = torch.autograd.grad(before, [layer.weight, layer.bias])
     curve = sgd_epochs(
         lambda x: layer(x).squeeze(1),
         list(layer.parameters()),
         X,
         y,
-        loss=LOSSES["hinge"],
+        loss=loss,
         epochs=1,
         batch_size=1000,
-        lr=0.01,
+        lr=0.5,
         momentum=0.0,
         generator=seed_everything(0),
     )
-    assert len(curve) == 1 and curve[0] > 0
+    assert curve == [pytest.approx(before.item(), rel=1e-6)]
+    torch.testing.assert_close(layer.weight.detach(), w0 - 0.5 * gw)
+    torch.testing.assert_close(layer.bias.detach(), b0 - 0.5 * gb)
