@@ -223,7 +223,8 @@ def test_sigterm_marks_the_runs_failed(cache_dir, mlflow_uri):
 def test_children_log_train_and_validation_auc_without_test_objects(tiny_config, mlflow_uri):
     """Issue 13: every child logs train_auc and, when its held-out training objects hold both
     classes, val_auc; those objects are left out of training and are never test objects."""
-    settings = settings_from_config(tiny_config(["seed=5"], adjectives="[hard,smooth]"))
+    overrides = ["seed=5", "validation.fraction=0.15"]
+    settings = settings_from_config(tiny_config(overrides, adjectives="[hard,smooth]"))
     assert settings.validation_fraction == 0.15
     result = run(settings)
     splits = load(settings)[2]
