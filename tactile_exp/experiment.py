@@ -270,9 +270,9 @@ def _run_adjective(
         sizes = {
             "n_train_instances": len(train),
             "n_test_instances": len(test),
-            "n_train_trials": len(split.train),
+            "n_train_trials": len(fit_split.train),
             "n_test_trials": len(split.test),
-            "n_train_objects": len(split.objects("train")),
+            "n_train_objects": len(fit_split.objects("train")),
             "n_test_objects": len(split.objects("test")),
             "n_test_units": len(units),
             "n_test_positive_units": int(units.y.sum()),
