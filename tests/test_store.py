@@ -104,7 +104,7 @@ def test_training_settings_retrain_while_head_settings_reuse(tiny_config, mlflow
         assert child.data.tags["training_key"] != key, training
         assert "reused_from" not in child.data.tags, training
 
-    off = run(settings_from_config(tiny_config([*REPEAT, "+tracking.reuse=false"], ONE)))
+    off = run(settings_from_config(tiny_config([*REPEAT, "tracking.reuse=false"], ONE)))
     child = _children(mlflow_uri, off.run_id)["hard"]
     assert "reused_from" not in child.data.tags
     assert _scores(mlflow_uri, child) == _scores(mlflow_uri, trained)  # retrained: same seed
