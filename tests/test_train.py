@@ -128,3 +128,20 @@ def test_sgd_epochs_batch_larger_than_data_is_one_full_batch():
     assert curve == [pytest.approx(before.item(), rel=1e-6)]
     torch.testing.assert_close(layer.weight.detach(), w0 - 0.5 * gw)
     torch.testing.assert_close(layer.bias.detach(), b0 - 0.5 * gb)
+
+
+def test_a_cuda_device_turns_tf32_off(monkeypatch):
+    flags = (torch.backends.cudnn.conv, torch.backends.cudnn.rnn, torch.backends.cuda.matmul)
+    before = [f.fp32_precision for f in flags]
+    try:
+        for f in flags:
+            f.fp32_precision = "tf32"
+        monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+        resolve_device("auto")  # CPU: leaves the flags alone
+        assert [f.fp32_precision for f in flags] == ["tf32"] * 3
+        monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+        assert resolve_device("auto") == torch.device("cuda")
+        assert [f.fp32_precision for f in flags] == ["ieee"] * 3
+    finally:
+        for f, value in zip(flags, before, strict=True):
+            f.fp32_precision = value
