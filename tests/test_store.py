@@ -180,3 +180,57 @@ def test_multimodal_rows_train_only_the_classification_layer(tiny_config, mlflow
     assert not _children(mlflow_uri, row_n.run_id, "part")
     layer_n = store.load_model(tracker, child_n.info.run_id, "model")
     assert layer_n.input_shape_ == (2 * 10 * 128 * 19 + 8 * 832,)
+
+
+def _key(**change) -> str:
+    from tactile_exp.config import Component
+
+    base = {
+        "dataset": "phac2-abc",
+        "modality": Component("haptic", {"steps": 150, "device": "cpu", "batch_size": 8}),
+        "model": Component("haptic_cnn", {"lr": 0.01, "impl": "torch", "device": "cpu"}),
+        "split": "published",
+        "validation": 0.0,
+        "seed": 0,
+        "adjective": "hard",
+    }
+    return store.training_key(**(base | change))
+
+
+def test_training_key_changes_with_what_trains_the_model_and_nothing_else():
+    """Reuse is by equal key: every trained-on setting must change it, machine settings not."""
+    from tactile_exp.config import Component
+
+    key = _key()
+    assert _key() == key and len(key) == 20
+    differ = [
+        _key(dataset="phac2-abd"),
+        _key(modality=Component("haptic_features", {"steps": 150})),
+        _key(modality=Component("haptic", {"steps": 100, "device": "cpu", "batch_size": 8})),
+        _key(model=Component("linear", {"lr": 0.01, "impl": "torch", "device": "cpu"})),
+        _key(model=Component("haptic_cnn", {"lr": 0.02, "impl": "torch", "device": "cpu"})),
+        _key(split="random"),
+        _key(validation=0.15),
+        _key(seed=1),
+        _key(adjective="soft"),
+    ]
+    assert key not in differ and len(set(differ)) == len(differ)
+    same = [
+        _key(modality=Component("haptic", {"steps": 150, "device": "cuda", "batch_size": 64})),
+        _key(model=Component("haptic_cnn", {"lr": 0.01, "impl": "numba", "device": "cuda"})),
+        _key(model=Component("haptic_cnn", {"lr": 0.01, "head_schedule": {"epochs": 3}})),
+    ]
+    assert same == [key] * 3
+
+
+@pytest.mark.parametrize("value,expected", [(None, True), (True, True), (False, False)])
+def test_reuse_switch(value, expected):
+    resolved = {} if value is None else {"tracking": {"reuse": value}}
+    assert store.reuse_enabled(resolved) is expected
+
+
+def test_reuse_switch_rejects_non_booleans():
+    from tactile_exp.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"^tracking.reuse: must be true or false, got 'yes'$"):
+        store.reuse_enabled({"tracking": {"reuse": "yes"}})

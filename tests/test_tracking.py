@@ -64,3 +64,102 @@ def test_row_hash_ignores_only_the_seed(tiny_config):
         assert settings_from_config(tiny_config(["seed=0", *change])).row_hash != base.row_hash
     fewer = settings_from_config(tiny_config(["seed=0"], adjectives="[hard]"))
     assert fewer.row_hash != base.row_hash
+
+
+# ---------------------------------------------------------------- Tracker, direct
+def test_flatten_dots_nested_keys_and_truncates_long_values():
+    from tactile_exp.tracking import MAX_PARAM_LENGTH, flatten
+
+    nested = {"a": {"b": 1, "c": {"d": [1, 2]}}, "e": "x" * (MAX_PARAM_LENGTH + 5)}
+    assert flatten(nested) == {"a.b": "1", "a.c.d": "[1, 2]", "e": "x" * MAX_PARAM_LENGTH}
+    assert flatten({"k": None}, "p.") == {"p.k": "None"}
+
+
+def test_run_ends_finished_failed_or_killed_with_the_error_and_every_param(mlflow_uri):
+    import pytest
+
+    tracker = Tracker(mlflow_uri, "runs")
+    params = {f"p{i}": str(i) for i in range(250)}  # more than one batch of 100
+    with tracker.run("ok", params, {"level": "x"}) as ok:
+        tracker.log_curves(ok, {"loss": [3.0, 2.0, 1.0]}, start=5)
+        tracker.log_metrics(ok, {"auc": 0.75}, step=2)
+    with pytest.raises(ValueError), tracker.run("bad", {}, {}, parent_id=ok):
+        raise ValueError("boom")
+    with pytest.raises(KeyboardInterrupt), tracker.run("stop", {}, {}):
+        raise KeyboardInterrupt
+    client = MlflowClient(mlflow_uri)
+    runs = {r.info.run_name: r for r in client.search_runs([tracker.experiment_id])}
+    assert runs["ok"].info.status == "FINISHED" and runs["ok"].data.params == params
+    assert runs["ok"].data.tags["level"] == "x" and "error" not in runs["ok"].data.tags
+    history = client.get_metric_history(ok, "loss")
+    assert sorted((m.step, m.value) for m in history) == [(5, 3.0), (6, 2.0), (7, 1.0)]
+    assert [(m.step, m.value) for m in client.get_metric_history(ok, "auc")] == [(2, 0.75)]
+    assert runs["bad"].info.status == "FAILED"
+    assert runs["bad"].data.tags["error"] == "ValueError: boom"
+    assert runs["bad"].data.tags["mlflow.parentRunId"] == ok
+    assert runs["stop"].info.status == "KILLED"
+    assert runs["stop"].data.tags["error"].startswith("KeyboardInterrupt")
+
+
+def test_curves_longer_than_a_batch_are_logged_whole(mlflow_uri, monkeypatch):
+    from tactile_exp import tracking
+
+    monkeypatch.setattr(tracking, "MAX_BATCH", 4)
+    tracker = Tracker(mlflow_uri, "curves")
+    with tracker.run("r", {}, {}) as run_id:
+        tracker.log_curves(run_id, {"a": [float(i) for i in range(7)], "b": [1.0, 2.0]})
+    client = MlflowClient(mlflow_uri)
+    assert sorted(m.step for m in client.get_metric_history(run_id, "a")) == list(range(7))
+    assert len(client.get_metric_history(run_id, "b")) == 2
+
+
+def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_uri):
+    import os
+    import socket
+
+    tracker = Tracker(mlflow_uri, "stale")
+    host = socket.gethostname()
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    me = str(os.getpid())
+
+    def make(name, **tags):
+        base = {"config_hash": "h1", "run_level": "parent"}
+        return tracker.client.create_run(tracker.experiment_id, run_name=name, tags=base | tags)
+
+    gone = make("gone", host=host, pid=str(dead.pid), pid_start="")
+    alive = make("alive", host=host, pid=me, pid_start="")
+    reused_pid = make("reused", host=host, pid=me, pid_start="1")  # same pid, other process
+    elsewhere = make("elsewhere", host=host + "-other", pid=str(dead.pid))
+    no_pid = make("no_pid", host=host)
+    other_hash = make("other", host=host, pid=str(dead.pid), config_hash="h2")
+    ended = tracker.end_stale_runs("h1")
+    assert sorted(ended) == sorted([gone.info.run_id, reused_pid.info.run_id])
+    client = MlflowClient(mlflow_uri)
+    status = {r: client.get_run(r.info.run_id).info.status for r in (gone, reused_pid)}
+    assert set(status.values()) == {"KILLED"}
+    error = client.get_run(gone.info.run_id).data.tags["error"]
+    assert error == f"stale: process {dead.pid} on {host} ended without closing this run"
+    for r in (alive, elsewhere, no_pid, other_hash):
+        assert client.get_run(r.info.run_id).info.status == "RUNNING"
+    assert tracker.finished_run("h1") is None
+
+
+def test_reading_a_missing_experiment_names_the_ones_there(mlflow_uri):
+    import pytest
+
+    from tactile_exp.tracking import ExperimentNotFound
+
+    Tracker(mlflow_uri, "present")
+    with pytest.raises(ExperimentNotFound, match=r"no MLflow experiment 'absent' in .*present"):
+        Tracker(mlflow_uri, "absent", create=False)
+    assert Tracker(mlflow_uri, "present", create=False).experiment_id
+
+
+def test_unreachable_server_is_reported_before_any_work():
+    import pytest
+
+    from tactile_exp.tracking import TrackingError, check_server
+
+    with pytest.raises(TrackingError, match=r"^tracking.uri: no MLflow server answers at http"):
+        check_server("http://127.0.0.1:9/", timeout=1.0)
