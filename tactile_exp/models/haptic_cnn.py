@@ -5,7 +5,9 @@ channels it runs at a few GFLOP/s. ``impl="compiled"`` runs the three conv + ReL
 numba kernels over a batch-innermost layout (``grouped_conv_numba``), an order of magnitude
 faster on CPU; ``impl="torch"`` runs the plain ``F.conv1d(groups=...)``; ``impl="auto"`` (default)
 picks compiled on CPU and torch on GPU (the kernels are CPU only). Both agree to float rounding
-(tests; ``bench/bench_haptic_cnn.py`` measures the speed).
+(tests; ``bench/bench_haptic_cnn.py`` measures the speed). Training goes through
+``GroupedTemporalConvNet.scores``, which compiled runs the classification layer inside the
+kernels' layout too (``HapticCNN._train_scores``).
 """
 
 from __future__ import annotations
