@@ -3,9 +3,11 @@
 Everything is measured in one run, the two implementations interleaved, so the ratios hold even
 on a shared machine. Prints:
 1. the first-use compile time (a fresh numba cache in a subprocess) and the cached load time;
-2. training throughput (forward, backward, SGD step; default architecture, batch 1000) of both,
-   in wall time and in CPU time per step, and their ratio;
-3. each compiled kernel's GFLOP/s at batch 1000 beside torch's dense matmul (sgemm) rate;
+2. training throughput (forward, backward, SGD step; default architecture, batch 1000) of both
+   through the same step as ``HapticCNN`` (``net.scores``: compiled, the conv stack and the
+   classification layer are one fused Function), in wall and CPU time per step, and the ratio;
+3. each compiled kernel's GFLOP/s at batch 1000 (the classification layer's too) beside
+   torch's dense matmul (sgemm) rate;
 4. each implementation's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training
    set for one adjective) and the Table I row I estimate it implies: 24 adjectives x (200 epochs
    + 100 fine-tuning epochs) + setup, measured, not assumed, plus the compile time once;
@@ -47,8 +49,8 @@ def sgd_step(impl: str) -> Callable[[], None]:
     optimiser = torch.optim.SGD([*net.parameters(), *head.parameters()], lr=0.01, momentum=0.9)
     x, y = torch.randn(BATCH, CHANNELS, STEPS), (torch.rand(BATCH) > 0.5).float()
 
-    def step() -> None:
-        loss = LOSSES["logistic"](head(net(x)).squeeze(1), y)
+    def step() -> None:  # HapticCNN's stage 1 step: net.scores (compiled: fused with the head)
+        loss = LOSSES["logistic"](net.scores(x, head), y)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
@@ -129,6 +131,19 @@ def kernel_rates(repeats: int) -> None:
         for name, times in rates.items():
             print(f"     {name:28s} {rate(gflop, times)}")
         c_in, length = 4, t_out
+    rows = groups * 4 * length
+    h = rng.random((rows, n_pad), dtype=np.float32)
+    w_head, scores = rng.standard_normal(rows, dtype=np.float32), np.empty(n_pad, np.float32)
+    grad_h, grad_w_head = np.empty_like(h), np.empty_like(w_head)
+    head_gflop = 2 * rows * n / 1e9
+    print(f"   classification layer on conv3 in the layout ({head_gflop * 1e3:.0f} MFLOP):")
+    for name, times in {
+        "forward": best_time(kernels.head_forward, (h, w_head, 0.0, scores), repeats),
+        "weight grad + conv3 grad": best_time(
+            kernels.head_backward, (h, w_head, scores, grad_h, grad_w_head), repeats
+        ),
+    }.items():
+        print(f"     {name:28s} {rate(head_gflop, times)}")
     x, net = torch.randn(BATCH, CHANNELS, STEPS), GroupedTemporalConvNet(CHANNELS, STEPS)
     net.impl = "torch"
     with torch.no_grad():

@@ -58,6 +58,41 @@ def test_compiled_forward_and_gradients_equal_torch(
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4, msg=name)
 
 
+def _scores_and_grads(net: GroupedTemporalConvNet, head: torch.nn.Linear, x, y, impl: str):
+    net.impl = impl
+    net.zero_grad()
+    head.zero_grad()
+    scores = net.scores(x, head)
+    (scores * y).sum().backward()
+    return scores.detach(), [p.grad.clone() for p in [*net.parameters(), *head.parameters()]]
+
+
+@pytest.mark.parametrize(
+    ("n", "channels", "steps", "groups", "kernels", "widths", "strides"), SHAPES
+)
+def test_compiled_scores_and_gradients_equal_torch(
+    n, channels, steps, groups, kernels, widths, strides
+):
+    """The training step's fused path (conv stack + classification layer in the layout)."""
+    torch.manual_seed(n + 1)
+    net = GroupedTemporalConvNet(
+        channels, steps, groups=groups, kernel_sizes=kernels, widths=widths, strides=strides
+    )
+    head = torch.nn.Linear(net.n_features, 1)
+    with torch.no_grad():
+        for bias in [*net.biases, head.bias]:
+            bias.uniform_(-0.1, 0.1)
+    x, y = torch.randn(n, channels, steps), torch.randn(n)
+    scores_c, grads_c = _scores_and_grads(net, head, x, y, "compiled")
+    scores_t, grads_t = _scores_and_grads(net, head, x, y, "torch")
+    assert scores_c.shape == (n,)
+    torch.testing.assert_close(scores_c, scores_t, rtol=1e-5, atol=1e-5)
+    names = [name for name, _ in net.named_parameters()] + ["head.weight", "head.bias"]
+    for name, g_c, g_t in zip(names, grads_c, grads_t, strict=True):
+        assert g_t.abs().max() > 0, name
+        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4, msg=name)
+
+
 def test_numba_cache_goes_to_the_user_cache_folder(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["TACTILE_EXP_CACHE"] = str(tmp_path)

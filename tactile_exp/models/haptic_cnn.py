@@ -5,12 +5,14 @@ channels it runs at a few GFLOP/s. ``impl="compiled"`` runs the three conv + ReL
 numba kernels over a batch-innermost layout (``grouped_conv_numba``), an order of magnitude
 faster on CPU; ``impl="torch"`` runs the plain ``F.conv1d(groups=...)``; ``impl="auto"`` (default)
 picks compiled on CPU and torch on GPU (the kernels are CPU only). Both agree to float rounding
-(tests; ``bench/bench_haptic_cnn.py`` measures the speed).
+(tests; ``bench/bench_haptic_cnn.py`` measures the speed). Training goes through
+``GroupedTemporalConvNet.scores``, which compiled runs the classification layer inside the
+kernels' layout too (``HapticCNN._train_scores``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -82,13 +84,28 @@ class GroupedTemporalConvNet(nn.Module):
         self.out_shape = (groups * widths[-1], length)  # conv3: channels x time
         self.n_features = int(np.prod(self.out_shape))
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def _compiled(self, x: torch.Tensor) -> bool:
+        """Whether ``x`` goes through the numba kernels (``impl``; ``auto``: on CPU)."""
         if self.impl == "compiled" and x.device.type != "cpu":
             raise ValueError(f"impl='compiled' runs on CPU only, got input on {x.device}")
         # The kernels give no gradient for the input itself: torch's path does, when asked.
-        if self.impl == "compiled" or (
+        return self.impl == "compiled" or (
             self.impl == "auto" and x.device.type == "cpu" and not x.requires_grad
-        ):
+        )
+
+    def scores(self, x: torch.Tensor, head: nn.Linear) -> torch.Tensor:
+        """``head(self(x)).squeeze(1)`` for a one-output ``head``: the training step's forward.
+        Compiled, conv3 stays in the kernels' layout (one fused autograd Function)."""
+        if head.out_features != 1 or not self._compiled(x):
+            return head(self(x)).squeeze(1)
+        from tactile_exp.models.grouped_conv_numba import grouped_conv_head  # numba: lazy
+
+        return grouped_conv_head(
+            x.float(), self.weights, self.biases, head, groups=self.groups, strides=self.strides
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self._compiled(x):
             from tactile_exp.models.grouped_conv_numba import grouped_conv_stack  # numba: lazy
 
             return grouped_conv_stack(
@@ -177,3 +194,8 @@ class HapticCNN(SGDModel):
         net = GroupedTemporalConvNet(*input_shape, **self.net_args)
         self.conv3_shape_ = net.out_shape
         return net, net.n_features
+
+    def _train_scores(
+        self, body: nn.Module, classifier: nn.Linear
+    ) -> Callable[[torch.Tensor], torch.Tensor]:
+        return lambda x: body.scores(x, classifier)

@@ -115,6 +115,12 @@ class SGDModel(Model):
     def _preprocess(self, X: np.ndarray) -> np.ndarray:
         return X
 
+    def _train_scores(
+        self, body: nn.Module, classifier: nn.Linear
+    ) -> Callable[[torch.Tensor], torch.Tensor]:
+        """Stage 1's forward, batch -> scores; a body with a fused path overrides it."""
+        return lambda x: classifier(body(x)).squeeze(1)
+
     def _tensor(self, X: np.ndarray) -> torch.Tensor:
         if self.body_ is None or self.classifier_ is None:
             raise RuntimeError(f"{type(self).__name__} is not fitted; call fit first")
@@ -164,7 +170,7 @@ class SGDModel(Model):
         body_.train()
         history: History = {
             "train_loss": sgd_epochs(
-                lambda x: classifier_(body_(x)).squeeze(1),
+                self._train_scores(body_, classifier_),
                 [*body_.parameters(), *classifier_.parameters()],
                 Xt,
                 yt,
