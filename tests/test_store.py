@@ -5,6 +5,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
+import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -180,3 +183,25 @@ def test_multimodal_rows_train_only_the_classification_layer(tiny_config, mlflow
     assert not _children(mlflow_uri, row_n.run_id, "part")
     layer_n = store.load_model(tracker, child_n.info.run_id, "model")
     assert layer_n.input_shape_ == (2 * 10 * 128 * 19 + 8 * 832,)
+
+
+def test_resume_skips_a_finished_job_only_on_the_same_data_file(tiny_config, mlflow_uri, tmp_path):
+    """skip-if-finished keys on the data file's identity too: the same config on a changed file
+    (another generator version, a replaced or real file) runs again."""
+    from tactile_exp.data.sources import DATA_SOURCES
+
+    generated = settings_from_config(tiny_config([], ONE)).data
+    source = DATA_SOURCES.build(generated.name, **generated.params).path
+    copy = tmp_path / "phac2.h5"
+    shutil.copy(source, copy)
+    overrides = ["data=phac2", f"data.path={copy}", "model=random", "combine_instances=separate"]
+    first = run(settings_from_config(tiny_config(overrides, ONE)))
+    assert not first.skipped
+    assert run(settings_from_config(tiny_config(overrides, ONE))).skipped  # same file: resume
+    os.utime(copy, ns=(time.time_ns(), time.time_ns() + 10**9))  # another file at that path
+    again = run(settings_from_config(tiny_config(overrides, ONE)))
+    assert not again.skipped and again.run_id != first.run_id
+    client = MlflowClient(mlflow_uri)
+    identity = [client.get_run(r.run_id).data.tags["data.identity"] for r in (first, again)]
+    assert identity[0] != identity[1]
+    assert run(settings_from_config(tiny_config(overrides, ONE))).skipped
