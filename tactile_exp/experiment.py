@@ -378,7 +378,8 @@ def _keep_models(
             tracker, run_id, "model", lambda f: store.write_model(f, settings.model.name, model)
         )
     if head is not None and head.storable:
-        store.log_folder(tracker, run_id, "head", lambda f: store.write_model(f, "linear", head))
+        write = functools.partial(store.write_model, name=store.model_name(head), model=head)
+        store.log_folder(tracker, run_id, "head", write)
     for part, (name, fitted) in parts.items():
         write = functools.partial(store.write_model, name=name, model=fitted)
         store.log_folder(tracker, run_id, f"parts/{part}", write)

@@ -2,7 +2,9 @@
 
 One instance per haptic unit: the frozen haptic ConvNet's conv3 activations of ``trials`` trials
 of one object (row I's unit at 1, row J's at 10, concatenated as T4 does) followed by the
-L2-normalised inception (5a) features of the object's first ``views`` photographs (row L's unit).
+L2-normalised inception (5a) features of the object's first ``views`` photographs (row L's unit,
+built by the visual modality's rule: ``unit_members`` without padding). ``multimodal_units`` and
+``visual_unit`` build the units for training and for ``predict`` alike.
 The ConvNet is the ``haptic`` part: the engine finds it by its training key (the model rows H, I
 and J train) or trains it in the job when absent, per adjective. The visual trunk is frozen and
 untrained (its features are cached on disk by weights file), so it needs no lookup. The model on
@@ -17,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.combine import COMBINERS
+from tactile_exp.combine import COMBINERS, unit_members
 from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
@@ -25,6 +27,7 @@ from tactile_exp.data.splits import split_photographs
 from tactile_exp.modalities.base import MODALITIES, Modality
 from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.modalities.visual import Visual
+from tactile_exp.models.base import Model
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +37,29 @@ def _component(node: dict[str, Any], key: str) -> Component:
         raise ValueError(f"modality.{key}: expected a mapping with a 'name' key, got {node!r}")
     params = {k: v for k, v in node.items() if k not in ("name", "_module_")}
     return Component(str(node["name"]), params)
+
+
+def visual_unit(features: np.ndarray, views: int) -> np.ndarray:
+    """One object's visual unit from its photographs' features (rows in view order): row L's
+    unit, built as the ``visual`` modality combines views (``unit_members`` without padding):
+    its first ``views`` views, or all of them repeated in order when it has fewer."""
+    n = len(features)
+    names = np.array([f"v{i:04d}" for i in range(n)], dtype=object)
+    views_of_one = Instances(features, np.zeros(n, np.int64), names, np.zeros(n, np.int64))
+    first = unit_members(views_of_one, views, pad=Visual.pad_units)[0]
+    return features[first].reshape(-1)
+
+
+def multimodal_units(
+    net: Model, haptic: Instances, trials: int, visual: dict[int, np.ndarray]
+) -> Instances:
+    """Rows M/N's instances: the ConvNet ``net``'s conv3 of ``trials`` trials of an object
+    concatenated (row I/J's unit, padded as the ``haptic`` modality pads), then the object's
+    visual unit (``visual``: object id -> ``visual_unit``). Training and predict both use it."""
+    units = COMBINERS.build("concat")(net.transform(haptic.X), haptic, trials, pad=Haptic.pad_units)
+    seen = np.stack([visual[int(o)] for o in units.object_id])
+    X = np.hstack([units.X, seen]).astype(np.float32)
+    return Instances(X, units.y, units.trial, units.object_id)
 
 
 @MODALITIES.register("multimodal")
@@ -87,7 +113,7 @@ class Multimodal(Modality):
         self.missing_ = set(int(o) for o in self.visual.arrays.missing)
 
     def _visual_units(self, split: Split) -> dict[int, np.ndarray]:
-        """Each object's first ``views`` photographs' features concatenated (repeated if fewer)."""
+        """Each object's visual unit (``visual_unit``) from its photographs in view order."""
         arrays = self.visual.arrays
         if self.visual.mean == "train":
             train_idx, _, _ = split_photographs(split, arrays.object_id)
@@ -96,16 +122,14 @@ class Multimodal(Modality):
         units = {}
         for obj in np.unique(arrays.object_id):
             rows = np.flatnonzero(arrays.object_id == obj)
-            rows = rows[np.argsort(arrays.view[rows], kind="stable")][: self.views]
-            chosen = [rows[i % len(rows)] for i in range(self.views)]
-            units[int(obj)] = features[chosen].reshape(-1)
+            rows = rows[np.argsort(arrays.view[rows], kind="stable")]
+            units[int(obj)] = visual_unit(features[rows], self.views)
         return units
 
     def instances(self, split: Split) -> tuple[Instances, Instances]:
         train, test = self.haptic.instances(split)
         net = self.provide("haptic", split, train)
         visual = self._visual_units(split)
-        concat = COMBINERS.build("concat")
         out = []
         left_out: set[int] = set()
         for part, inst in (("train", train), ("test", test)):
@@ -118,10 +142,7 @@ class Multimodal(Modality):
                     f"photographs hold labels {np.unique(kept.y).tolist()}, expected positives "
                     f"and negatives (objects without photographs: {sorted(self.missing_)})"
                 )
-            units = concat(net.transform(kept.X), kept, self.trials)
-            seen = np.stack([visual[int(o)] for o in units.object_id])
-            X = np.hstack([units.X, seen]).astype(np.float32)
-            out.append(Instances(X, units.y, units.trial, units.object_id))
+            out.append(multimodal_units(net, kept, self.trials, visual))
         self.left_out_ = sorted(left_out)
         if left_out:
             log.warning(
