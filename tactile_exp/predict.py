@@ -373,7 +373,7 @@ class _Inputs:
     def multimodal(self, child: str) -> Instances:
         """Rows M, N: each haptic unit's frozen ConvNet conv3 beside the object's visual unit,
         built by the ``multimodal`` modality's own rules (``multimodal_units``)."""
-        from tactile_exp.modalities.multimodal import multimodal_units, visual_unit
+        from tactile_exp.modalities.multimodal import multimodal_units, visual_units
 
         settings, arrays, where = self.state(child)
 
@@ -394,8 +394,9 @@ class _Inputs:
                 f"the trials given are of objects {objects}"
             )
         net = store.load_model(self.tracker, child, "parts/haptic")
-        seen = visual_unit(self._visual(visual, part("visual"), where), views)
-        return multimodal_units(net, instances, n_trials, {objects[0]: seen})
+        photos = self._visual(visual, part("visual"), where)
+        seen = visual_units(photos, np.full(len(photos), objects[0]), views)
+        return multimodal_units(net, instances, n_trials, seen)
 
 
 def read_photographs(folder: Path, size: int) -> tuple[list[Path], np.ndarray]:

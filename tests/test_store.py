@@ -205,3 +205,14 @@ def test_resume_skips_a_finished_job_only_on_the_same_data_file(tiny_config, mlf
     identity = [client.get_run(r.run_id).data.tags["data.identity"] for r in (first, again)]
     assert identity[0] != identity[1]
     assert run(settings_from_config(tiny_config(overrides, ONE))).skipped
+
+
+def test_visual_units_are_row_l_units_never_padded_beyond_an_object_with_fewer_views():
+    from tactile_exp.modalities.multimodal import visual_units
+
+    features = np.arange(13, dtype=np.float32)[:, None] * np.ones((1, 2), np.float32)
+    object_id = np.array([5] * 10 + [7] * 3)
+    units = visual_units(features, object_id, 8)
+    assert sorted(units) == [5, 7]
+    np.testing.assert_array_equal(units[5], features[:8].reshape(-1))  # views 0-7, no 2nd unit
+    np.testing.assert_array_equal(units[7], features[[10, 11, 12, 10, 11, 12, 10, 11]].reshape(-1))

@@ -4,7 +4,7 @@ One instance per haptic unit: the frozen haptic ConvNet's conv3 activations of `
 of one object (row I's unit at 1, row J's at 10, concatenated as T4 does) followed by the
 L2-normalised inception (5a) features of the object's first ``views`` photographs (row L's unit,
 built by the visual modality's rule: ``unit_members`` without padding). ``multimodal_units`` and
-``visual_unit`` build the units for training and for ``predict`` alike.
+``visual_units`` build the units for training and for ``predict`` alike.
 The ConvNet is the ``haptic`` part: the engine finds it by its training key (the model rows H, I
 and J train) or trains it in the job when absent, per adjective. The visual trunk is frozen and
 untrained (its features are cached on disk by weights file), so it needs no lookup. The model on
@@ -39,15 +39,21 @@ def _component(node: dict[str, Any], key: str) -> Component:
     return Component(str(node["name"]), params)
 
 
-def visual_unit(features: np.ndarray, views: int) -> np.ndarray:
-    """One object's visual unit from its photographs' features (rows in view order): row L's
-    unit, built as the ``visual`` modality combines views (``unit_members`` without padding):
-    its first ``views`` views, or all of them repeated in order when it has fewer."""
+def visual_units(features: np.ndarray, object_id: np.ndarray, views: int) -> dict[int, np.ndarray]:
+    """Each object's visual unit from its photographs' features (rows in view order within an
+    object): row L's unit, built as the ``visual`` modality combines views (``unit_members``
+    without padding): its first ``views`` views, or all of them repeated in order when fewer."""
     n = len(features)
-    names = np.array([f"v{i:04d}" for i in range(n)], dtype=object)
-    views_of_one = Instances(features, np.zeros(n, np.int64), names, np.zeros(n, np.int64))
-    first = unit_members(views_of_one, views, pad=Visual.pad_units)[0]
-    return features[first].reshape(-1)
+    rank = np.zeros(n, np.int64)
+    for obj in np.unique(object_id):
+        rows = np.flatnonzero(object_id == obj)
+        rank[rows] = np.arange(len(rows))
+    names = np.array([f"{o}_v{r:04d}" for o, r in zip(object_id, rank, strict=True)], dtype=object)
+    photos = Instances(features, np.zeros(n, np.int64), names, np.asarray(object_id))
+    units: dict[int, np.ndarray] = {}
+    for members in unit_members(photos, views, pad=Visual.pad_units):
+        units.setdefault(int(object_id[members[0]]), features[members].reshape(-1))
+    return units
 
 
 def multimodal_units(
@@ -55,7 +61,8 @@ def multimodal_units(
 ) -> Instances:
     """Rows M/N's instances: the ConvNet ``net``'s conv3 of ``trials`` trials of an object
     concatenated (row I/J's unit, padded as the ``haptic`` modality pads), then the object's
-    visual unit (``visual``: object id -> ``visual_unit``). Training and predict both use it."""
+    visual unit (``visual``: object id -> its ``visual_units`` entry). Training and predict
+    both build their units here."""
     units = COMBINERS.build("concat")(net.transform(haptic.X), haptic, trials, pad=Haptic.pad_units)
     seen = np.stack([visual[int(o)] for o in units.object_id])
     X = np.hstack([units.X, seen]).astype(np.float32)
@@ -113,18 +120,14 @@ class Multimodal(Modality):
         self.missing_ = set(int(o) for o in self.visual.arrays.missing)
 
     def _visual_units(self, split: Split) -> dict[int, np.ndarray]:
-        """Each object's visual unit (``visual_unit``) from its photographs in view order."""
+        """Each object's visual unit (``visual_units``) from its photographs in view order."""
         arrays = self.visual.arrays
         if self.visual.mean == "train":
             train_idx, _, _ = split_photographs(split, arrays.object_id)
             self.visual.features.fit(train_idx)
         features = self.visual.features.transform(np.arange(len(arrays.object_id)))
-        units = {}
-        for obj in np.unique(arrays.object_id):
-            rows = np.flatnonzero(arrays.object_id == obj)
-            rows = rows[np.argsort(arrays.view[rows], kind="stable")]
-            units[int(obj)] = visual_unit(features[rows], self.views)
-        return units
+        order = np.lexsort((arrays.view, arrays.object_id))
+        return visual_units(features[order], arrays.object_id[order], self.views)
 
     def instances(self, split: Split) -> tuple[Instances, Instances]:
         train, test = self.haptic.instances(split)
