@@ -297,16 +297,17 @@ class _Inputs:
         dataset, names = self.selected
         try:
             key = (settings["steps"], settings["offsets"], settings["pac_downsample"])
-            if key not in self._haptic_arrays:
-                try:
-                    self._haptic_arrays[key] = compute_haptic_arrays(_Subset(dataset, names), *key)
-                except (DataError, ValueError, KeyError) as err:
-                    raise PredictError(
-                        f"{self.data}: a trial lacks what the models need: {err}"
-                    ) from None
-            pre = HapticPreprocessor(
-                self._haptic_arrays[key], settings["pca_components"], settings["per_finger"]
-            )
+            components, per_finger = settings["pca_components"], settings["per_finger"]
+        except KeyError as err:
+            raise store.ArtifactError(f"{where}/settings.json: missing entry {err}") from None
+        if key not in self._haptic_arrays:
+            try:
+                self._haptic_arrays[key] = compute_haptic_arrays(_Subset(dataset, names), *key)
+            except (DataError, ValueError, KeyError) as err:
+                lacks = f"{self.data}: a trial lacks what the models need: {err}"
+                raise PredictError(lacks) from None
+        try:
+            pre = HapticPreprocessor(self._haptic_arrays[key], components, per_finger)
             pre.restore(arrays)
         except (KeyError, ValueError) as err:
             raise store.ArtifactError(f"{where}: {err}") from None

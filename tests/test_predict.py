@@ -85,7 +85,7 @@ def test_predict_errors_are_clear(job, mlflow_uri, tmp_path, capsys):
     with h5py.File(broken, "a") as f:
         del f[trial]["biotacs/finger_0/pdc"]
     message = error([result.run_id, *base[:2], "--data", str(broken), "--trial", trial])
-    assert trial in message and "pdc" in message
+    assert trial in message and "pdc" in message and "artifact" not in message  # data, not job
 
     child = client.search_runs([exp.experiment_id], f"tags.mlflow.parentRunId = '{result.run_id}'")[
         0
