@@ -162,10 +162,13 @@ def run(settings: Settings) -> JobResult:
     """Run (or skip, if already FINISHED) one job and log it to MLflow."""
     tracker = Tracker(settings.tracking.uri, settings.tracking.experiment)
     if settings.tracking.skip_finished:
-        done = tracker.finished_run(settings.config_hash)
+        identity = DATA_SOURCES.build(settings.data.name, **settings.data.params).identity()
+        done = tracker.finished_run(settings.config_hash, data_identity=identity)
         if done is not None:
             log.info(
-                "skipping %s: run %s already FINISHED with this config", settings.run_name, done
+                "skipping %s: run %s already FINISHED with this config on this data file",
+                settings.run_name,
+                done,
             )
             return JobResult(done, float("nan"), {}, skipped=True)
     tracker.end_stale_runs(settings.config_hash)
@@ -375,7 +378,8 @@ def _keep_models(
             tracker, run_id, "model", lambda f: store.write_model(f, settings.model.name, model)
         )
     if head is not None and head.storable:
-        store.log_folder(tracker, run_id, "head", lambda f: store.write_model(f, "linear", head))
+        write = functools.partial(store.write_model, name=store.model_name(head), model=head)
+        store.log_folder(tracker, run_id, "head", write)
     for part, (name, fitted) in parts.items():
         write = functools.partial(store.write_model, name=name, model=fitted)
         store.log_folder(tracker, run_id, f"parts/{part}", write)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import io
 import json
 import sys
@@ -75,6 +76,15 @@ class Prediction:
         return "\n".join(lines) + "\n"
 
 
+# modality -> (takes trials, takes photographs)
+INPUTS = {
+    "haptic": (True, False),
+    "haptic_features": (True, False),
+    "visual": (False, True),
+    "multimodal": (True, True),
+}
+
+
 def predict(
     *,
     run_id: str | None = None,
@@ -88,45 +98,56 @@ def predict(
 ) -> Prediction:
     """Scores of each adjective of job ``run_id`` (default: the newest FINISHED job of
     ``experiment``) for ``trials`` (or all trials of ``object_id``) of the PHAC-2-layout file
-    ``data``, or for the photographs in folder ``photos``."""
+    ``data`` (rows A-J), for the photographs in folder ``photos`` (rows K, L), or for both, of
+    one object (rows M, N). Row O (random guess) is refused: it keeps no model."""
     tracker = _tracker(tracking_uri, experiment)
     job = _job(tracker, run_id)
-    config = _config(tracker, job.info.run_id)
-    children = _children(tracker, job.info.run_id, adjectives)
-    modality = str(config["modality"]["name"])
-    haptic_input = data is not None or trials or object_id is not None
-    if modality == "haptic":
-        if not haptic_input:
-            raise PredictError(
-                f"run {job.info.run_id} holds haptic models (modality haptic): give trials "
-                "(data with trials or an object id), not photographs"
-            )
-        inputs = _haptic_inputs(data, trials, object_id, children, tracker)
-    elif modality == "visual":
-        if photos is None:
-            raise PredictError(
-                f"run {job.info.run_id} holds visual models (modality visual): give a folder "
-                "of photographs, not trials"
-            )
-        inputs = _visual_inputs(Path(photos), children, tracker)
-    else:
+    job_id = job.info.run_id
+    config = _config(tracker, job_id)
+    modality, model_name = str(config["modality"]["name"]), str(config["model"]["name"])
+    if model_name == "random":
         raise PredictError(
-            f"run {job.info.run_id}: modality {modality!r}; predict applies haptic and visual "
-            "jobs (rows A-L need their own features, rows M and N both inputs: not supported yet)"
+            f"run {job_id} is a random-guess job (model random, Table I row O): its scores are "
+            "seeded random numbers that ignore the input, so it keeps no model to apply; give "
+            "the run id of a trained job"
         )
+    if modality not in INPUTS:
+        raise PredictError(f"run {job_id}: modality {modality!r}; predict applies {list(INPUTS)}")
+    takes_trials, takes_photos = INPUTS[modality]
+    has_trials = data is not None or bool(trials) or object_id is not None
+    if takes_trials and not has_trials:
+        wanted = "and a folder of its photographs" if takes_photos else "not photographs"
+        raise PredictError(
+            f"run {job_id} holds {modality} models (modality {modality}): give trials (data "
+            f"with trials or an object id) {wanted}"
+        )
+    if takes_photos and photos is None:
+        wanted = "and the object's trials (data with trials)" if takes_trials else "not trials"
+        raise PredictError(
+            f"run {job_id} holds {modality} models (modality {modality}): give a folder of "
+            f"photographs {wanted}"
+        )
+    children = _children(tracker, job_id, adjectives)
+    given = _Inputs(tracker, data=data, trials=trials, object_id=object_id, photos=photos)
+    inputs = {
+        "haptic": given.haptic,
+        "haptic_features": given.features,
+        "visual": given.visual,
+        "multimodal": given.multimodal,
+    }[modality]
+    from tactile_exp.modalities import MODALITIES
+
+    pad = MODALITIES[modality].pad_units  # as the job combined its test units
     combiner, combine = str(config["combine_instances"]["name"]), int(config["combine"])
-    model_name, model_params = config["model"]["name"], dict(config["model"])
-    model_params.pop("name")
+    model_params = {k: v for k, v in config["model"].items() if k != "name"}
     units: list[str] = []
     columns = []
     for child in children.values():
-        instances = inputs(child)
-        scores, names = _apply(
-            tracker, child, instances, combiner, combine, model_name, model_params
+        scores, units = _apply(
+            tracker, child, inputs(child), combiner, combine, model_name, model_params, pad=pad
         )
         columns.append(scores)
-        units = names
-    return Prediction(job.info.run_id, units, list(children), np.column_stack(columns))
+    return Prediction(job_id, units, list(children), np.column_stack(columns))
 
 
 def _tracker(uri: str | None, experiment: str) -> Any:
@@ -221,49 +242,73 @@ class _Subset:
         return self.dataset.identity()
 
 
-def _haptic_inputs(
-    data: str | Path | None,
-    trials: Sequence[str],
-    object_id: int | None,
-    children: dict[str, str],
-    tracker: Any,
-) -> Any:
-    from tactile_exp.data.phac2 import PHAC2, DataError
-    from tactile_exp.preprocess.haptic import HapticPreprocessor, compute_haptic_arrays
+class _Inputs:
+    """The new object's trials and photographs, read once and turned into each adjective's
+    instances as that adjective's job turned its test trials and photographs into instances."""
 
-    if data is None:
-        raise PredictError("haptic models need data: a PHAC-2-layout file holding the trials")
-    try:
-        dataset = PHAC2(data)
-        names = [dataset.trial_name(t) for t in trials]
-    except DataError as err:
-        raise PredictError(str(err)) from None
-    if object_id is not None:
-        names += [t for t in dataset.trials if t.object_id == object_id and t not in names]
-        if not any(t.object_id == object_id for t in names):
-            raise PredictError(f"{data}: no trials of object {object_id}")
-    if not names:
-        raise PredictError("give at least one trial (trials=...) or an object id")
-    first = next(iter(children.values()))
-    settings = store.read_json(
-        store.download(tracker, first, "preprocess", store.STATE_FILES),
-        f"run {first}: artifact preprocess",
-    )
-    try:
-        arrays = compute_haptic_arrays(
-            _Subset(dataset, names), settings["steps"], settings["offsets"],
-            settings["pac_downsample"],
-        )  # fmt: skip
-    except (DataError, ValueError, KeyError) as err:
-        raise PredictError(f"{data}: a trial lacks what the models need: {err}") from None
+    def __init__(
+        self,
+        tracker: Any,
+        *,
+        data: str | Path | None,
+        trials: Sequence[str],
+        object_id: int | None,
+        photos: str | Path | None,
+    ) -> None:
+        self.tracker, self.data, self.trials, self.object_id = tracker, data, trials, object_id
+        self.photos = None if photos is None else Path(photos)
+        self._haptic_arrays: dict[tuple[Any, ...], Any] = {}
+        self._views: dict[tuple[Any, ...], np.ndarray] = {}
 
-    def instances(child: str) -> Instances:
-        where = f"run {child}: artifact preprocess"
-        folder = store.download(tracker, child, "preprocess", store.STATE_FILES)
-        state = store.read_json(folder, where)
+    @functools.cached_property
+    def selected(self) -> tuple[Any, list[TrialName]]:
+        """The data set and the chosen trials (given ones, then the object's others)."""
+        from tactile_exp.data.phac2 import PHAC2, DataError
+
+        if self.data is None:
+            raise PredictError("haptic models need data: a PHAC-2-layout file holding the trials")
         try:
-            pre = HapticPreprocessor(arrays, state["pca_components"], state["per_finger"])
-            pre.restore(store.read_arrays(folder, where))
+            dataset = PHAC2(self.data)
+            names = [dataset.trial_name(t) for t in self.trials]
+        except DataError as err:
+            raise PredictError(str(err)) from None
+        if self.object_id is not None:
+            obj = self.object_id
+            names += [t for t in dataset.trials if t.object_id == obj and t not in names]
+            if not any(t.object_id == obj for t in names):
+                raise PredictError(f"{self.data}: no trials of object {obj}")
+        if not names:
+            raise PredictError("give at least one trial (trials=...) or an object id")
+        return dataset, names
+
+    def state(self, child: str) -> tuple[dict[str, Any], dict[str, np.ndarray], str]:
+        """The child's fitted preprocessing (``preprocess/``): settings, arrays, its name."""
+        where = f"run {child}: artifact preprocess"
+        folder = store.download(self.tracker, child, "preprocess", store.STATE_FILES)
+        return store.read_json(folder, where), store.read_arrays(folder, where), where
+
+    def haptic(self, child: str) -> Instances:
+        return self._haptic(*self.state(child))
+
+    def _haptic(self, settings: dict[str, Any], arrays: dict[str, np.ndarray], where: str):
+        from tactile_exp.data.phac2 import DataError
+        from tactile_exp.preprocess.haptic import HapticPreprocessor, compute_haptic_arrays
+
+        dataset, names = self.selected
+        try:
+            key = (settings["steps"], settings["offsets"], settings["pac_downsample"])
+            components, per_finger = settings["pca_components"], settings["per_finger"]
+        except KeyError as err:
+            raise store.ArtifactError(f"{where}/settings.json: missing entry {err}") from None
+        if key not in self._haptic_arrays:
+            try:
+                self._haptic_arrays[key] = compute_haptic_arrays(_Subset(dataset, names), *key)
+            except (DataError, ValueError, KeyError) as err:
+                lacks = f"{self.data}: a trial lacks what the models need: {err}"
+                raise PredictError(lacks) from None
+        try:
+            pre = HapticPreprocessor(self._haptic_arrays[key], components, per_finger)
+            pre.restore(arrays)
         except (KeyError, ValueError) as err:
             raise store.ArtifactError(f"{where}: {err}") from None
         X = pre.transform(names)
@@ -272,7 +317,87 @@ def _haptic_inputs(
         obj = np.repeat([t.object_id for t in names], per_trial)
         return Instances(X.reshape(-1, *X.shape[3:]), np.zeros(len(trial), np.int64), trial, obj)
 
-    return instances
+    @functools.cached_property
+    def trial_data(self) -> list[Any]:
+        """The chosen trials as read, optional channels included (the static features use the
+        gripper and the hand transforms)."""
+        from tactile_exp.data.phac2 import DataError
+
+        dataset, names = self.selected
+        try:
+            return list(dataset.iter_trials(names))
+        except DataError as err:
+            raise PredictError(str(err)) from None
+
+    def features(self, child: str) -> Instances:
+        """Rows A-F: the hand-designed features of each trial (one instance per trial)."""
+        from tactile_exp.modalities.haptic_features import trial_features
+
+        settings, arrays, where = self.state(child)
+        trials = self.trial_data
+        try:
+            X = trial_features(trials, settings, arrays)
+        except KeyError as err:
+            raise store.ArtifactError(f"{where}: missing entry {err}") from None
+        except ValueError as err:
+            raise PredictError(f"{self.data}: {err}") from None
+        names = np.array([t.name.name for t in trials], dtype=object)
+        obj = np.array([t.name.object_id for t in trials])
+        return Instances(X, np.zeros(len(trials), np.int64), names, obj)
+
+    def _visual(self, settings: dict[str, Any], arrays: dict[str, np.ndarray], where: str):
+        """(n, 832) features of the folder's photographs, in file-name order (views)."""
+        from tactile_exp.models.googlenet import build_trunk, network_input, pooled_features
+
+        try:
+            size, layout, seed = int(settings["size"]), settings["layout"], settings["seed"]
+            weights = settings["weights"]
+            mean = tuple(float(m) for m in arrays["channel_mean"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise store.ArtifactError(f"{where}: missing or bad entry {err}") from None
+        key = (size, layout, seed, weights, mean)
+        if key not in self._views:
+            _, images = read_photographs(Path(str(self.photos)), size)
+            if weights is not None and not Path(weights).is_file():
+                raise PredictError(f"{where}: the GoogLeNet weights file {weights} is not there")
+            trunk = build_trunk(None if weights is None else Path(weights), seed, layout)
+            self._views[key] = pooled_features(trunk, network_input(images, mean, layout))
+        return self._views[key]
+
+    def visual(self, child: str) -> Instances:
+        """Rows K, L: one instance per photograph, named ``<folder>_v<VV>`` in file-name order."""
+        X = self._visual(*self.state(child))
+        n, stem = len(X), Path(str(self.photos)).name
+        names = np.array([f"{stem}_v{i:02d}" for i in range(n)], dtype=object)
+        return Instances(X, np.zeros(n, np.int64), names, np.zeros(n, np.int64))
+
+    def multimodal(self, child: str) -> Instances:
+        """Rows M, N: each haptic unit's frozen ConvNet conv3 beside the object's visual unit,
+        built by the ``multimodal`` modality's own rules (``multimodal_units``)."""
+        from tactile_exp.modalities.multimodal import multimodal_units, visual_units
+
+        settings, arrays, where = self.state(child)
+
+        def part(name: str) -> dict[str, np.ndarray]:
+            prefix = f"{name}."
+            return {k.removeprefix(prefix): v for k, v in arrays.items() if k.startswith(prefix)}
+
+        try:
+            haptic, visual = settings["haptic"], settings["visual"]
+            n_trials, views = int(settings["trials"]), int(settings["views"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise store.ArtifactError(f"{where}: missing or bad entry {err}") from None
+        instances = self._haptic(haptic, part("haptic"), where)
+        objects = np.unique(instances.object_id).tolist()
+        if len(objects) != 1:
+            raise PredictError(
+                f"a multimodal unit joins trials of one object with that object's photographs; "
+                f"the trials given are of objects {objects}"
+            )
+        net = store.load_model(self.tracker, child, "parts/haptic")
+        photos = self._visual(visual, part("visual"), where)
+        seen = visual_units(photos, np.full(len(photos), objects[0]), views)
+        return multimodal_units(net, instances, n_trials, seen)
 
 
 def read_photographs(folder: Path, size: int) -> tuple[list[Path], np.ndarray]:
@@ -297,31 +422,6 @@ def read_photographs(folder: Path, size: int) -> tuple[list[Path], np.ndarray]:
     return paths, images
 
 
-def _visual_inputs(folder: Path, children: dict[str, str], tracker: Any) -> Any:
-    from tactile_exp.models.googlenet import build_trunk, network_input, pooled_features
-
-    first = next(iter(children.values()))
-    where = f"run {first}: artifact preprocess"
-    state = store.read_json(store.download(tracker, first, "preprocess", store.STATE_FILES), where)
-    paths, images = read_photographs(folder, int(state["size"]))
-    weights = state["weights"]
-    if weights is not None and not Path(weights).is_file():
-        raise PredictError(f"{where}: the GoogLeNet weights file {weights} is not there")
-    trunk = build_trunk(None if weights is None else Path(weights), state["seed"], state["layout"])
-    by_mean: dict[tuple[float, ...], np.ndarray] = {}
-
-    def instances(child: str) -> Instances:
-        folder_ = store.download(tracker, child, "preprocess", store.STATE_FILES)
-        mean = tuple(float(m) for m in store.read_arrays(folder_, where)["channel_mean"])
-        if mean not in by_mean:
-            by_mean[mean] = pooled_features(trunk, network_input(images, mean, state["layout"]))
-        names = np.array([f"{folder.name}_v{i:02d}" for i in range(len(paths))], dtype=object)
-        n = len(paths)
-        return Instances(by_mean[mean], np.zeros(n, np.int64), names, np.zeros(n, np.int64))
-
-    return instances
-
-
 def _apply(
     tracker: Any,
     child: str,
@@ -330,7 +430,11 @@ def _apply(
     combine: int,
     model_name: str,
     model_params: dict[str, Any],
+    *,
+    pad: bool,
 ) -> tuple[np.ndarray, list[str]]:
+    """One adjective's scores of ``instances`` and the units they belong to; ``pad``: the
+    modality's ``pad_units`` (views are never padded, row L)."""
     from tactile_exp.combine import COMBINERS
     from tactile_exp.models.registry import MODELS
 
@@ -348,7 +452,7 @@ def _apply(
                 counts[t] = counts.get(t, -1) + 1
                 names[i] = f"{t}#{counts[t]}"
         return model.decision_function(instances.X), names
-    units = combine_units(model.transform(instances.X), instances, combine)
+    units = combine_units(model.transform(instances.X), instances, combine, pad=pad)
     head = store.load_model(tracker, child, "head")
     return head.decision_function(units.X), [str(t) for t in units.trial]
 

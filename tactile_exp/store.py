@@ -99,8 +99,18 @@ def log_folder(tracker: Tracker, run_id: str, path: str, write: Callable[[Path],
         tracker.log_dir(run_id, Path(tmp), path)
 
 
+def model_name(model: Any) -> str:
+    """The name ``model``'s class is registered under in ``MODELS`` (what ``read_model`` builds)."""
+    from tactile_exp.models.registry import MODELS
+
+    for name in MODELS.names():
+        if MODELS[name] is type(model):
+            return name
+    raise KeyError(f"{type(model).__name__} is not a registered model")
+
+
 def write_model(folder: Path, name: str, model: Any) -> None:
-    """``model`` (a fitted ``SGDModel`` registered as ``name``) into ``folder``."""
+    """``model`` (a fitted storable model registered as ``name``) into ``folder``."""
     import torch
 
     tensors, arrays = model.state()

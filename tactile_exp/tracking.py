@@ -2,8 +2,8 @@
 
 Uses ``MlflowClient`` explicitly (no global active run) so every run is terminated exactly once:
 FINISHED on success, FAILED (with the error as a tag) on any exception. Jobs are idempotent: a
-job whose ``config_hash`` already has a FINISHED parent run is skipped, so re-running a crashed
-sweep's command resumes it.
+job whose ``config_hash`` already has a FINISHED parent run on the same data file (its
+``data.identity``) is skipped, so re-running a crashed sweep's command resumes it.
 
 What ``mlflow ui`` needs to show these runs as training runs: the experiment is tagged as
 traditional ML (``mlflow.experimentKind``; without it the UI opens on its GenAI traces page),
@@ -194,12 +194,15 @@ class Tracker:
                 time.sleep(0.5 * (attempt + 1))
         raise RuntimeError("unreachable")
 
-    def finished_run(self, config_hash: str) -> str | None:
+    def finished_run(self, config_hash: str, *, data_identity: str) -> str | None:
+        """A FINISHED job of ``config_hash`` on the data file ``data_identity`` (its
+        ``data.identity`` tag): the same config on another file (a new generator version, a
+        replaced or real file) has not been run, so it is not skipped."""
         runs = self.client.search_runs(
             [self.experiment_id],
             filter_string=(
                 f"tags.config_hash = '{config_hash}' and tags.run_level = 'parent' "
-                "and attributes.status = 'FINISHED'"
+                f"and tags.`data.identity` = '{data_identity}' and attributes.status = 'FINISHED'"
             ),
             max_results=1,
         )

@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 
@@ -29,7 +30,10 @@ def job(tiny_config, mlflow_uri):
 def _logged(uri: str, parent: str) -> dict[str, dict[str, float]]:
     client = MlflowClient(uri)
     exp = client.get_experiment_by_name("tactile_exp")
-    runs = client.search_runs([exp.experiment_id], f"tags.mlflow.parentRunId = '{parent}'")
+    runs = client.search_runs(
+        [exp.experiment_id],
+        f"tags.mlflow.parentRunId = '{parent}' and tags.run_level = 'child'",
+    )
     out = {}
     for child in runs:
         with open(client.download_artifacts(child.info.run_id, "scores.csv")) as f:
@@ -81,7 +85,7 @@ def test_predict_errors_are_clear(job, mlflow_uri, tmp_path, capsys):
     with h5py.File(broken, "a") as f:
         del f[trial]["biotacs/finger_0/pdc"]
     message = error([result.run_id, *base[:2], "--data", str(broken), "--trial", trial])
-    assert trial in message and "pdc" in message
+    assert trial in message and "pdc" in message and "artifact" not in message  # data, not job
 
     child = client.search_runs([exp.experiment_id], f"tags.mlflow.parentRunId = '{result.run_id}'")[
         0
@@ -125,3 +129,98 @@ def test_predict_from_photographs_equals_the_logged_scores(tiny_config, mlflow_u
         assert score == pytest.approx(logged[unit], abs=1e-5)
     with pytest.raises(PredictError, match="visual models"):
         predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=dataset.path, trials=[stem])
+
+
+def _test_object(logged: dict[str, float], dataset) -> tuple[int, list[str]]:
+    """A test object of the job and its logged units."""
+    by_name = {t.name: t.object_id for t in dataset.trials}
+    obj = by_name[sorted(logged)[0]]
+    return obj, sorted(u for u in logged if by_name[u] == obj)
+
+
+@pytest.mark.parametrize(
+    "row",
+    [
+        "table1_a_haptic_static_1trial",
+        pytest.param("table1_b_haptic_static_10trials", marks=pytest.mark.slow),
+        pytest.param("table1_e_haptic_static_dynamic_1trial", marks=pytest.mark.slow),
+        pytest.param("table1_f_haptic_static_1trial_dynamic_10trials", marks=pytest.mark.slow),
+    ],
+)
+def test_predict_baseline_rows_equal_the_logged_scores(tiny_config, mlflow_uri, row):
+    """Rows A-F: the stored static PCA, HMM chains and SVM (or head) score a test object's
+    trials as the job scored them."""
+    settings = settings_from_config(tiny_config([f"experiment={row}"], "[hard]"))
+    result = run(settings)
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+    logged = _logged(mlflow_uri, result.run_id)["hard"]
+    obj, units = _test_object(logged, dataset)
+    got = predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=dataset.path, object_id=obj)
+    assert got.units == units
+    np.testing.assert_allclose(got.scores[:, 0], [logged[u] for u in units], atol=1e-5)
+
+
+def test_baseline_artifacts_corrupt_or_missing_are_clear_errors(tiny_config, mlflow_uri):
+    settings = settings_from_config(
+        tiny_config(["experiment=table1_c_haptic_dynamic_1trial"], "[hard]")
+    )
+    result = run(settings)
+    data = DATA_SOURCES.build(settings.data.name, **settings.data.params).path
+    trial = sorted(_logged(mlflow_uri, result.run_id)["hard"])[0]
+    client = MlflowClient(mlflow_uri)
+    child = client.search_runs(
+        [client.get_experiment_by_name("tactile_exp").experiment_id],
+        f"tags.mlflow.parentRunId = '{result.run_id}'",
+    )[0]
+    folder = Path(child.info.artifact_uri.removeprefix("file://"))
+    for path, expected in (
+        ("preprocess/arrays.npz", "preprocess/arrays.npz is not a readable npz"),
+        ("model/arrays.npz", "model/arrays.npz is not a readable npz"),
+    ):
+        kept = (folder / path).read_bytes()
+        (folder / path).write_bytes(b"garbage")
+        with pytest.raises(
+            store.ArtifactError, match=f"run {child.info.run_id}: artifact {expected}"
+        ):
+            predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=data, trials=[trial])
+        (folder / path).write_bytes(kept)
+    (folder / "preprocess" / "arrays.npz").unlink()
+    with pytest.raises(store.ArtifactError, match=r"artifact preprocess/ lacks arrays.npz"):
+        predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=data, trials=[trial])
+
+
+def test_random_guess_job_is_refused(tiny_config, mlflow_uri):
+    overrides = ["experiment=table1_o_random"]
+    settings = settings_from_config(tiny_config(overrides, "[hard]"))
+    result = run(settings)
+    data = DATA_SOURCES.build(settings.data.name, **settings.data.params).path
+    with pytest.raises(PredictError, match="random-guess job.*keeps no model"):
+        predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=data, object_id=1)
+
+
+@pytest.mark.slow  # a multimodal job: trains the ConvNet part and prepares photographs
+def test_predict_multimodal_row_equals_the_logged_scores(tiny_config, mlflow_uri, tmp_path):
+    small = ["modality.visual.size=32", "modality.visual.batch_size=128"]
+    overrides = ["experiment=table1_m_multimodal_i_l", *small]
+    settings = settings_from_config(tiny_config(overrides, "[hard]"))
+    result = run(settings)
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+    logged = _logged(mlflow_uri, result.run_id)["hard"]
+    obj, units = _test_object(logged, dataset)
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for path in dataset.photographs()[obj]:
+        shutil.copy(path, folder / path.name)
+    args = {"run_id": result.run_id, "tracking_uri": mlflow_uri, "data": dataset.path}
+    got = predict(**args, object_id=obj, photos=folder)
+    assert got.units == units
+    np.testing.assert_allclose(got.scores[:, 0], [logged[u] for u in units], atol=1e-5)
+
+    with pytest.raises(PredictError, match="give a folder of photographs and the object's"):
+        predict(**args, object_id=obj)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(PredictError, match="no photographs"):
+        predict(**args, object_id=obj, photos=tmp_path / "empty")
+    other = next(t.name for t in dataset.trials if t.object_id != obj)
+    with pytest.raises(PredictError, match="trials of one object"):
+        predict(**args, trials=[units[0], other], photos=folder)

@@ -5,6 +5,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
+import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -234,3 +237,36 @@ def test_reuse_switch_rejects_non_booleans():
 
     with pytest.raises(ConfigError, match=r"^tracking.reuse: must be true or false, got 'yes'$"):
         store.reuse_enabled({"tracking": {"reuse": "yes"}})
+
+
+def test_resume_skips_a_finished_job_only_on_the_same_data_file(tiny_config, mlflow_uri, tmp_path):
+    """skip-if-finished keys on the data file's identity too: the same config on a changed file
+    (another generator version, a replaced or real file) runs again."""
+    from tactile_exp.data.sources import DATA_SOURCES
+
+    generated = settings_from_config(tiny_config([], ONE)).data
+    source = DATA_SOURCES.build(generated.name, **generated.params).path
+    copy = tmp_path / "phac2.h5"
+    shutil.copy(source, copy)
+    overrides = ["data=phac2", f"data.path={copy}", "model=random", "combine_instances=separate"]
+    first = run(settings_from_config(tiny_config(overrides, ONE)))
+    assert not first.skipped
+    assert run(settings_from_config(tiny_config(overrides, ONE))).skipped  # same file: resume
+    os.utime(copy, ns=(time.time_ns(), time.time_ns() + 10**9))  # another file at that path
+    again = run(settings_from_config(tiny_config(overrides, ONE)))
+    assert not again.skipped and again.run_id != first.run_id
+    client = MlflowClient(mlflow_uri)
+    identity = [client.get_run(r.run_id).data.tags["data.identity"] for r in (first, again)]
+    assert identity[0] != identity[1]
+    assert run(settings_from_config(tiny_config(overrides, ONE))).skipped
+
+
+def test_visual_units_are_row_l_units_never_padded_beyond_an_object_with_fewer_views():
+    from tactile_exp.modalities.multimodal import visual_units
+
+    features = np.arange(13, dtype=np.float32)[:, None] * np.ones((1, 2), np.float32)
+    object_id = np.array([5] * 10 + [7] * 3)
+    units = visual_units(features, object_id, 8)
+    assert sorted(units) == [5, 7]
+    np.testing.assert_array_equal(units[5], features[:8].reshape(-1))  # views 0-7, no 2nd unit
+    np.testing.assert_array_equal(units[7], features[[10, 11, 12, 10, 11, 12, 10, 11]].reshape(-1))

@@ -451,6 +451,18 @@ class StaticFeatures:
             self.axes_.append((mean, principal_axes(scatter, N_ELECTRODE_PCS)))
         return self
 
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The fitted per-EP PCA (mean, axes) as named arrays (kept with a stored model)."""
+        out = {}
+        for e, (mean, axes) in enumerate(self.axes_ or []):
+            out[f"mean{e}"], out[f"axes{e}"] = mean, axes
+        return out
+
+    def load_arrays(self, a: dict[str, np.ndarray]) -> StaticFeatures:
+        """Restore the fitted PCA saved by ``arrays`` (in place of ``fit``)."""
+        self.axes_ = [(a[f"mean{e}"], a[f"axes{e}"]) for e in range(len(PHASES))]
+        return self
+
     def feature_names(self, table: StaticTable) -> list[str]:
         per_ep = [*table.names, *polyfit_names(self.interleave)]
         return [f"{ep}/{n}" for ep in PHASES for n in per_ep]

@@ -13,7 +13,8 @@ draw's 3 objects rarely hold both classes).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
@@ -143,6 +144,7 @@ class LinearSVMModel(Model):
     """The `Model` face of `ObjectCVLinearSVM` (Table I rows A-F); groups = object ids."""
 
     learns_representation = False
+    storable = True  # state()/restore(): the scaler's and the SVM's fitted arrays (store.py)
 
     def __init__(
         self,
@@ -164,7 +166,35 @@ class LinearSVMModel(Model):
 
     def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
         self.svm.fit(train.X.reshape(len(train), -1), train.y, train.object_id)
+        self.input_shape_ = tuple(train.X.shape[1:])
         return {}
+
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """No tensors; C and the fitted scaler and SVM as arrays: what ``restore`` takes."""
+        scaler, svc = self.svm.pipeline_[0], self.svm.pipeline_[-1]
+        arrays = {"C": np.float64(self.svm.C_), "mean": scaler.mean_, "scale": scaler.scale_}
+        return {}, arrays | {"coef": svc.coef_, "intercept": svc.intercept_}
+
+    def restore(
+        self,
+        input_shape: tuple[int, ...],
+        tensors: Mapping[str, Any],
+        arrays: Mapping[str, np.ndarray],
+    ) -> LinearSVMModel:
+        """The fitted model from ``state()``'s output; scores exactly as the one that wrote it."""
+        width = int(np.prod(input_shape))
+        shapes = {"mean": (width,), "scale": (width,), "coef": (1, width), "intercept": (1,)}
+        for key, shape in shapes.items():
+            if np.shape(arrays[key]) != shape:
+                raise ValueError(f"{key}: shape {np.shape(arrays[key])}, expected {shape}")
+        self.svm.C_ = float(arrays["C"])
+        self.svm.pipeline_ = self.svm._pipeline(self.svm.C_)
+        scaler, svc = self.svm.pipeline_[0], self.svm.pipeline_[-1]
+        scaler.mean_, scaler.scale_ = arrays["mean"], arrays["scale"]
+        svc.coef_, svc.intercept_, svc.classes_ = arrays["coef"], arrays["intercept"], np.arange(2)
+        scaler.n_features_in_ = svc.n_features_in_ = width
+        self.input_shape_ = tuple(input_shape)
+        return self
 
     def decision_function(self, X: np.ndarray) -> np.ndarray:
         return self.svm.decision_function(X.reshape(len(X), -1))

@@ -2,7 +2,9 @@
 
 One instance per haptic unit: the frozen haptic ConvNet's conv3 activations of ``trials`` trials
 of one object (row I's unit at 1, row J's at 10, concatenated as T4 does) followed by the
-L2-normalised inception (5a) features of the object's first ``views`` photographs (row L's unit).
+L2-normalised inception (5a) features of the object's first ``views`` photographs (row L's unit,
+built by the visual modality's rule: ``unit_members`` without padding). ``multimodal_units`` and
+``visual_units`` build the units for training and for ``predict`` alike.
 The ConvNet is the ``haptic`` part: the engine finds it by its training key (the model rows H, I
 and J train) or trains it in the job when absent, per adjective. The visual trunk is frozen and
 untrained (its features are cached on disk by weights file), so it needs no lookup. The model on
@@ -17,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.combine import COMBINERS
+from tactile_exp.combine import COMBINERS, unit_members
 from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
@@ -25,6 +27,7 @@ from tactile_exp.data.splits import split_photographs
 from tactile_exp.modalities.base import MODALITIES, Modality
 from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.modalities.visual import Visual
+from tactile_exp.models.base import Model
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +37,36 @@ def _component(node: dict[str, Any], key: str) -> Component:
         raise ValueError(f"modality.{key}: expected a mapping with a 'name' key, got {node!r}")
     params = {k: v for k, v in node.items() if k not in ("name", "_module_")}
     return Component(str(node["name"]), params)
+
+
+def visual_units(features: np.ndarray, object_id: np.ndarray, views: int) -> dict[int, np.ndarray]:
+    """Each object's visual unit from its photographs' features (rows in view order within an
+    object): row L's unit, built as the ``visual`` modality combines views (``unit_members``
+    without padding): its first ``views`` views, or all of them repeated in order when fewer."""
+    n = len(features)
+    rank = np.zeros(n, np.int64)
+    for obj in np.unique(object_id):
+        rows = np.flatnonzero(object_id == obj)
+        rank[rows] = np.arange(len(rows))
+    names = np.array([f"{o}_v{r:04d}" for o, r in zip(object_id, rank, strict=True)], dtype=object)
+    photos = Instances(features, np.zeros(n, np.int64), names, np.asarray(object_id))
+    units: dict[int, np.ndarray] = {}
+    for members in unit_members(photos, views, pad=Visual.pad_units):
+        units.setdefault(int(object_id[members[0]]), features[members].reshape(-1))
+    return units
+
+
+def multimodal_units(
+    net: Model, haptic: Instances, trials: int, visual: dict[int, np.ndarray]
+) -> Instances:
+    """Rows M/N's instances: the ConvNet ``net``'s conv3 of ``trials`` trials of an object
+    concatenated (row I/J's unit, padded as the ``haptic`` modality pads), then the object's
+    visual unit (``visual``: object id -> its ``visual_units`` entry). Training and predict
+    both build their units here."""
+    units = COMBINERS.build("concat")(net.transform(haptic.X), haptic, trials, pad=Haptic.pad_units)
+    seen = np.stack([visual[int(o)] for o in units.object_id])
+    X = np.hstack([units.X, seen]).astype(np.float32)
+    return Instances(X, units.y, units.trial, units.object_id)
 
 
 @MODALITIES.register("multimodal")
@@ -87,25 +120,19 @@ class Multimodal(Modality):
         self.missing_ = set(int(o) for o in self.visual.arrays.missing)
 
     def _visual_units(self, split: Split) -> dict[int, np.ndarray]:
-        """Each object's first ``views`` photographs' features concatenated (repeated if fewer)."""
+        """Each object's visual unit (``visual_units``) from its photographs in view order."""
         arrays = self.visual.arrays
         if self.visual.mean == "train":
             train_idx, _, _ = split_photographs(split, arrays.object_id)
             self.visual.features.fit(train_idx)
         features = self.visual.features.transform(np.arange(len(arrays.object_id)))
-        units = {}
-        for obj in np.unique(arrays.object_id):
-            rows = np.flatnonzero(arrays.object_id == obj)
-            rows = rows[np.argsort(arrays.view[rows], kind="stable")][: self.views]
-            chosen = [rows[i % len(rows)] for i in range(self.views)]
-            units[int(obj)] = features[chosen].reshape(-1)
-        return units
+        order = np.lexsort((arrays.view, arrays.object_id))
+        return visual_units(features[order], arrays.object_id[order], self.views)
 
     def instances(self, split: Split) -> tuple[Instances, Instances]:
         train, test = self.haptic.instances(split)
         net = self.provide("haptic", split, train)
         visual = self._visual_units(split)
-        concat = COMBINERS.build("concat")
         out = []
         left_out: set[int] = set()
         for part, inst in (("train", train), ("test", test)):
@@ -118,10 +145,7 @@ class Multimodal(Modality):
                     f"photographs hold labels {np.unique(kept.y).tolist()}, expected positives "
                     f"and negatives (objects without photographs: {sorted(self.missing_)})"
                 )
-            units = concat(net.transform(kept.X), kept, self.trials)
-            seen = np.stack([visual[int(o)] for o in units.object_id])
-            X = np.hstack([units.X, seen]).astype(np.float32)
-            out.append(Instances(X, units.y, units.trial, units.object_id))
+            out.append(multimodal_units(net, kept, self.trials, visual))
         self.left_out_ = sorted(left_out)
         if left_out:
             log.warning(
