@@ -250,3 +250,15 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
     with Image.open(path) as image:
         assert image.size == figures.fig6_size(2) == (900, 800)
         assert np.asarray(image.convert("L")).std() > 10
+
+
+def test_runs_table_lists_a_job_and_its_children(table3_tracker, mlflow_uri, capsys):
+    job = runs.row_group(runs.collect(table3_tracker), "I").first_run
+    cli.main(["--tracking-uri", mlflow_uri, "--experiment", "table3_test", "--runs-table"] + [
+        job.run_id])  # fmt: skip
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("| Run Name |") and len(lines) == 2 + 1 + 2
+    parent = lines[2].split(" | ")
+    assert parent[0] == "| table1_i_haptic_cnn_1trial-s0"
+    assert parent[-2] == f"{job.mean_auc:.3f}" and parent[3].startswith("python -m tactile_exp")
+    assert [line.split(" | ")[0] for line in lines[3:]] == ["| └ adj=hard", "| └ adj=soft"]

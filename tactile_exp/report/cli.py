@@ -234,7 +234,7 @@ def main(argv: list[str] | None = None) -> None:
         action="append",
         default=[],
         metavar="TRIAL",
-        help="Fig. 6 on this test trial, e.g. aluminum_channel_701_03 (repeat; default: the "
+        help="Fig. 6 on this test trial, e.g. aluminum_bar_701_03 (repeat; default: the "
         "best and the worst scored positive test trials of each adjective)",
     )
     parser.add_argument(

@@ -59,7 +59,9 @@ def fig6(maps: list[Conv3Map], signals: list[str], title: str, path: Path) -> No
     """One adjective's conv3 maps side by side (channel x time, darker = higher, one grey scale
     for the figure), rows labelled by input signal, EP blocks split by red lines."""
     plt = _pyplot()
-    channels, steps = maps[0].activations.shape
+    from matplotlib.ticker import MaxNLocator
+
+    channels = maps[0].activations.shape[0]
     if channels % len(signals):
         raise ReportError(
             f"conv3 has {channels} channels, not a multiple of {len(signals)} signals"
@@ -70,7 +72,7 @@ def fig6(maps: list[Conv3Map], signals: list[str], title: str, path: Path) -> No
     fig, axes = plt.subplots(1, len(maps), figsize=(width_px / DPI, height_px / DPI), sharey=True)
     axes = np.atleast_1d(axes)
     left = FIG6_MARGIN / (width_px / DPI)
-    fig.subplots_adjust(left=left, right=0.98, top=0.88, bottom=0.08, wspace=0.08)
+    fig.subplots_adjust(left=left, right=0.91, top=0.88, bottom=0.08, wspace=0.08)
     for ax, m in zip(axes, maps, strict=True):
         image = ax.imshow(
             m.activations, aspect="auto", cmap="Greys", vmin=0, vmax=vmax, interpolation="nearest"
@@ -85,10 +87,12 @@ def fig6(maps: list[Conv3Map], signals: list[str], title: str, path: Path) -> No
             fontsize=8,
         )
         ax.set_xlabel("conv3 time step\n(each EP resampled to its own length)", fontsize=7)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.tick_params(axis="x", labelsize=7)
     axes[0].set_yticks(np.arange(len(signals)) * width + (width - 1) / 2, signals, fontsize=5.5)
     axes[0].set_ylabel(f"conv3 channel ({width} filters per input signal)", fontsize=8)
-    fig.colorbar(image, ax=list(axes), fraction=0.03, pad=0.01).ax.tick_params(labelsize=7)
+    colorbar = fig.colorbar(image, cax=fig.add_axes((0.93, 0.3, 0.015, 0.4)))
+    colorbar.ax.tick_params(labelsize=7)
     fig.suptitle(title, fontsize=9)
     fig.savefig(path, dpi=DPI)
     plt.close(fig)

@@ -15,12 +15,12 @@ def _cells(run) -> list[str]:
     created = datetime.fromtimestamp(info.start_time / 1000, UTC)
     seconds = ((info.end_time or info.start_time) - info.start_time) / 1000
     datasets = [f"{d.dataset.name} ({d.dataset.digest})" for d in run.inputs.dataset_inputs]
-    metrics = data.metrics
+    metrics, commit = data.metrics, data.tags.get("mlflow.source.git.commit", "")
     return [
         info.run_name,
         f"{created:%Y-%m-%d %H:%M:%S}",
         f"{seconds:.1f} s" if seconds < 120 else f"{seconds / 60:.1f} min",
-        data.tags.get("mlflow.source.name", ""),
+        data.tags.get("mlflow.source.name", "") + (f" @ {commit[:7]}" if commit else ""),
         ", ".join(datasets),
         f"{metrics['mean_auc']:.3f}" if "mean_auc" in metrics else "",
         f"{metrics['auc']:.3f}" if "auc" in metrics else "",
