@@ -57,10 +57,19 @@ def job_config(tracker: Tracker, job_id: str) -> dict[str, Any]:
     return config
 
 
+def first_per_unit(units: list[UnitScore]) -> dict[str, UnitScore]:
+    """Unit name -> its first line: row H scores each instance of a trial under the trial's
+    name, and the first is finger_0, offset 0, the instance Fig. 6 shows."""
+    out: dict[str, UnitScore] = {}
+    for unit in units:
+        out.setdefault(unit.unit, unit)
+    return out
+
+
 def pick_units(units: list[UnitScore], n: int) -> list[UnitScore]:
     """``n`` test trials spread over the positive ones by score, best first (so both correct and
     wrong decisions show when there are any); all test trials when none is positive."""
-    unique = list({u.unit: u for u in units}.values())
+    unique = list(first_per_unit(units).values())
     pool = [u for u in unique if u.label == 1] or unique
     pool.sort(key=lambda u: -u.score)
     index = np.unique(np.linspace(0, len(pool) - 1, min(n, len(pool))).round().astype(int))
@@ -103,7 +112,7 @@ def conv3_maps(
     maps, signals = [], []
     for adjective in (a for a in adjectives if a in found):
         child = found[adjective]
-        units = {u.unit: u for u in read_scores(tracker, child)}
+        units = first_per_unit(read_scores(tracker, child))
         if trials:
             absent = [t for t in trials if t not in units]
             if absent:

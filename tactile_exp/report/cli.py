@@ -139,7 +139,7 @@ def _table3(groups: list[Group], tracker: Tracker, choices: Choices) -> list[dic
     rows = t3.read_rows(tracker, groups)
     if not choices.table3_objects:
         return t3.table3(rows, t3.choose_objects(rows))
-    common = t3.choose_objects(rows, n=len(ADJECTIVES) * 100)
+    common = t3.choose_objects(rows, n=None)
     absent = [o for o in choices.table3_objects if o not in common]
     if absent:
         raise ReportError(

@@ -68,8 +68,9 @@ def read_rows(tracker: Tracker, groups: list[Group]) -> dict[str, RowScores | No
     return out
 
 
-def choose_objects(rows: dict[str, RowScores | None], n: int = N_OBJECTS) -> list[int]:
-    """The ``n`` objects tested on the most adjectives in every row that ran (ties: lower id)."""
+def choose_objects(rows: dict[str, RowScores | None], n: int | None = N_OBJECTS) -> list[int]:
+    """The ``n`` (None: all) objects tested on the most adjectives in every row that ran
+    (ties: the lower id first)."""
     ran = [r for r in rows.values() if r is not None]
     if not ran:
         return []
