@@ -1,4 +1,5 @@
-"""The report from runs logged as jobs log them: grouping, labels, numbers, files, CLI errors."""
+"""The report from runs logged as jobs log them: grouping, labels, numbers, files, CLI errors,
+Table III from held-out scores, Fig. 6 from a stored ConvNet."""
 
 import csv
 import shutil
@@ -8,8 +9,11 @@ import pytest
 from mlflow.tracking import MlflowClient
 from PIL import Image
 
-from tactile_exp import report
+from tactile_exp import experiment, store
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.report import activations, cli, figures, runs, scores, table1
+from tactile_exp.report import table3 as t3
 from tactile_exp.tracking import Tracker
 
 ROW_A = {"choice.experiment": "table1_a_haptic_static_1trial", "paper.row": "A"}
@@ -64,7 +68,7 @@ def tracker(mlflow_uri):
 
 
 def test_groups_count_each_seed_once_and_label_variants(tracker):
-    groups = {g.key: g for g in report.collect(tracker)}
+    groups = {g.key: g for g in runs.collect(tracker)}
     assert set(groups) == {"a", "a-1adj", "k", "i-quick", "i-c10", "i"}
     a = groups["a"]
     assert sorted(a.runs) == [0, 1] and a.at_paper_settings
@@ -74,11 +78,11 @@ def test_groups_count_each_seed_once_and_label_variants(tracker):
     assert groups["i-quick"].differences == ("schedule=quick",)
     assert groups["i-c10"].differences == ("combine=10",)
     assert groups["a-1adj"].differences == ("1 adjectives",)
-    assert [g.row for g in report.collect(tracker, sweep_id="s1")][:2] == ["A", "A"]
+    assert [g.row for g in runs.collect(tracker, sweep_id="s1")][:2] == ["A", "A"]
 
 
 def test_table_numbers_and_labels(tracker):
-    rows = report.table1(report.collect(tracker))
+    rows = table1.table1(runs.collect(tracker))
     a = next(r for r in rows if r["seeds"] == "0 1")
     mean_a = 0.65 + np.mean(0.01 * np.arange(24))
     assert float(a["mean_auc"]) == pytest.approx(mean_a, abs=1e-6)
@@ -90,24 +94,28 @@ def test_table_numbers_and_labels(tracker):
         "synthetic-abc",
     )
     assert len(a["run_ids"].split()) == 2
-    md = report.table1_markdown(rows)
+    md = table1.table1_markdown(rows)
     quick = next(line for line in md.splitlines() if "schedule=quick" in line)
     assert quick.startswith("| (I) |") and "83.2" in quick
     assert md.count("| I | `table1_i_haptic_cnn_1trial` | paper |") == 1
 
 
 def test_written_files_read_back(tracker, tmp_path):
-    groups = report.collect(tracker)
-    paths = report.write(groups, tmp_path / "out", "test")
+    groups = runs.collect(tracker)
+    paths = cli.write(
+        groups=groups, out=tmp_path / "out", source="test", tracker=tracker, choices=cli.Choices()
+    )
     assert [p.name for p in paths] == [
         "table1.md",
         "table1.csv",
         "per_adjective.csv",
         "fig5_per_adjective.png",
+        "table3.md",
+        "table3.csv",
         "index.md",
     ]
     with open(tmp_path / "out" / "table1.csv") as f:
-        assert list(csv.DictReader(f)) == report.table1(groups)
+        assert list(csv.DictReader(f)) == table1.table1(groups)
     with open(tmp_path / "out" / "per_adjective.csv") as f:
         lines = {r["row_hash"]: r for r in csv.DictReader(f)}
     assert float(lines["a"]["metallic"]) == pytest.approx(
@@ -118,14 +126,16 @@ def test_written_files_read_back(tracker, tmp_path):
         assert image.size == (1200, 450)
         assert np.asarray(image.convert("L")).std() > 10  # drawn, not blank
     # Fig. 5 takes row I at the paper's settings, not its stronger combine=10 variant.
-    assert report.best(groups, report.HAPTIC).key == "i"
-    assert report.best(groups, ("visual",)).key == "k"
+    assert runs.best(groups, runs.HAPTIC).key == "i"
+    assert runs.best(groups, ("visual",)).key == "k"
     index = (tmp_path / "out" / "index.md").read_text()
     assert "![Fig. 5](fig5_per_adjective.png)" in index and "`table1_i_haptic_cnn_1trial`" in index
+    # Row I's runs here hold no models: Fig. 6 says why it is missing, the rest stands.
+    assert "Not drawn: run " in index and "config.yaml unreadable" in index
 
 
 def test_cli_logs_a_report_run(tracker, mlflow_uri, tmp_path, capsys):
-    report.main(["--tracking-uri", mlflow_uri, "--experiment", "report_test"] + [
+    cli.main(["--tracking-uri", mlflow_uri, "--experiment", "report_test"] + [
         "--sweep-id", "s1", "--out", str(tmp_path / "r")])  # fmt: skip
     client = MlflowClient(mlflow_uri)
     runs = client.search_runs([tracker.experiment_id], "tags.run_level = 'report'")
@@ -139,7 +149,116 @@ def test_cli_logs_a_report_run(tracker, mlflow_uri, tmp_path, capsys):
 def test_cli_names_what_is_missing(tracker, mlflow_uri, tmp_path):
     out = ["--tracking-uri", mlflow_uri, "--out", str(tmp_path / "r")]
     with pytest.raises(SystemExit, match="no MLflow experiment 'nope'.*report_test"):
-        report.main([*out, "--experiment", "nope"])
+        cli.main([*out, "--experiment", "nope"])
     with pytest.raises(SystemExit, match="no FINISHED job runs .* sweep_id 'zzz'"):
-        report.main([*out, "--experiment", "report_test", "--sweep-id", "zzz"])
+        cli.main([*out, "--experiment", "report_test", "--sweep-id", "zzz"])
     assert not (tmp_path / "r").exists()
+
+
+# Table III: (row, adjective) -> [(object id, label, scores of its test units)].
+SCORES = {
+    ("I", "hard"): [(509, 1, [0.5, -0.1]), (120, 0, [-1.0])],
+    ("I", "soft"): [(509, 1, [-0.3]), (119, 0, [0.2])],
+    ("L", "hard"): [(509, 1, [-0.2]), (120, 0, [0.4])],
+    ("L", "soft"): [(509, 1, [0.1])],
+}
+
+
+@pytest.fixture(scope="module")
+def table3_tracker(mlflow_uri):
+    """Rows I and L (not M) as jobs with per-adjective child runs holding scores.csv."""
+    tracker = Tracker(mlflow_uri, "table3_test")
+    for row, params in (("I", ROW_I), ("L", {**ROW_K, "paper.row": "L"})):
+        _log(tracker, row, params, 0, "", False, 0.6, adjectives=["hard", "soft"])
+        job = tracker.client.search_runs([tracker.experiment_id], f"tags.row_hash = '{row}'")[
+            0
+        ].info.run_id
+        for adjective in ("hard", "soft"):
+            lines = ["unit,object_id,label,score"]
+            for object_id, label, values in SCORES[(row, adjective)]:
+                lines += [f"t{object_id}_{i},{object_id},{label},{s}" for i, s in enumerate(values)]
+            tags = {"run_level": "child", "adjective": adjective}
+            with tracker.run(f"adj={adjective}", {}, tags, job) as child:
+                tracker.log_text(child, "\n".join(lines) + "\n", "scores.csv")
+    return tracker
+
+
+def test_table3_predicted_sets_from_held_out_scores(table3_tracker, tmp_path):
+    rows = t3.read_rows(table3_tracker, runs.collect(table3_tracker))
+    assert rows["M"] is None and rows["I"].scores["hard"][509] == pytest.approx((0.2, 1))
+    # 509 is tested on both adjectives in both rows, 120 on one; 119 only in row I.
+    assert t3.choose_objects(rows) == [509, 120]
+    lines = t3.table3(rows, [509, 120])
+    got = {(r["object_id"], r["row"]): r for r in lines}
+    assert got["509", "I"]["tested_adjectives"] == "hard soft"
+    assert got["509", "I"]["ground_truth"] == "hard soft"
+    assert (got["509", "I"]["predicted"], got["509", "I"]["agree"]) == ("hard", "1/2")
+    assert (got["509", "L"]["predicted"], got["509", "L"]["agree"]) == ("soft", "1/2")
+    assert (got["120", "L"]["predicted"], got["120", "L"]["agree"]) == ("hard", "0/1")
+    assert got["120", "M"]["predicted"] == "not run" and got["120", "I"]["ground_truth"] == ""
+    paths = t3.write_table3(lines, tmp_path)
+    with open(paths[1]) as f:
+        assert list(csv.DictReader(f)) == lines
+    md = paths[0].read_text()
+    assert "| hard (1/2 agree) | soft (1/2 agree) | not run |" in md
+
+
+def test_table3_objects_chosen_on_the_command_line(table3_tracker, mlflow_uri, tmp_path):
+    out = tmp_path / "r"
+    args = ["--tracking-uri", mlflow_uri, "--experiment", "table3_test", "--out", str(out)]
+    cli.main([*args, "--table3-object", "120"])
+    with open(out / "table3.csv") as f:
+        assert {r["object_id"] for r in csv.DictReader(f)} == {"120"}
+    with pytest.raises(SystemExit, match=r"objects \[119\] .* those are \[120, 509\]"):
+        cli.main([*args, "--table3-object", "119"])
+
+
+def test_signal_names_follow_the_preprocessing_channel_order():
+    names = activations.signal_names(4)
+    assert len(names) == 32 and names[:5] == [
+        "squeeze PAC", "squeeze PDC", "squeeze TAC", "squeeze TDC", "squeeze PC1"]  # fmt: skip
+    assert names[8] == "hold PAC" and names[-1] == "fast_slide PC4"
+
+
+def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tmp_path):
+    settings = settings_from_config(tiny_config([], "[metallic,hard]"))
+    job = experiment.run(settings)
+    tracker = Tracker(settings.tracking.uri, settings.tracking.experiment)
+    data = activations.conv3_maps(
+        tracker=tracker, job_id=job.run_id, adjectives=["metallic", "compressible"]
+    )
+    assert data.missing == ["compressible"] and len(data.signals) == 32
+    assert [m.adjective for m in data.maps] == ["metallic", "metallic"]
+    assert data.maps[0].unit.score >= data.maps[1].unit.score  # best, then worst positive
+
+    # The same trials through the job's own path: its modality fits the preprocessing on the
+    # training trials; the stored ConvNet's conv3 of each trial's first instance must match.
+    result = job.results["metallic"]
+    _, modality, splits = experiment.load(settings)
+    _, test = modality.instances(splits["metallic"])
+    child = scores.children(tracker, job.run_id)["metallic"]
+    net = store.load_model(tracker, child, "model")
+    for m in data.maps:
+        assert m.unit.label == 1 and m.unit.unit in set(result.units)
+        first = int(np.flatnonzero(test.trial == m.unit.unit)[0])
+        expected = net.transform(test.X[first : first + 1]).reshape(net.conv3_shape_)
+        assert m.activations == pytest.approx(expected, abs=1e-5)
+        assert m.activations.min() >= 0 and m.activations.max() > 0  # ReLU'd, not all zero
+
+    path = tmp_path / "fig6.png"
+    figures.fig6(data.maps, data.signals, "test", path)
+    with Image.open(path) as image:
+        assert image.size == figures.fig6_size(2) == (900, 800)
+        assert np.asarray(image.convert("L")).std() > 10
+
+
+def test_runs_table_lists_a_job_and_its_children(table3_tracker, mlflow_uri, capsys):
+    job = runs.row_group(runs.collect(table3_tracker), "I").first_run
+    cli.main(["--tracking-uri", mlflow_uri, "--experiment", "table3_test", "--runs-table"] + [
+        job.run_id])  # fmt: skip
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("| Run Name |") and len(lines) == 2 + 1 + 2
+    parent = lines[2].split(" | ")
+    assert parent[0] == "| table1_i_haptic_cnn_1trial-s0"
+    assert parent[-2] == f"{job.mean_auc:.3f}" and parent[3].startswith("python -m tactile_exp")
+    assert [line.split(" | ")[0] for line in lines[3:]] == ["| └ adj=hard", "| └ adj=soft"]

@@ -17,7 +17,7 @@ from mlflow.tracking import MlflowClient
 from PIL import Image
 from test_extending import table1_rows
 
-from tactile_exp import report
+from tactile_exp.report import cli, figures, table3
 
 
 def _jobs(sweep: str, *arguments: str) -> list[list[str]]:
@@ -59,8 +59,9 @@ def test_smoke_sweep_and_report(cache_dir, mlflow_uri, tmp_path):
         [sys.executable, "-m", "tactile_exp", "-m", "sweep=smoke", *args], check=True, timeout=900
     )
     out = tmp_path / "report"
-    report.main(["--tracking-uri", mlflow_uri, "--experiment", "tactile_exp_smoke"] + [
-        "--out", str(out)])  # fmt: skip
+    cli.main(
+        ["--tracking-uri", mlflow_uri, "--experiment", "tactile_exp_smoke"] + ["--out", str(out)]
+    )  # fmt: skip (defaults: Fig. 6 of metallic and compressible)
 
     client = MlflowClient(mlflow_uri)
     experiment = client.get_experiment_by_name("tactile_exp_smoke")
@@ -86,12 +87,27 @@ def test_smoke_sweep_and_report(cache_dir, mlflow_uri, tmp_path):
                 assert float(line[adjective]) == pytest.approx(
                     run.data.metrics[f"auc.{adjective}"], abs=1e-6
                 )
-    with Image.open(out / "fig5_per_adjective.png") as image:
-        assert image.size == (1200, 450)
-        assert np.asarray(image.convert("L")).std() > 10
+    sizes = {"fig5_per_adjective.png": (1200, 450), "fig6_metallic.png": figures.fig6_size(2)}
+    for name, size in sizes.items():
+        with Image.open(out / name) as image:
+            assert image.size == size
+            assert np.asarray(image.convert("L")).std() > 10
     index = (out / "index.md").read_text()
-    for name in ("table1.csv", "per_adjective.csv", "fig5_per_adjective.png"):
+    for name in ("table1.csv", "per_adjective.csv", "table3.csv", *sizes):
         assert f"]({name})" in index
+    # The smoke grid trains hard and metallic only: Fig. 6 says compressible is not there.
+    assert "- compressible: not among the job's adjectives." in index
+    assert not (out / "fig6_compressible.png").exists()
+    with open(out / "table3.csv") as f:
+        lines = list(csv.DictReader(f))
+    assert [line["row"] for line in lines] == ["I", "L", "M"] * 3  # three objects, three rows
+    for line in lines:
+        job = parents[line["run_id"]]
+        assert job.data.params["paper.row"] == line["row"]
+        assert line["predicted"] != table3.NOT_RUN and line["agree"].endswith("/2")
+    assert {line["tested_adjectives"] for line in lines} == {"hard metallic"}
+    assert (out / "table3.md").read_text().count("\n") == 2 + 3
     reports = client.search_runs([experiment.experiment_id], "tags.run_level = 'report'")
     listed = {a.path for a in client.list_artifacts(reports[0].info.run_id, "report")}
     assert listed == {f"report/{p.name}" for p in out.iterdir()}
+    assert len(listed) == 8

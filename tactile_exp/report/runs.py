@@ -1,0 +1,171 @@
+"""The tracked runs the report reads: FINISHED job (parent) runs grouped into Table I's lines.
+
+Runs are grouped by ``row_hash``, the resolved config up to the seed: runs in a group differ only
+in seed (and, with ``split=random``, in the split the seed draws). Each seed counts once (its
+latest run).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.tracking import Tracker
+
+# Command-line overrides that leave a row's method as the paper has it: which data, which split,
+# where results go, which GoogLeNet weights file. Anything else makes the group a variant.
+NEUTRAL_OVERRIDES = (
+    "experiment",
+    "seed",
+    "split",
+    "data",
+    "tracking",
+    "device",
+    "cache_dir",
+    "modality.weights",
+    "modality.layout",
+    "sweep",
+    "hydra",
+)
+HAPTIC = ("haptic", "haptic_features")
+
+
+@dataclass(frozen=True)
+class Run:
+    run_id: str
+    seed: int
+    start_time: int
+    mean_auc: float
+    aucs: dict[str, float]
+    data: str  # the data file's identity
+    sweep_id: str
+
+
+@dataclass
+class Group:
+    """Runs of one config up to the seed: one line of Table I."""
+
+    key: str
+    method: str
+    row: str  # the paper's Table I row the experiment file names, or ""
+    paper_auc: float | None
+    schedule: str
+    schedule_epochs: str
+    split: str
+    modality: str
+    model: str
+    n_adjectives: int
+    differences: tuple[str, ...]  # what differs from the paper's settings of the row
+    runs: dict[int, Run] = field(default_factory=dict)  # seed -> its latest run
+
+    @property
+    def at_paper_settings(self) -> bool:
+        return bool(self.row) and not self.differences
+
+    @property
+    def aucs(self) -> np.ndarray:
+        return np.array([r.mean_auc for r in self.sorted_runs])
+
+    @property
+    def first_run(self) -> Run:
+        """The run of the lowest seed: the one a per-run view (Fig. 6, Table III) shows."""
+        return self.runs[min(self.runs)]
+
+    @property
+    def sorted_runs(self) -> list[Run]:
+        return [self.runs[s] for s in sorted(self.runs)]
+
+    def per_adjective(self) -> dict[str, float]:
+        runs = self.sorted_runs
+        return {
+            a: float(np.mean([r.aucs[a] for r in runs if a in r.aucs]))
+            for a in ADJECTIVES
+            if any(a in r.aucs for r in runs)
+        }
+
+
+def _differences(params: dict[str, str], overrides: str, n_adjectives: int) -> tuple[str, ...]:
+    out = []
+    if params.get("choice.schedule", "paper") != "paper":
+        out.append(f"schedule={params['choice.schedule']}")
+    if n_adjectives != len(ADJECTIVES):
+        out.append(f"{n_adjectives} adjectives")
+    for item in overrides.split():
+        key = item.lstrip("+~").split("=", 1)[0]
+        neutral = any(key == k or key.startswith(f"{k}.") for k in NEUTRAL_OVERRIDES)
+        if not neutral and key not in ("adjectives", "schedule"):
+            out.append(item)
+    return tuple(out)
+
+
+def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
+    """Every group of FINISHED parent runs (of one sweep, if given), sorted by Table I row."""
+    query = "tags.run_level = 'parent' and attributes.status = 'FINISHED'"
+    if sweep_id:
+        query += f" and tags.sweep_id = '{sweep_id}'"
+    found = tracker.client.search_runs([tracker.experiment_id], query, max_results=50000)
+    groups: dict[str, Group] = {}
+    for run in found:
+        params, tags, metrics = run.data.params, run.data.tags, run.data.metrics
+        if "mean_auc" not in metrics:
+            continue
+        aucs = {k.removeprefix("auc."): v for k, v in metrics.items() if k.startswith("auc.")}
+        key = tags.get("row_hash") or tags["config_hash"]  # runs logged before row_hash existed
+        if key not in groups:
+            experiment = params.get("choice.experiment", "None")
+            paper = params.get("paper.auc", "None")
+            groups[key] = Group(
+                key=key,
+                method=experiment
+                if experiment != "None"
+                else re.sub(r"-s\d+$", "", run.info.run_name),
+                row=params.get("paper.row", ""),
+                paper_auc=None if paper == "None" else float(paper),
+                schedule=params.get("choice.schedule", ""),
+                schedule_epochs=f"{params.get('schedule.epochs')}+"
+                f"{params.get('schedule.finetune_epochs')} epochs",
+                split=params.get("split.name", ""),
+                modality=params.get("modality.name", ""),
+                model=params.get("model.name", ""),
+                n_adjectives=len(aucs),
+                differences=_differences(params, tags.get("overrides", ""), len(aucs)),
+            )
+        entry = Run(
+            run_id=run.info.run_id,
+            seed=int(params["seed"]),
+            start_time=run.info.start_time,
+            mean_auc=metrics["mean_auc"],
+            aucs=aucs,
+            data=tags.get("data.identity", ""),
+            sweep_id=tags.get("sweep_id", ""),
+        )
+        kept = groups[key].runs.get(entry.seed)
+        if kept is None or entry.start_time > kept.start_time:
+            groups[key].runs[entry.seed] = entry
+    return sorted(groups.values(), key=lambda g: (g.row or "~", g.method, g.key))
+
+
+def best(groups: list[Group], modalities: tuple[str, ...]) -> Group | None:
+    """The group of these modalities with the highest mean AUC, preferring the paper's settings
+    (a 2-epoch preset must not stand for a modality when the full row exists)."""
+    candidates = [g for g in groups if g.modality in modalities and g.model != "random"]
+    preferred = [g for g in candidates if g.at_paper_settings] or candidates
+    return max(preferred, key=lambda g: g.aucs.mean(), default=None)
+
+
+def row_group(groups: list[Group], row: str) -> Group | None:
+    """The group that stands for Table I row ``row``: the paper's settings when run, else the
+    variant with the most adjectives, then the most recent run."""
+    candidates = [g for g in groups if g.row == row]
+    return max(
+        candidates,
+        key=lambda g: (
+            g.at_paper_settings,
+            g.n_adjectives,
+            max(r.start_time for r in g.runs.values()),
+        ),
+        default=None,
+    )

@@ -1,0 +1,61 @@
+"""A job's held-out results as its child runs logged them: per adjective, ``scores.csv``.
+
+``scores.csv`` has one line per test unit (a trial, a group of trials, an object's views, or one
+instance): ``unit`` (the unit's first trial, or the object's name for visual units), ``object_id``,
+``label`` (ground truth, 0/1) and ``score`` (the decision value). Every classifier the jobs train
+ends in a hinge-loss linear layer, so an adjective is predicted when its score is > 0
+(``THRESHOLD``, as ``tactile_exp.predict`` decides).
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+from tactile_exp.tracking import Tracker
+
+THRESHOLD = 0.0
+SCORES_FILE = "scores.csv"
+
+
+class ReportError(RuntimeError):
+    """A run the report needs is incomplete or does not fit; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class UnitScore:
+    unit: str
+    object_id: int
+    label: int
+    score: float
+
+    @property
+    def predicted(self) -> bool:
+        return self.score > THRESHOLD
+
+
+def children(tracker: Tracker, job_id: str) -> dict[str, str]:
+    """Adjective -> the job's FINISHED child (per-adjective) run."""
+    runs = tracker.client.search_runs(
+        [tracker.experiment_id],
+        f"tags.mlflow.parentRunId = '{job_id}' and tags.run_level = 'child' "
+        "and attributes.status = 'FINISHED'",
+        max_results=1000,
+    )
+    return {r.data.tags["adjective"]: r.info.run_id for r in runs}
+
+
+def read_scores(tracker: Tracker, child_id: str) -> list[UnitScore]:
+    """The test units of one child run, as its ``scores.csv`` lists them."""
+    from mlflow.exceptions import MlflowException
+
+    try:
+        path = Path(tracker.client.download_artifacts(child_id, SCORES_FILE))
+        with open(path, newline="") as f:
+            return [
+                UnitScore(r["unit"], int(r["object_id"]), int(float(r["label"])), float(r["score"]))
+                for r in csv.DictReader(f)
+            ]
+    except (OSError, KeyError, ValueError, MlflowException) as err:
+        raise ReportError(f"run {child_id}: artifact {SCORES_FILE} unreadable ({err})") from None
