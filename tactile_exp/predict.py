@@ -400,6 +400,14 @@ class _Inputs:
         return multimodal_units(net, instances, n_trials, seen)
 
 
+def haptic_instances(
+    tracker: Any, *, data: str | Path, trials: Sequence[str], child: str
+) -> Instances:
+    """The instances of ``trials`` as child run ``child`` built its own (its stored
+    preprocessing): what the report's Fig. 6 feeds the stored ConvNet."""
+    return _Inputs(tracker, data=data, trials=trials, object_id=None, photos=None).haptic(child)
+
+
 def read_photographs(folder: Path, size: int) -> tuple[list[Path], np.ndarray]:
     """The photographs in ``folder`` cropped above the plate and resized (V1): (n, 3, s, s)."""
     from tactile_exp.data.phac2 import DataError, load_photograph

@@ -95,7 +95,7 @@ def conv3_maps(
     """The conv3 maps of job ``job_id`` (a ``haptic_cnn`` job) for ``trials`` (test trials of
     every adjective), or ``n_trials`` picked per adjective."""
     from tactile_exp.data.sources import DATA_SOURCES
-    from tactile_exp.predict import _haptic_inputs
+    from tactile_exp.predict import haptic_instances
 
     config = job_config(tracker, job_id)
     modality, model = config["modality"]["name"], config["model"]["name"]
@@ -124,7 +124,7 @@ def conv3_maps(
         else:
             chosen = pick_units(list(units.values()), n_trials)
         names = [u.unit for u in chosen]
-        instances = _haptic_inputs(dataset.path, names, None, {adjective: child}, tracker)(child)
+        instances = haptic_instances(tracker, data=dataset.path, trials=names, child=child)
         net = store.load_model(tracker, child, "model")
         first = [int(np.flatnonzero(instances.trial == name)[0]) for name in names]
         conv3 = net.transform(instances.X[first]).reshape(len(first), *net.conv3_shape_)
