@@ -9,7 +9,8 @@ chain cache (rows C, D, E, F each fit the 16 chains) and `shortcuts.disabled()` 
 static PCA one trial-EP at a time, one pipeline per (C, draw), per-call HMM scoring). "After"
 shares a fresh chain cache across the six rows (row C fits, D, E, F reuse) with the shortcuts on.
 Prints the seconds of each row, both sweep totals and their ratio, and checks that both paths
-choose the same C and give the same test AUC (largest difference printed).
+choose the same C and give the same test AUC (largest difference printed). Target (issue 14):
+the sweep at least 3x faster after than before.
 
 Targets (full default synthetic file, 600 trials): static features < 2 min (first run, reading
 the file included); dynamic chains for 24 adjectives < 10 min. ``--adjectives N`` times N
