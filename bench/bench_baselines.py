@@ -1,12 +1,16 @@
 """Bench: static features of every trial and dynamic HMM chains per adjective, first run vs cache.
 
-``--rows`` instead times Table I rows A-F as one sweep per adjective, before and after the
-fitted-chain cache, side by side: each row fits its features on the adjective's split,
-transforms every trial and fits the object-CV linear SVM on the training trials (trial-level
-features for every row, B and D included). "Before" refits the 16 chains in rows C, D, E and F
-(no chain cache, as every job did); "after" shares a fresh chain cache across the six rows, so
-row C fits the chains and D, E, F load them. The trial tables are built once beforehand, cached
-in both cases. Prints the seconds of each row, both sweep totals and their ratio.
+``--rows`` instead times Table I rows A-F as one sweep per adjective, the plain path and the
+fast one side by side (interleaved per adjective, in one process): each row fits its features on
+the adjective's split, transforms the training and test trials and fits the object-CV linear SVM
+on the training side; rows B and D pool each object's trial features (mean, as the engine's
+``combine_instances=mean`` with all of an object's trials). "Before" is today's code path: no
+chain cache (rows C, D, E, F each fit the 16 chains) and `shortcuts.disabled()` (per-trial
+static PCA one trial-EP at a time, one pipeline per (C, draw), per-call HMM scoring). "After"
+shares a fresh chain cache across the six rows (row C fits, D, E, F reuse) with the shortcuts on.
+Prints the seconds of each row, both sweep totals and their ratio, and checks that both paths
+choose the same C and give the same test AUC (largest difference printed). Target (issue 14):
+the sweep at least 3x faster after than before.
 
 Targets (full default synthetic file, 600 trials): static features < 2 min (first run, reading
 the file included); dynamic chains for 24 adjectives < 10 min. ``--adjectives N`` times N
@@ -21,18 +25,21 @@ caches go to a fresh temporary folder, so the first run is a true one.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import tempfile
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+from sklearn.metrics import roc_auc_score
 
 from tactile_exp.baselines import features as feat
+from tactile_exp.baselines import shortcuts
 from tactile_exp.baselines.dynamic import DynamicFeatures
 from tactile_exp.baselines.features import FEATURE_KINDS, BaselineFeatures
 from tactile_exp.baselines.svm import ObjectCVLinearSVM
-from tactile_exp.data.layout import ADJECTIVES, TrialName
+from tactile_exp.data.layout import ADJECTIVES, Split, TrialName
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.splits import make_split
 from tactile_exp.data.synthetic import default_file
@@ -52,13 +59,15 @@ def main() -> None:
         (rows if args.rows else run)(args, Path(feature_cache))
 
 
-ROWS = {  # Table I row -> BaselineFeatures settings (conf/experiment/table1_[a-f]_*.yaml)
-    "A": dict(features=("static",)),
-    "B": dict(features=("static",)),
-    "C": dict(features=("dynamic",)),
-    "D": dict(features=("dynamic",)),
-    "E": dict(features=("static", "dynamic")),
-    "F": dict(features=("static", "dynamic"), dynamic_pool="object"),
+# Table I row -> (BaselineFeatures settings, whether the SVM sees one mean vector per object)
+# as in conf/experiment/table1_[a-f]_*.yaml
+ROWS: dict[str, tuple[dict, bool]] = {
+    "A": (dict(features=("static",)), False),
+    "B": (dict(features=("static",)), True),
+    "C": (dict(features=("dynamic",)), False),
+    "D": (dict(features=("dynamic",)), True),
+    "E": (dict(features=("static", "dynamic")), False),
+    "F": (dict(features=("static", "dynamic"), dynamic_pool="object"), False),
 }
 
 
@@ -70,32 +79,64 @@ def rows(args: argparse.Namespace, feature_cache: Path) -> None:
         BaselineFeatures(
             data, features=FEATURE_KINDS, hmm_grid=args.grid, cache_dir=tables
         ).prepare()
-    names = feat._trials(data)
     totals = {"before": 0.0, "after": 0.0}
+    per_row = {when: dict.fromkeys(ROWS, 0.0) for when in totals}
+    same_c, auc_gap = True, 0.0
     for adj in ADJECTIVES[: args.adjectives]:
-        split = data.split(adj)
-        train = list(split.train)
-        y = np.array([split.labels[t] for t in train])
-        groups = np.array([TrialName.parse(t).object_id for t in train])
+        split = make_split(data, adj)
+        results = {}
         for when, chain_cache in (("before", None), ("after", feature_cache / adj)):
-            seconds = {}
-            for row, settings in ROWS.items():
-                t0 = time.perf_counter()
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    bf = BaselineFeatures(
-                        data, hmm_grid=args.grid, cache_dir=chain_cache, **settings
-                    ).fit(split)
-                    ObjectCVLinearSVM().fit(bf.transform(train), y, groups)
-                    bf.transform(names)
-                seconds[row] = time.perf_counter() - t0
+            switch = shortcuts.disabled() if when == "before" else contextlib.nullcontext()
+            with switch:
+                seconds, results[when] = {}, {}
+                for row, (settings, pool) in ROWS.items():
+                    t0 = time.perf_counter()
+                    results[when][row] = _row(data, split, args.grid, chain_cache, settings, pool)
+                    seconds[row] = time.perf_counter() - t0
             totals[when] += sum(seconds.values())
-            per_row = ", ".join(f"{r} {s:.1f}" for r, s in seconds.items())
-            print(f"  {adj} {when:>6}: rows {per_row} s; sweep {sum(seconds.values()):.1f} s")
+            for row in ROWS:
+                per_row[when][row] += seconds[row]
+            line = ", ".join(f"{r} {s:.1f}" for r, s in seconds.items())
+            print(f"  {adj} {when:>6}: rows {line} s; sweep {sum(seconds.values()):.1f} s")
+        for row in ROWS:
+            (c0, auc0), (c1, auc1) = results["before"][row], results["after"][row]
+            same_c &= c0 == c1
+            auc_gap = max(auc_gap, abs(auc0 - auc1))
+    for row in ROWS:
+        b, a = per_row["before"][row], per_row["after"][row]
+        print(f"row {row}: before {b:.1f} s, after {a:.1f} s (x{b / a:.1f})")
     print(
         f"rows A-F, {args.adjectives} adjective(s): before {totals['before']:.1f} s, after "
-        f"{totals['after']:.1f} s: x{totals['before'] / totals['after']:.1f} faster"
+        f"{totals['after']:.1f} s: x{totals['before'] / totals['after']:.1f} faster; same C in "
+        f"every row: {same_c}; largest test-AUC difference {auc_gap:.2g}"
     )
+
+
+def _row(
+    data: PHAC2, split: Split, grid: str, chain_cache: Path | None, settings: dict, pool: bool
+) -> tuple[float, float]:
+    """One row on one adjective: (chosen C, test AUC)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bf = BaselineFeatures(data, hmm_grid=grid, cache_dir=chain_cache, **settings).fit(split)
+        sides = []
+        for trials in (split.train, split.test):
+            X = bf.transform(trials)
+            y = np.array([split.labels[t] for t in trials])
+            groups = np.array([TrialName.parse(t).object_id for t in trials])
+            sides.append(_pool(X, y, groups) if pool else (X, y, groups))
+        svm = ObjectCVLinearSVM().fit(*sides[0])
+    X_test, y_test, _ = sides[1]
+    return svm.C_, float(roc_auc_score(y_test, svm.decision_function(X_test)))
+
+
+def _pool(
+    X: np.ndarray, y: np.ndarray, groups: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One row per object: the mean of its trials' features (rows B and D)."""
+    objects = np.unique(groups)
+    first = [np.flatnonzero(groups == o)[0] for o in objects]
+    return np.array([X[groups == o].mean(axis=0) for o in objects]), y[first], objects
 
 
 def run(args: argparse.Namespace, feature_cache: Path) -> None:

@@ -26,6 +26,7 @@ from hmmlearn import hmm
 from sklearn.cluster import KMeans
 from threadpoolctl import threadpool_limits
 
+from tactile_exp.baselines import shortcuts
 from tactile_exp.baselines.static import PHASES, pool_moments, principal_axes
 from tactile_exp.data.layout import Split, TrialData, TrialName
 
@@ -247,6 +248,7 @@ class DynamicFeatures:
         self.holdout = holdout
         self.n_init = n_init
         self.seed = seed
+        self._scored: tuple[SequenceTable, np.ndarray] | None = None  # see `transform`
 
     def settings(self) -> dict[str, object]:
         """Everything besides the data and the split that the fitted chains depend on."""
@@ -342,7 +344,16 @@ class DynamicFeatures:
         return self
 
     def transform(self, table: SequenceTable, trials: Sequence[str]) -> np.ndarray:
+        """(n, 16) log-likelihoods; every trial of ``table`` is scored once per fitted chains and
+        indexed after (rows C-F and the object pooling of row F share it; see `shortcuts`)."""
         idx = table.index(trials)
+        if not shortcuts.enabled():
+            return self._score(table, idx)
+        if self._scored is None or self._scored[0] is not table:
+            self._scored = (table, self._score(table, np.arange(len(table.trials))))
+        return self._scored[1][idx]
+
+    def _score(self, table: SequenceTable, idx: np.ndarray) -> np.ndarray:
         cols = [
             chain.score(table.seqs[T][c][idx])
             for c, (chain, (_, T, _)) in enumerate(zip(self.chains_, self.params_, strict=True))

@@ -8,7 +8,8 @@ the mean dynamic vector of its object's trials on the same side of the split).
 The data file is read once per data set and settings (one trial at a time); the reduced tables
 are memoised in-process and, with ``cache_dir``, saved on disk (atomic write). With ``cache_dir``
 the fitted HMM chains of each adjective are saved too, keyed by the data, the split's membership
-and labels, and the chain settings and seed, so rows C, D, E and F fit each chain once.
+and labels, and the chain settings and seed, so rows C, D, E and F fit each chain once (and, in
+one process, load it once and score every trial once).
 """
 
 from __future__ import annotations
@@ -201,11 +202,15 @@ class BaselineFeatures:
             return dynamic.fit(self.sequence_table_, split)
         key = self._chain_key(split, dynamic)
         path = Path(self.cache_dir) / f"baseline_hmm_{split.adjective}_{key}.npz"
+        if str(path) in _MEMO:  # an earlier row of this process: its scores come along
+            return _MEMO[str(path)]
         arrays = load_arrays(path, DynamicFeatures.KEYS)
         if arrays is not None:
-            return dynamic.load_arrays(arrays)
-        dynamic.fit(self.sequence_table_, split)
-        save_arrays(path, dynamic.arrays())
+            dynamic.load_arrays(arrays)
+        else:
+            dynamic.fit(self.sequence_table_, split)
+            save_arrays(path, dynamic.arrays())
+        _MEMO[str(path)] = dynamic
         return dynamic
 
     def _chain_key(self, split: Split, dynamic: DynamicFeatures) -> str:

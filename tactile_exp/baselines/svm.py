@@ -23,6 +23,7 @@ from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import LinearSVC
 
+from tactile_exp.baselines import shortcuts
 from tactile_exp.data.layout import Instances
 from tactile_exp.models.base import EpochCallback, History, Model, clone
 from tactile_exp.models.registry import MODELS
@@ -76,9 +77,12 @@ class ObjectCVLinearSVM:
         self.seed = seed
 
     @staticmethod
-    def _pipeline(C: float) -> Pipeline:
-        svc = LinearSVC(C=C, penalty="l2", dual=False, class_weight="balanced", max_iter=10000)
-        return make_pipeline(StandardScaler(), svc)
+    def _svc(C: float) -> LinearSVC:
+        return LinearSVC(C=C, penalty="l2", dual=False, class_weight="balanced", max_iter=10000)
+
+    @classmethod
+    def _pipeline(cls, C: float) -> Pipeline:
+        return make_pipeline(StandardScaler(), cls._svc(C))
 
     def cv_scores(self, X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> np.ndarray | None:
         """Pooled held-out AUC per C; ``None`` when the pooled held-out part has one class.
@@ -105,15 +109,32 @@ class ObjectCVLinearSVM:
         held = np.concatenate([te for _, te in draws])
         if len(np.unique(y[held])) < 2:
             return None
-        scores = []
-        for C in self.Cs:
-            decisions = []
+        decisions = self._held_out_decisions(X, y, draws)
+        return np.array([roc_auc_score(y[held], np.concatenate(d)) for d in decisions])
+
+    def _held_out_decisions(
+        self, X: np.ndarray, y: np.ndarray, draws: list[tuple[np.ndarray, np.ndarray]]
+    ) -> list[list[np.ndarray]]:
+        """Per C, per draw: the held-out decision values of the pipeline fitted on the rest.
+
+        The scaler does not depend on C, so each draw is standardised once for the whole grid
+        (the same arrays the per-C pipeline computes; see `shortcuts`).
+        """
+        decisions: list[list[np.ndarray]] = [[] for _ in self.Cs]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            if not shortcuts.enabled():
+                for j, C in enumerate(self.Cs):
+                    for tr, te in draws:
+                        pipeline = self._pipeline(C).fit(X[tr], y[tr])
+                        decisions[j].append(pipeline.decision_function(X[te]))
+                return decisions
             for tr, te in draws:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", ConvergenceWarning)
-                    decisions.append(self._pipeline(C).fit(X[tr], y[tr]).decision_function(X[te]))
-            scores.append(roc_auc_score(y[held], np.concatenate(decisions)))
-        return np.array(scores)
+                scaler = StandardScaler().fit(X[tr])
+                X_tr, X_te = scaler.transform(X[tr]), scaler.transform(X[te])
+                for j, C in enumerate(self.Cs):
+                    decisions[j].append(self._svc(C).fit(X_tr, y[tr]).decision_function(X_te))
+        return decisions
 
     def fit(self, X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> ObjectCVLinearSVM:
         X, y, groups = np.asarray(X, dtype=float), np.asarray(y), np.asarray(groups)
