@@ -12,21 +12,14 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
+from tactile_exp import termination
+
 log = logging.getLogger("tactile_exp")
-
-
-class Terminated(SystemExit):
-    """SIGTERM, unwound like an error so MLflow runs end FAILED, not RUNNING."""
-
-
-def _terminate(signum: int, frame: object) -> None:
-    # SLURM and `kill` send SIGTERM (and a terminated sweep forwards it to its workers).
-    raise Terminated(f"terminated by signal {signum}")
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg: DictConfig) -> float:
-    signal.signal(signal.SIGTERM, _terminate)
+    signal.signal(signal.SIGTERM, termination.handle)
     from tactile_exp.config import settings_from_config
     from tactile_exp.errors import reported
     from tactile_exp.experiment import run
@@ -40,7 +33,7 @@ def main(cfg: DictConfig) -> float:
                 cfg, choices, sweep_id, Path(hc.runtime.output_dir), tuple(hc.overrides.task)
             )
             return run(settings).mean_auc
-    except Terminated:
+    except termination.Terminated:
         if hc.mode != RunMode.MULTIRUN:
             raise
         # A sweep worker (joblib/loky) would survive the exception and take the next job: its

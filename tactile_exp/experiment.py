@@ -256,7 +256,7 @@ def _run_adjective(
         source = store.find_trained(tracker, key) if reuse and trains else None
         if source is not None:
             log.info("  %s: reusing the model trained in run %s", adjective, source)
-            tracker.client.set_tag(run_id, "reused_from", source)
+            tracker.set_tags(run_id, {"reused_from": source})
             model = store.load_model(
                 tracker, source, "model", overrides=_unkeyed(settings.model.params)
             )
@@ -334,7 +334,7 @@ def _part_provider(
         source = store.find_trained(tracker, key) if reuse else None
         if source is not None:
             log.info("  %s: reusing the model trained in run %s", name, source)
-            tracker.client.set_tag(run_id, f"reused_from.{part}", source)
+            tracker.set_tags(run_id, {f"reused_from.{part}": source})
             model = store.load_model(
                 tracker, source, "model", overrides=_unkeyed(part_model.params)
             )
@@ -353,7 +353,7 @@ def _part_provider(
                     tracker, rid, "model", lambda f: store.write_model(f, part_model.name, model)
                 )
             source = rid
-        tracker.client.set_tag(run_id, f"part.{part}", source)
+        tracker.set_tags(run_id, {f"part.{part}": source})
         parts[part] = (part_model.name, model)
         return model
 

@@ -26,6 +26,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from tactile_exp.termination import shielded
+
 os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")  # no calls home; the network is closed
 
 log = logging.getLogger(__name__)
@@ -249,32 +251,40 @@ class Tracker:
         all_tags = {"mlflow.runName": name, **process_tags(), **self.source_tags, **tags}
         if parent_id is not None:
             all_tags["mlflow.parentRunId"] = parent_id
-        run = self.client.create_run(self.experiment_id, run_name=name, tags=all_tags)
-        run_id = run.info.run_id
+        run_id = None
         try:
-            items = [Param(k, v) for k, v in params.items()]
-            for i in range(0, len(items), 100):  # MLflow accepts at most 100 params per batch
-                self.client.log_batch(run_id, params=items[i : i + 100])
+            with shielded():  # a SIGTERM now is raised once the run exists, so it ends FAILED
+                run = self.client.create_run(self.experiment_id, run_name=name, tags=all_tags)
+                run_id = run.info.run_id
+                items = [Param(k, v) for k, v in params.items()]
+                for i in range(0, len(items), 100):  # MLflow takes at most 100 params per batch
+                    self.client.log_batch(run_id, params=items[i : i + 100])
             yield run_id
         except BaseException as err:
+            if run_id is None:
+                raise
             message = f"{type(err).__name__}: {err}"[:5000]
-            self.client.log_batch(run_id, tags=[RunTag("error", message)])
             status = "KILLED" if isinstance(err, KeyboardInterrupt) else "FAILED"
-            self.client.set_terminated(run_id, status=status)
+            with shielded():
+                self.client.log_batch(run_id, tags=[RunTag("error", message)])
+                self.client.set_terminated(run_id, status=status)
             raise
-        self.client.set_terminated(run_id, status="FINISHED")
+        with shielded():
+            self.client.set_terminated(run_id, status="FINISHED")
 
     def set_tags(self, run_id: str, tags: Mapping[str, str]) -> None:
         from mlflow.entities import RunTag
 
-        self.client.log_batch(run_id, tags=[RunTag(k, v) for k, v in tags.items()])
+        with shielded():
+            self.client.log_batch(run_id, tags=[RunTag(k, v) for k, v in tags.items()])
 
     def log_dataset(self, run_id: str, *, name: str, digest: str, source: str) -> None:
         """A data file as the run's dataset input: the UI's Dataset column (name + digest)."""
         from mlflow.entities import Dataset, DatasetInput
 
         dataset = Dataset(name=name, digest=digest, source_type="local", source=source)
-        self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)])
+        with shielded():
+            self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)])
 
     def log_metrics(self, run_id: str, values: Mapping[str, float], step: int = 0) -> None:
         self.log_curves(run_id, {k: [v] for k, v in values.items()}, start=step)
@@ -290,16 +300,20 @@ class Tracker:
             for step, v in enumerate(values)
         ]
         for i in range(0, len(metrics), MAX_BATCH):
-            self.client.log_batch(run_id, metrics=metrics[i : i + MAX_BATCH])
+            with shielded():
+                self.client.log_batch(run_id, metrics=metrics[i : i + MAX_BATCH])
 
     def log_text(self, run_id: str, text: str, path: str) -> None:
-        self.client.log_text(run_id, text, path)
+        with shielded():
+            self.client.log_text(run_id, text, path)
 
     def log_figure(self, run_id: str, figure: Any, path: str) -> None:
-        self.client.log_figure(run_id, figure, path)
+        with shielded():
+            self.client.log_figure(run_id, figure, path)
 
     def log_file(self, run_id: str, file: Path, path: str) -> None:
         self.client.log_artifact(run_id, str(file), path)
 
     def log_dir(self, run_id: str, folder: Path, path: str) -> None:
-        self.client.log_artifacts(run_id, str(folder), path)
+        with shielded():
+            self.client.log_artifacts(run_id, str(folder), path)

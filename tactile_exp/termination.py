@@ -1,0 +1,40 @@
+"""SIGTERM as an exception that never lands inside an MLflow write.
+
+SLURM and `kill` send SIGTERM, and a terminated sweep forwards it to its workers. The job unwinds
+it like an error, so its runs end FAILED rather than RUNNING. Raised in the middle of a sqlite
+transaction, though, it left the connection unusable, so marking the run FAILED failed as well and
+the run stayed RUNNING. Inside ``shielded()`` the signal is therefore held back and raised as
+soon as the write is done.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+_state = {"depth": 0, "pending": 0}
+
+
+class Terminated(SystemExit):
+    """SIGTERM, unwound like an error so MLflow runs end FAILED, not RUNNING."""
+
+
+def handle(signum: int, frame: object) -> None:
+    """The SIGTERM handler: raise now, or at the end of the write in progress."""
+    if _state["depth"]:
+        _state["pending"] = signum
+        return
+    raise Terminated(f"terminated by signal {signum}")
+
+
+@contextmanager
+def shielded() -> Iterator[None]:
+    """Hold SIGTERM back while the block runs; raise it afterwards if it came."""
+    _state["depth"] += 1
+    try:
+        yield
+    finally:
+        _state["depth"] -= 1
+    if not _state["depth"] and _state["pending"]:
+        signum, _state["pending"] = _state["pending"], 0
+        raise Terminated(f"terminated by signal {signum}")
