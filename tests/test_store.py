@@ -81,6 +81,7 @@ def _scores(uri: str, child) -> list[float]:
         return [float(r["score"]) for r in csv.DictReader(io.StringIO(f.read()))]
 
 
+@pytest.mark.job
 @pytest.mark.slow  # ten tiny jobs
 def test_training_settings_retrain_while_head_settings_reuse(tiny_config, mlflow_uri):
     first = run(settings_from_config(tiny_config(REPEAT, ONE)))
@@ -110,6 +111,7 @@ def test_training_settings_retrain_while_head_settings_reuse(tiny_config, mlflow
     assert _scores(mlflow_uri, child) == _scores(mlflow_uri, trained)  # retrained: same seed
 
 
+@pytest.mark.job
 def test_missing_artifact_of_a_found_run_is_a_clear_error(tiny_config, mlflow_uri):
     first = run(settings_from_config(tiny_config(REPEAT, ONE)))
     trained = _children(mlflow_uri, first.run_id)["hard"]
@@ -121,6 +123,7 @@ def test_missing_artifact_of_a_found_run_is_a_clear_error(tiny_config, mlflow_ur
         run(settings_from_config(tiny_config(REPEAT, ONE)))
 
 
+@pytest.mark.job
 def test_killed_job_reuses_its_finished_adjectives(tiny_config, mlflow_uri, monkeypatch):
     calls = []
     fit = HapticCNN.fit
@@ -148,6 +151,7 @@ def test_killed_job_reuses_its_finished_adjectives(tiny_config, mlflow_uri, monk
     assert "reused_from" not in rerun["soft"].data.tags
 
 
+@pytest.mark.job
 @pytest.mark.slow  # three tiny jobs, one of them preparing photographs
 def test_multimodal_rows_train_only_the_classification_layer(tiny_config, mlflow_uri):
     small = ["modality.visual.size=32", "modality.visual.batch_size=128"]  # 5a at 1x1: fast

@@ -3,6 +3,7 @@
 import subprocess
 from pathlib import Path
 
+import pytest
 from mlflow.tracking import MlflowClient
 
 from tactile_exp.config import settings_from_config
@@ -14,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FAST = ["model=random", "combine_instances=separate"]
 
 
+@pytest.mark.job
 def test_job_runs_carry_ui_tags_and_the_data_file_as_input(tiny_config, mlflow_uri):
     settings = settings_from_config(tiny_config([*FAST, "seed=41"], adjectives="[hard]"))
     run(settings)
@@ -163,3 +165,74 @@ def test_unreachable_server_is_reported_before_any_work():
 
     with pytest.raises(TrackingError, match=r"^tracking.uri: no MLflow server answers at http"):
         check_server("http://127.0.0.1:9/", timeout=1.0)
+
+
+def test_finished_run_is_the_finished_parent_of_that_config_only(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "resume")
+    parent = {"config_hash": "h1", "run_level": "parent"}
+    with pytest.raises(RuntimeError), tracker.run("crashed", {}, parent):
+        raise RuntimeError("crash")
+    with tracker.run("child", {}, {"config_hash": "h1", "run_level": "child"}):
+        pass
+    with tracker.run("other", {}, {"config_hash": "h2", "run_level": "parent"}):
+        pass
+    tracker.client.create_run(tracker.experiment_id, run_name="running", tags=parent)
+    assert tracker.finished_run("h1") is None  # FAILED, a child, another hash, RUNNING
+    with tracker.run("done", {}, parent) as done:
+        pass
+    assert tracker.finished_run("h1") == done
+    assert Tracker(mlflow_uri, "elsewhere").finished_run("h1") is None
+
+
+def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_path):
+    import os
+    import socket
+
+    tracker = Tracker(mlflow_uri, "tags", entry_point="python -m tactile_exp.sweep")
+    (tmp_path / "f.txt").write_text("file")
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "g.txt").write_text("dir")
+    with tracker.run("r", {}, {"mine": "1"}) as run_id:
+        tracker.set_tags(run_id, {"late": "2", "later": "3"})
+        tracker.log_dataset(run_id, name="phac2.h5", digest="abc", source="/data/phac2.h5")
+        tracker.log_text(run_id, "hello", "notes/t.txt")
+        tracker.log_file(run_id, tmp_path / "f.txt", "files")
+        tracker.log_dir(run_id, tmp_path / "d", "folder")
+    run = MlflowClient(mlflow_uri).get_run(run_id)
+    tags = run.data.tags
+    assert tags["mlflow.runName"] == "r" and tags["mine"] == "1"
+    assert (tags["late"], tags["later"]) == ("2", "3")
+    assert tags["mlflow.source.name"] == "python -m tactile_exp.sweep"
+    assert tags["mlflow.source.type"] == "LOCAL"
+    assert tags["host"] == socket.gethostname() and tags["pid"] == str(os.getpid())
+    start = Path(f"/proc/{os.getpid()}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    assert tags["pid_start"] == start
+    (dataset,) = run.inputs.dataset_inputs
+    assert (dataset.dataset.name, dataset.dataset.digest) == ("phac2.h5", "abc")
+    assert dataset.dataset.source == "/data/phac2.h5"
+    root = Path(run.info.artifact_uri.removeprefix("file://"))
+    db_dir = Path(mlflow_uri.removeprefix("sqlite:///")).parent
+    assert root.is_relative_to(db_dir / "mlartifacts")  # artifacts beside the database
+    assert (root / "notes" / "t.txt").read_text() == "hello"
+    assert (root / "files" / "f.txt").read_text() == "file"
+    assert (root / "folder" / "g.txt").read_text() == "dir"
+
+
+def test_tracking_uri_and_artifact_root(monkeypatch, tmp_path):
+    from tactile_exp import tracking
+
+    assert tracking._artifact_root("http://host:5000") is None
+    assert tracking._artifact_root(f"sqlite:///{tmp_path}/m.db") == f"file://{tmp_path}/mlartifacts"
+    assert tracking.project_root() == ROOT
+    monkeypatch.setattr(tracking, "__file__", str(tmp_path / "pkg" / "tracking.py"))
+    monkeypatch.chdir(tmp_path)
+    assert tracking.project_root() == tmp_path  # an installed package: the cwd
+
+
+def test_git_commit_of_the_checkout():
+    commit = git_commit(ROOT)
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True)
+    if head.returncode != 0:  # mutmut's copy of the tree is no checkout
+        assert commit is None
+    else:
+        assert commit == head.stdout.decode().strip() and len(commit) == 40
