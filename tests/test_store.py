@@ -238,3 +238,109 @@ def test_reuse_switch_rejects_non_booleans():
 
     with pytest.raises(ConfigError, match=r"^tracking.reuse: must be true or false, got 'yes'$"):
         store.reuse_enabled({"tracking": {"reuse": "yes"}})
+
+
+# ---------------------------------------------------------------- store functions, direct
+def _linear():
+    model = MODELS.build("linear", epochs=2, batch_size=16)
+    data = _instances(shape=(7,))
+    model.fit(data)
+    return model, data
+
+
+def test_find_trained_is_the_newest_finished_run_of_the_key_or_what_it_reused(mlflow_uri):
+    import time
+
+    tracker = Tracker(mlflow_uri, "store")
+
+    def logged(name: str, tags: dict[str, str], fail: bool = False) -> str:
+        time.sleep(0.01)  # distinct start times
+        try:
+            with tracker.run(name, {}, tags) as run_id:
+                if fail:
+                    raise RuntimeError("crash")
+        except RuntimeError:
+            pass
+        return run_id
+
+    assert store.find_trained(tracker, "k1") is None
+    first = logged("first", {"training_key": "k1"})
+    logged("other", {"training_key": "k2"})
+    logged("crashed", {"training_key": "k1"}, fail=True)
+    assert store.find_trained(tracker, "k1") == first
+    second = logged("second", {"training_key": "k1"})
+    assert store.find_trained(tracker, "k1") == second
+    logged("copy", {"training_key": "k1", "reused_from": second})
+    assert store.find_trained(tracker, "k1") == second  # provenance: the training run
+    assert store.find_trained(Tracker(mlflow_uri, "another"), "k1") is None
+
+
+def test_a_logged_model_loads_from_its_run_and_missing_files_name_the_run(mlflow_uri, tmp_path):
+    model, data = _linear()
+    tracker = Tracker(mlflow_uri, "store")
+    with tracker.run("r", {}, {}) as run_id:
+        store.log_folder(tracker, run_id, "model", lambda d: store.write_model(d, "linear", model))
+        store.log_folder(tracker, run_id, "half", lambda d: (d / "settings.json").write_text("{}"))
+    loaded = store.load_model(tracker, run_id, "model", {"device": "cpu"})
+    assert loaded.get_params()["device"] == "cpu"
+    np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
+    local = store.download(tracker, run_id, "model", store.MODEL_FILES)
+    assert sorted(p.name for p in local.iterdir()) == sorted(store.MODEL_FILES)
+    with pytest.raises(
+        store.ArtifactError, match=rf"^run {run_id}: artifact half/ lacks weights.pt, arrays.npz$"
+    ):
+        store.load_model(tracker, run_id, "half")
+    with pytest.raises(store.ArtifactError, match=rf"^run {run_id}: artifact nothing/ cannot be"):
+        store.download(tracker, run_id, "nothing", store.STATE_FILES)
+
+
+def test_state_folders_round_trip_and_bad_files_name_the_artifact(tmp_path):
+    store.write_state(tmp_path, {"steps": np.int64(3), "shape": (1, 2)}, {"a": [1.5, 2.0]})
+    settings = store.read_json(tmp_path, "here")
+    assert settings == {"format": store.FORMAT, "steps": 3, "shape": [1, 2]}
+    np.testing.assert_array_equal(store.read_arrays(tmp_path, "here")["a"], [1.5, 2.0])
+    assert list(store.read_arrays(tmp_path, "here")) == ["a"]
+    with pytest.raises(TypeError, match="^cannot store object as JSON$"):
+        store.write_state(tmp_path, {"x": object()}, {})
+    for text in ("[1]", '{"format": 0}', "{}"):
+        (tmp_path / "settings.json").write_text(text)
+        with pytest.raises(
+            store.ArtifactError,
+            match=rf"^here/settings.json: expected a mapping with format {store.FORMAT}$",
+        ):
+            store.read_json(tmp_path, "here")
+    (tmp_path / "settings.json").write_text("{")
+    with pytest.raises(store.ArtifactError, match=r"^here/settings.json is not readable JSON \("):
+        store.read_json(tmp_path, "here")
+    (tmp_path / "arrays.npz").write_bytes(b"garbage")
+    with pytest.raises(store.ArtifactError, match=r"^here/arrays.npz is not a readable npz file"):
+        store.read_arrays(tmp_path, "here")
+
+
+def test_stored_model_settings_are_checked_before_loading(tmp_path):
+    model, data = _linear()
+    store.write_model(tmp_path, "linear", model)
+    settings = json.loads((tmp_path / "settings.json").read_text())
+    assert settings["model"] == "linear"
+    assert settings["input_shape"] == list(data.X.shape[1:])
+    assert settings["format"] == store.FORMAT
+    for broken in ({"model": None}, {"input_shape": ["x"]}, {"params": 3}):
+        (tmp_path / "settings.json").write_text(json.dumps(settings | broken))
+        if broken == {"model": None}:
+            (tmp_path / "settings.json").write_text(
+                json.dumps({k: v for k, v in settings.items() if k != "model"})
+            )
+        with pytest.raises(store.ArtifactError, match=r"^w/settings.json: missing or bad entry"):
+            store.read_model(tmp_path, "w")
+    (tmp_path / "settings.json").write_text(json.dumps(settings | {"model": "nope"}))
+    with pytest.raises(store.ArtifactError, match=r"^w: the stored nope model does not load"):
+        store.read_model(tmp_path, "w")
+    (tmp_path / "settings.json").write_text(json.dumps(settings))
+    torch.save({"w": [1, 2]}, tmp_path / "weights.pt")
+    with pytest.raises(
+        store.ArtifactError, match=r"^w/weights.pt: expected a mapping of names to tensors$"
+    ):
+        store.read_model(tmp_path, "w")
+    torch.save([torch.zeros(1)], tmp_path / "weights.pt")
+    with pytest.raises(store.ArtifactError, match=r"^w/weights.pt: expected a mapping"):
+        store.read_model(tmp_path, "w")

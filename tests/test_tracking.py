@@ -236,3 +236,61 @@ def test_git_commit_of_the_checkout():
         assert commit is None
     else:
         assert commit == head.stdout.decode().strip() and len(commit) == 40
+
+
+def test_check_server_asks_health_once():
+    import http.server
+    import threading
+
+    from tactile_exp.tracking import check_server
+
+    paths: list[str] = []
+
+    class Health(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 (the handler's name)
+            paths.append(self.path)
+            self.send_response(200)
+            self.end_headers()
+            self.wfile.write(b"OK")
+
+        def log_message(self, *args):
+            pass
+
+    server = http.server.HTTPServer(("127.0.0.1", 0), Health)
+    thread = threading.Thread(target=server.handle_request)
+    thread.start()
+    try:
+        check_server(f"http://127.0.0.1:{server.server_port}/")
+    finally:
+        thread.join(5)
+        server.server_close()
+    assert paths == ["/health"]
+
+
+def test_experiment_creation_retries_then_raises(mlflow_uri, monkeypatch):
+    from mlflow.tracking import MlflowClient as Client
+
+    from tactile_exp import tracking
+
+    waits: list[float] = []
+    monkeypatch.setattr(tracking.time, "sleep", waits.append)
+    tries: list[str] = []
+
+    def racing(self, name, **kwargs):
+        tries.append(name)
+        if len(tries) < 3:
+            raise RuntimeError("database is locked")
+        return original(self, name, **kwargs)
+
+    original = Client.create_experiment
+    monkeypatch.setattr(Client, "create_experiment", racing)
+    tracker = Tracker(mlflow_uri, "raced")
+    assert tries == ["raced"] * 3 and waits == [0.5, 1.0]
+    assert Client(mlflow_uri).get_experiment_by_name("raced").experiment_id == (
+        tracker.experiment_id
+    )
+    waits.clear()
+    monkeypatch.setattr(Client, "create_experiment", lambda self, name, **kw: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        Tracker(mlflow_uri, "never")
+    assert waits == [0.5, 1.0, 1.5, 2.0]
