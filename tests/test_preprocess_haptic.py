@@ -307,3 +307,30 @@ def test_short_dataset_raises():
     trials = [make_trial(n, seed=i) for i, n in enumerate(trial_names(1))]
     with pytest.raises(ValueError, match="yielded 2 trials, expected 3"):
         compute_haptic_arrays(Short(trials), steps=5, offsets=1)
+
+
+def test_state_restores_the_fitted_preprocessing_and_rejects_bad_state(dataset):
+    arrays = compute_haptic_arrays(dataset, steps=6, offsets=2)
+    train, test = train_test(dataset)
+    fitted = HapticPreprocessor(arrays, n_components=3).fit(train)
+    state = fitted.state()
+    assert sorted(state) == sorted(HapticPreprocessor.STATE)
+    np.testing.assert_array_equal(state["mean"], fitted.mean_)
+    np.testing.assert_array_equal(state["scale"], fitted.scale_)
+    np.testing.assert_array_equal(state["components"], fitted.components_)
+    np.testing.assert_array_equal(state["pca_mean"], fitted.pca_mean_)
+    restored = HapticPreprocessor(arrays, n_components=3).restore(state)
+    np.testing.assert_array_equal(restored.transform(test), fitted.transform(test))
+    for name in ("mean", "scale", "components", "pca_mean"):
+        np.testing.assert_array_equal(getattr(restored, f"{name}_"), state[name])
+    for name in HapticPreprocessor.STATE:
+        partial = {k: v for k, v in state.items() if k != name}
+        with pytest.raises(ValueError, match=f"^haptic preprocessing state lacks '{name}'$"):
+            HapticPreprocessor(arrays, n_components=3).restore(partial)
+    four = HapticPreprocessor(arrays, n_components=4)  # expects 4 + 4 channels per EP
+    message = r"^haptic preprocessing 'weight' has shape \(2, 4, 7, 23\), expected \(2, 4, 8, 23\) "
+    with pytest.raises(ValueError, match=message + "for 4 electrode PCs$"):
+        four.restore(state)
+    message = r"^haptic preprocessing 'bias' has shape \(2, 4, 7\), expected \(2, 4, 8\) for 4 "
+    with pytest.raises(ValueError, match=message):
+        four.restore(state | {"weight": np.zeros((2, 4, 8, 23))})

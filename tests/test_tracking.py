@@ -163,8 +163,14 @@ def test_unreachable_server_is_reported_before_any_work():
 
     from tactile_exp.tracking import TrackingError, check_server
 
-    with pytest.raises(TrackingError, match=r"^tracking.uri: no MLflow server answers at http"):
+    message = (
+        r"^tracking.uri: no MLflow server answers at http://127.0.0.1:9/ \(.*Connection refused\); "
+        r"start one \(`mlflow server`\) or use tracking=local$"
+    )
+    with pytest.raises(TrackingError, match=message):
         check_server("http://127.0.0.1:9/", timeout=1.0)
+    with pytest.raises(TrackingError, match=r"at http://\[bad \(.*IPv6.*\); start one"):
+        check_server("http://[bad")  # no `reason`: the error itself is shown
 
 
 def test_finished_run_is_the_finished_parent_of_that_config_only(mlflow_uri):
@@ -188,6 +194,11 @@ def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_
     import os
     import socket
 
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     tracker = Tracker(mlflow_uri, "tags", entry_point="python -m tactile_exp.sweep")
     (tmp_path / "f.txt").write_text("file")
     (tmp_path / "d").mkdir()
@@ -198,6 +209,9 @@ def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_
         tracker.log_text(run_id, "hello", "notes/t.txt")
         tracker.log_file(run_id, tmp_path / "f.txt", "files")
         tracker.log_dir(run_id, tmp_path / "d", "folder")
+        figure = plt.figure(figsize=(2, 1), dpi=50)
+        tracker.log_figure(run_id, figure, "plots/f.png")
+        plt.close(figure)
     run = MlflowClient(mlflow_uri).get_run(run_id)
     tags = run.data.tags
     assert tags["mlflow.runName"] == "r" and tags["mine"] == "1"
@@ -209,13 +223,14 @@ def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_
     assert tags["pid_start"] == start
     (dataset,) = run.inputs.dataset_inputs
     assert (dataset.dataset.name, dataset.dataset.digest) == ("phac2.h5", "abc")
-    assert dataset.dataset.source == "/data/phac2.h5"
+    assert (dataset.dataset.source, dataset.dataset.source_type) == ("/data/phac2.h5", "local")
     root = Path(run.info.artifact_uri.removeprefix("file://"))
     db_dir = Path(mlflow_uri.removeprefix("sqlite:///")).parent
     assert root.is_relative_to(db_dir / "mlartifacts")  # artifacts beside the database
     assert (root / "notes" / "t.txt").read_text() == "hello"
     assert (root / "files" / "f.txt").read_text() == "file"
     assert (root / "folder" / "g.txt").read_text() == "dir"
+    assert (root / "plots" / "f.png").read_bytes().startswith(b"\x89PNG")
 
 
 def test_tracking_uri_and_artifact_root(monkeypatch, tmp_path):
@@ -223,9 +238,9 @@ def test_tracking_uri_and_artifact_root(monkeypatch, tmp_path):
 
     assert tracking._artifact_root("http://host:5000") is None
     assert tracking._artifact_root(f"sqlite:///{tmp_path}/m.db") == f"file://{tmp_path}/mlartifacts"
-    assert tracking.project_root() == ROOT
-    monkeypatch.setattr(tracking, "__file__", str(tmp_path / "pkg" / "tracking.py"))
     monkeypatch.chdir(tmp_path)
+    assert tracking.project_root() == ROOT  # the checkout, wherever the cwd is
+    monkeypatch.setattr(tracking, "__file__", str(tmp_path / "site" / "pkg" / "tracking.py"))
     assert tracking.project_root() == tmp_path  # an installed package: the cwd
 
 
@@ -294,3 +309,28 @@ def test_experiment_creation_retries_then_raises(mlflow_uri, monkeypatch):
     with pytest.raises(ZeroDivisionError):
         Tracker(mlflow_uri, "never")
     assert waits == [0.5, 1.0, 1.5, 2.0]
+
+
+def test_check_server_waits_only_its_timeout(monkeypatch):
+    from tactile_exp import tracking
+
+    calls: list[tuple[str, object]] = []
+
+    class Answer:
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *args):
+            return False
+
+        def read(self):
+            return b"OK"
+
+    def urlopen(url, timeout=None):
+        calls.append((url, timeout))
+        return Answer()
+
+    monkeypatch.setattr(tracking.urllib.request, "urlopen", urlopen)
+    tracking.check_server("http://h:5000")
+    tracking.check_server("http://h:5000/", timeout=1.5)
+    assert calls == [("http://h:5000/health", 5.0), ("http://h:5000/health", 1.5)]
