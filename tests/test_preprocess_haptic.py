@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from sklearn.decomposition import PCA
@@ -127,6 +129,9 @@ def test_shapes(dataset):
     assert out.shape == (2, 2, 5, 32, 20) and out.dtype == np.float32
     assert prep.explained_variance_ratio_.shape == (4, 4)
     assert HapticPreprocessor(arrays, n_components=2).fit(["brick_508_01"]).n_channels == 24
+    assert not np.array_equal(prep.mean_[0], prep.mean_[1])  # the default: each finger its own
+    for k in (1, 19):  # the ends of the allowed range
+        assert HapticPreprocessor(arrays, n_components=k).n_channels == 4 * (N_SCALAR + k)
 
 
 def test_stored_statistics_match_raw_rows(dataset):
@@ -190,6 +195,9 @@ def test_pca_matches_sklearn_on_normalised_rows(dataset):
         np.testing.assert_allclose(
             prep.explained_variance_ratio_[e], ref.explained_variance_ratio_, rtol=1e-6
         )
+        np.testing.assert_allclose(prep.explained_variance_[e], ref.explained_variance_, rtol=1e-6)
+        largest = np.abs(prep.components_[e]).argmax(axis=1)
+        assert np.all(prep.components_[e][np.arange(4), largest] > 0)  # deterministic sign
         signs = np.sign(np.sum(prep.components_[e] * ref.components_, axis=1))
         np.testing.assert_allclose(prep.components_[e], ref.components_ * signs[:, None], atol=1e-8)
         expected = ref.transform(np.concatenate(rows)) * signs
@@ -248,11 +256,16 @@ def test_bad_preprocessor_use_raises(dataset):
         with pytest.raises(ValueError, match="n_components must be an integer in 1..19"):
             HapticPreprocessor(arrays, n_components=k)
     prep = HapticPreprocessor(arrays)
-    with pytest.raises(RuntimeError, match="before fit"):
+    with pytest.raises(RuntimeError, match="^HapticPreprocessor.transform called before fit$"):
         prep.transform(["brick_508_01"])
-    with pytest.raises(KeyError, match="no_such_trial_999_01"):
+    with pytest.raises(
+        KeyError, match=r"trials not in the haptic arrays: \['no_such_trial_999_01'\]"
+    ):
         prep.fit(["brick_508_01", "no_such_trial_999_01"])
-    with pytest.raises(ValueError, match="at least one trial"):
+    unknown = [f"ghost_999_{t:02d}" for t in range(1, 7)]
+    with pytest.raises(KeyError, match=re.escape(f"{unknown[:5]} (6 total)")):
+        arrays.index(unknown)
+    with pytest.raises(ValueError, match="^HapticPreprocessor.fit needs at least one trial$"):
         prep.fit([])
 
 
@@ -334,3 +347,16 @@ def test_state_restores_the_fitted_preprocessing_and_rejects_bad_state(dataset):
     message = r"^haptic preprocessing 'bias' has shape \(2, 4, 7\), expected \(2, 4, 8\) for 4 "
     with pytest.raises(ValueError, match=message):
         four.restore(state | {"weight": np.zeros((2, 4, 8, 23))})
+
+
+def test_a_constant_signal_is_normalised_to_zero():
+    trials = [make_trial(n, seed=i) for i, n in enumerate(trial_names(1))]
+    for t in trials:
+        for f in t.fingers:
+            f.tac[:] = 2000
+    arrays = compute_haptic_arrays(FakeDataset(trials), steps=5, offsets=1)
+    prep = HapticPreprocessor(arrays).fit([t.name.name for t in trials])
+    np.testing.assert_array_equal(prep.scale_[:, 2], 1.0)  # TAC: no division by zero
+    out = prep.transform([t.name.name for t in trials]).reshape(3, 2, 1, 4, 8, 5)
+    np.testing.assert_allclose(out[..., 2, :], 0.0, atol=1e-4)
+    assert np.isfinite(out).all()
