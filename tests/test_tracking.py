@@ -334,3 +334,25 @@ def test_check_server_waits_only_its_timeout(monkeypatch):
     tracking.check_server("http://h:5000")
     tracking.check_server("http://h:5000/", timeout=1.5)
     assert calls == [("http://h:5000/health", 5.0), ("http://h:5000/health", 1.5)]
+
+
+def test_alive_only_probes_and_trusts_what_it_cannot_check(monkeypatch):
+    from tactile_exp import tracking
+
+    child = subprocess.Popen(["sleep", "30"])
+    try:
+        start = tracking._process_start(child.pid)
+        assert tracking._alive(child.pid, start) and tracking._alive(child.pid, "")
+        assert not tracking._alive(child.pid, str(int(start) + 1))  # a reused pid
+        assert child.poll() is None  # probing sent no signal that ends it
+        monkeypatch.setattr(tracking, "_process_start", lambda pid: "")
+        assert tracking._alive(child.pid, "123")  # start time unreadable: assume alive
+    finally:
+        child.kill()
+        child.wait()
+
+    def not_ours(pid, signal):
+        raise PermissionError(pid)
+
+    monkeypatch.setattr(tracking.os, "kill", not_ours)
+    assert tracking._alive(child.pid, "")  # another user's live process
