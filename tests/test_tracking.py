@@ -131,6 +131,7 @@ def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_u
 
     gone = make("gone", host=host, pid=str(dead.pid), pid_start="")
     alive = make("alive", host=host, pid=me, pid_start="")
+    untimed = make("untimed", host=host, pid=me)  # no start time recorded: pid alone decides
     reused_pid = make("reused", host=host, pid=me, pid_start="1")  # same pid, other process
     elsewhere = make("elsewhere", host=host + "-other", pid=str(dead.pid))
     no_pid = make("no_pid", host=host)
@@ -142,7 +143,7 @@ def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_u
     assert set(status.values()) == {"KILLED"}
     error = client.get_run(gone.info.run_id).data.tags["error"]
     assert error == f"stale: process {dead.pid} on {host} ended without closing this run"
-    for r in (alive, elsewhere, no_pid, other_hash):
+    for r in (alive, untimed, elsewhere, no_pid, other_hash):
         assert client.get_run(r.info.run_id).info.status == "RUNNING"
     assert tracker.finished_run("h1") is None
 
