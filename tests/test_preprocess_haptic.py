@@ -143,6 +143,9 @@ def test_stored_statistics_match_raw_rows(dataset):
     np.testing.assert_allclose(
         arrays.scatter[i, 1, 1, N_SCALAR:, N_SCALAR:], np.cov(rows.T, ddof=0) * len(rows)
     )
+    segments = [trial.segment(state) for state in EPS.values()]
+    ep_rows = np.concatenate([trial.fingers[1].electrodes[s] for s in segments]).astype(float)
+    np.testing.assert_allclose(arrays.centre[i, 1, N_SCALAR:], ep_rows.mean(axis=0))
     raw = arrays.signals[i, 1, 0, 1, N_SCALAR:].T + arrays.centre[i, 1, N_SCALAR:]
     np.testing.assert_allclose(raw, rows, atol=1e-3)
 
@@ -360,3 +363,65 @@ def test_a_constant_signal_is_normalised_to_zero():
     out = prep.transform([t.name.name for t in trials]).reshape(3, 2, 1, 4, 8, 5)
     np.testing.assert_allclose(out[..., 2, :], 0.0, atol=1e-4)
     assert np.isfinite(out).all()
+
+
+def test_defaults_are_the_papers_150_steps_and_5_offsets(dataset, tmp_path, monkeypatch):
+    from tactile_exp.preprocess import haptic
+
+    few = FakeDataset([dataset._data[n.name] for n in dataset.trials[:2]])
+    assert compute_haptic_arrays(few).signals.shape[1:] == (2, 5, 4, 23, 150)
+    monkeypatch.setattr(haptic, "default_cache_dir", lambda: tmp_path)
+    assert load_haptic_arrays(few).signals.shape[1:] == (2, 5, 4, 23, 150)
+    assert len(list(tmp_path.glob("haptic-*.npz"))) == 1  # in the reader's cache dir
+
+
+def test_cache_entries_differ_by_offsets_and_pac_method(dataset, tmp_path):
+    few = FakeDataset([dataset._data[n.name] for n in dataset.trials[:2]])
+    for offsets in (1, 2):
+        for method in ("subsample", "mean"):
+            got = load_haptic_arrays(few, 5, offsets, method, cache_dir=tmp_path)
+            want = compute_haptic_arrays(few, 5, offsets, method)
+            np.testing.assert_array_equal(got.signals, want.signals)
+            again = load_haptic_arrays(few, 5, offsets, method, cache_dir=tmp_path)
+            np.testing.assert_array_equal(again.signals, want.signals)
+    assert len(list(tmp_path.glob("haptic-*.npz"))) == 4
+    trial = few._data[few.trials[0].name]
+    mean_pac = downsample_pac(trial.fingers[0].pac, trial.n_rows, "mean")
+    hold = trial.segment(EPS["hold"])
+    got = compute_haptic_arrays(few, EP_LEN, 1, "mean")
+    raw = got.signals[0, 0, 0, 1, 0] + got.centre[0, 0, 0]
+    np.testing.assert_allclose(raw, mean_pac[hold], rtol=1e-6)
+
+
+def test_progress_is_reported_for_large_data_sets(capsys):
+    trials = [make_trial(f"brick_508_{t:02d}", seed=t, ep_len=3) for t in range(1, 22)]
+    compute_haptic_arrays(FakeDataset(trials), steps=2, offsets=1)
+    out, err = capsys.readouterr()
+    lines = [f"haptic preprocessing: {k}/21 trials" for k in (*range(2, 21, 2), 21)]
+    assert out == "" and err.splitlines() == lines
+    compute_haptic_arrays(FakeDataset(trials[:19]), steps=2, offsets=1)
+    assert capsys.readouterr() == ("", "")  # small data sets: silent
+    empty = compute_haptic_arrays(FakeDataset([]), steps=2, offsets=1)
+    assert empty.trials == () and empty.signals.shape == (0, 2, 1, 4, 23, 2)
+
+
+def test_trials_out_of_order_or_extra_are_an_error():
+    trials = [make_trial(n, seed=i) for i, n in enumerate(trial_names(1))]
+
+    class Reordered(FakeDataset):
+        def iter_trials(self, names=None):
+            yield from reversed(list(super().iter_trials(names)))
+
+    class Extra(FakeDataset):
+        def iter_trials(self, names=None):
+            yield from super().iter_trials(names)
+            yield trials[0]
+
+    names = sorted(t.name.name for t in trials)
+    first, last = names[0], names[-1]
+    with pytest.raises(ValueError, match=f"^dataset yielded trial {last}, expected {first}$"):
+        compute_haptic_arrays(Reordered(trials), steps=2, offsets=1)
+    with pytest.raises(
+        ValueError, match=f"^dataset yielded trial {trials[0].name.name}, expected no more trials$"
+    ):
+        compute_haptic_arrays(Extra(trials), steps=2, offsets=1)
