@@ -11,6 +11,7 @@ from sklearn.decomposition import PCA
 from tactile_exp.data.layout import EPS, PAC_PER_ROW, FingerData, TrialData, TrialName
 from tactile_exp.preprocess.haptic import (
     N_SCALAR,
+    HapticArrays,
     HapticPreprocessor,
     compute_haptic_arrays,
     downsample_pac,
@@ -425,3 +426,29 @@ def test_trials_out_of_order_or_extra_are_an_error():
         ValueError, match=f"^dataset yielded trial {trials[0].name.name}, expected no more trials$"
     ):
         compute_haptic_arrays(Extra(trials), steps=2, offsets=1)
+
+
+def test_wrong_shapes_name_the_array_or_signal():
+    trial = make_trial("brick_508_01", seed=0)
+    n = trial.n_rows
+    trial.fingers[0].electrodes = trial.fingers[0].electrodes[:, :18]
+    with pytest.raises(
+        ValueError, match=rf"finger_0/electrodes: shape \({n}, 18\), expected {n} rows x 19$"
+    ):
+        compute_haptic_arrays(FakeDataset([trial]), steps=5, offsets=1)
+    trial = make_trial("brick_508_01", seed=0)
+    trial.fingers[1].pdc = trial.fingers[1].pdc[:-1]
+    with pytest.raises(ValueError, match=rf"finger_1/pdc: shape \({n - 1},\), expected {n} rows$"):
+        compute_haptic_arrays(FakeDataset([trial]), steps=5, offsets=1)
+    good = compute_haptic_arrays(FakeDataset([make_trial("brick_508_01", seed=0)]), 5, 1)
+    with pytest.raises(
+        ValueError, match=r"^HapticArrays.count: shape \(1, 3\), expected \(1, 4\)$"
+    ):
+        HapticArrays(
+            good.trials, good.signals, good.centre, good.count[:, :3], good.mean, good.scatter
+        )
+
+
+def test_resample_of_a_single_row_repeats_it():
+    out = resample(np.array([[1.0, 2.0]]), 3, 2)
+    np.testing.assert_array_equal(out, np.broadcast_to([1.0, 2.0], (2, 3, 2)))

@@ -1,6 +1,7 @@
 """What `mlflow ui` shows of a job: experiment kind, source tags, dataset input, row grouping."""
 
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -113,6 +114,8 @@ def test_curves_longer_than_a_batch_are_logged_whole(mlflow_uri, monkeypatch):
     client = MlflowClient(mlflow_uri)
     assert sorted(m.step for m in client.get_metric_history(run_id, "a")) == list(range(7))
     assert len(client.get_metric_history(run_id, "b")) == 2
+    now_ms = time.time() * 1000
+    assert all(abs(m.timestamp - now_ms) < 600_000 for m in client.get_metric_history(run_id, "a"))
 
 
 def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_uri):
