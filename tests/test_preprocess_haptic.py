@@ -17,6 +17,7 @@ from tactile_exp.preprocess.haptic import (
     downsample_pac,
     load_haptic_arrays,
     resample,
+    trial_signals,
 )
 
 EP_LEN = 12  # every EP this long, so steps=EP_LEN, offsets=1 reproduces the raw rows exactly
@@ -450,5 +451,13 @@ def test_wrong_shapes_name_the_array_or_signal():
 
 
 def test_resample_of_a_single_row_repeats_it():
+    assert resample(np.ones((4, 2)), 3).shape == (1, 3, 2)  # one copy by default
     out = resample(np.array([[1.0, 2.0]]), 3, 2)
     np.testing.assert_array_equal(out, np.broadcast_to([1.0, 2.0], (2, 3, 2)))
+
+
+def test_trial_signals_default_to_subsampled_pac():
+    trial = make_trial("brick_508_01", seed=0)
+    x = trial_signals(trial)
+    np.testing.assert_array_equal(x[1, :, 0], trial.fingers[1].pac[::PAC_PER_ROW])
+    np.testing.assert_array_equal(x[0, :, 1], trial.fingers[0].pdc)

@@ -86,6 +86,7 @@ def test_run_ends_finished_failed_or_killed_with_the_error_and_every_param(mlflo
     with tracker.run("ok", params, {"level": "x"}) as ok:
         tracker.log_curves(ok, {"loss": [3.0, 2.0, 1.0]}, start=5)
         tracker.log_metrics(ok, {"auc": 0.75}, step=2)
+        tracker.log_metrics(ok, {"mean_auc": 0.5})
     with pytest.raises(ValueError), tracker.run("bad", {}, {}, parent_id=ok):
         raise ValueError("boom")
     with pytest.raises(KeyboardInterrupt), tracker.run("stop", {}, {}):
@@ -97,6 +98,7 @@ def test_run_ends_finished_failed_or_killed_with_the_error_and_every_param(mlflo
     history = client.get_metric_history(ok, "loss")
     assert sorted((m.step, m.value) for m in history) == [(5, 3.0), (6, 2.0), (7, 1.0)]
     assert [(m.step, m.value) for m in client.get_metric_history(ok, "auc")] == [(2, 0.75)]
+    assert [(m.step, m.value) for m in client.get_metric_history(ok, "mean_auc")] == [(0, 0.5)]
     assert runs["bad"].info.status == "FAILED"
     assert runs["bad"].data.tags["error"] == "ValueError: boom"
     assert runs["bad"].data.tags["mlflow.parentRunId"] == ok
