@@ -229,6 +229,8 @@ def test_training_key_changes_with_what_trains_the_model_and_nothing_else():
         _key(model=Component("haptic_cnn", {"lr": 0.01, "head_schedule": {"epochs": 3}})),
     ]
     assert same == [key] * 3
+    odd = Component("haptic_cnn", {"weights": Path("w.pt")})  # not JSON: hashed as its text
+    assert _key(model=odd) == _key(model=Component("haptic_cnn", {"weights": "w.pt"}))
 
 
 @pytest.mark.parametrize("value,expected", [(None, True), (True, True), (False, False)])

@@ -120,7 +120,7 @@ def test_curves_longer_than_a_batch_are_logged_whole(mlflow_uri, monkeypatch):
     assert all(abs(m.timestamp - now_ms) < 600_000 for m in client.get_metric_history(run_id, "a"))
 
 
-def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_uri):
+def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_uri, caplog):
     import os
     import socket
 
@@ -141,7 +141,9 @@ def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_u
     elsewhere = make("elsewhere", host=host + "-other", pid=str(dead.pid))
     no_pid = make("no_pid", host=host)
     other_hash = make("other", host=host, pid=str(dead.pid), config_hash="h2")
-    ended = tracker.end_stale_runs("h1")
+    with caplog.at_level("WARNING", logger="tactile_exp.tracking"):
+        ended = tracker.end_stale_runs("h1")
+    assert caplog.messages == ["marked 2 stale RUNNING run(s) of this config KILLED"]
     assert sorted(ended) == sorted([gone.info.run_id, reused_pid.info.run_id])
     client = MlflowClient(mlflow_uri)
     status = {r: client.get_run(r.info.run_id).info.status for r in (gone, reused_pid)}
