@@ -41,6 +41,7 @@ def _dataset(settings) -> PHAC2:
 
 
 # ---------------------------------------------------------------- preprocessing fit, job level
+@pytest.mark.job
 @pytest.mark.parametrize("fit_on", ["train", "all"])
 def test_job_fits_the_preprocessing_on_what_fit_on_says(tiny_config, monkeypatch, fit_on):
     """A job's normaliser and PCA see the adjective's training trials only, unless fit_on=all."""
@@ -134,6 +135,7 @@ def test_mean_auc_is_the_plain_mean():
 
 
 # ---------------------------------------------------------------- resume
+@pytest.mark.job
 def test_a_crashed_job_runs_again_and_then_is_skipped(tiny_config, mlflow_uri, monkeypatch):
     """FAILED (here after one adjective's child FINISHED) is rerun; FINISHED is then skipped."""
     original = MODELS["random"]
@@ -159,6 +161,7 @@ def test_a_crashed_job_runs_again_and_then_is_skipped(tiny_config, mlflow_uri, m
     assert sorted(r.info.status for r in parents) == ["FAILED", "FINISHED"]
 
 
+@pytest.mark.job
 def test_a_job_left_running_by_a_killed_process_runs_again(tiny_config, mlflow_uri):
     """A parent run still RUNNING (its process was killed -9) is not a finished job."""
     settings = settings_from_config(tiny_config([*FAST, "seed=44"], adjectives="[hard]"))
@@ -170,6 +173,7 @@ def test_a_job_left_running_by_a_killed_process_runs_again(tiny_config, mlflow_u
     assert MlflowClient(mlflow_uri).get_run(result.run_id).info.status == "FINISHED"
 
 
+@pytest.mark.job
 def test_a_finished_run_of_another_config_does_not_skip(tiny_config):
     first = run(settings_from_config(tiny_config([*FAST, "seed=45"], adjectives="[hard]")))
     other = run(settings_from_config(tiny_config([*FAST, "seed=46"], adjectives="[hard]")))
@@ -177,6 +181,7 @@ def test_a_finished_run_of_another_config_does_not_skip(tiny_config):
 
 
 # ---------------------------------------------------------------- impossible values
+@pytest.mark.job
 def test_combine_beyond_the_trials_stops_before_any_run_is_created(tiny_config, mlflow_uri):
     settings = settings_from_config(tiny_config(["combine=3", *FAST[:1]]))
     with pytest.raises(ConfigError, match="combine: 3 trials per unit.*allowed 1..2"):
@@ -197,6 +202,7 @@ def test_tracking_uri_is_config_then_environment_then_the_checkout(monkeypatch, 
     assert tracking.resolve_uri("sqlite:///given.db") == "sqlite:///given.db"
 
 
+@pytest.mark.job
 def test_job_without_tracking_uri_logs_to_mlflow_tracking_uri(
     compose_config, cache_dir, mlflow_uri, monkeypatch
 ):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from sklearn.decomposition import PCA
@@ -9,11 +11,13 @@ from sklearn.decomposition import PCA
 from tactile_exp.data.layout import EPS, PAC_PER_ROW, FingerData, TrialData, TrialName
 from tactile_exp.preprocess.haptic import (
     N_SCALAR,
+    HapticArrays,
     HapticPreprocessor,
     compute_haptic_arrays,
     downsample_pac,
     load_haptic_arrays,
     resample,
+    trial_signals,
 )
 
 EP_LEN = 12  # every EP this long, so steps=EP_LEN, offsets=1 reproduces the raw rows exactly
@@ -127,6 +131,9 @@ def test_shapes(dataset):
     assert out.shape == (2, 2, 5, 32, 20) and out.dtype == np.float32
     assert prep.explained_variance_ratio_.shape == (4, 4)
     assert HapticPreprocessor(arrays, n_components=2).fit(["brick_508_01"]).n_channels == 24
+    assert not np.array_equal(prep.mean_[0], prep.mean_[1])  # the default: each finger its own
+    for k in (1, 19):  # the ends of the allowed range
+        assert HapticPreprocessor(arrays, n_components=k).n_channels == 4 * (N_SCALAR + k)
 
 
 def test_stored_statistics_match_raw_rows(dataset):
@@ -138,6 +145,9 @@ def test_stored_statistics_match_raw_rows(dataset):
     np.testing.assert_allclose(
         arrays.scatter[i, 1, 1, N_SCALAR:, N_SCALAR:], np.cov(rows.T, ddof=0) * len(rows)
     )
+    segments = [trial.segment(state) for state in EPS.values()]
+    ep_rows = np.concatenate([trial.fingers[1].electrodes[s] for s in segments]).astype(float)
+    np.testing.assert_allclose(arrays.centre[i, 1, N_SCALAR:], ep_rows.mean(axis=0))
     raw = arrays.signals[i, 1, 0, 1, N_SCALAR:].T + arrays.centre[i, 1, N_SCALAR:]
     np.testing.assert_allclose(raw, rows, atol=1e-3)
 
@@ -190,6 +200,9 @@ def test_pca_matches_sklearn_on_normalised_rows(dataset):
         np.testing.assert_allclose(
             prep.explained_variance_ratio_[e], ref.explained_variance_ratio_, rtol=1e-6
         )
+        np.testing.assert_allclose(prep.explained_variance_[e], ref.explained_variance_, rtol=1e-6)
+        largest = np.abs(prep.components_[e]).argmax(axis=1)
+        assert np.all(prep.components_[e][np.arange(4), largest] > 0)  # deterministic sign
         signs = np.sign(np.sum(prep.components_[e] * ref.components_, axis=1))
         np.testing.assert_allclose(prep.components_[e], ref.components_ * signs[:, None], atol=1e-8)
         expected = ref.transform(np.concatenate(rows)) * signs
@@ -248,11 +261,16 @@ def test_bad_preprocessor_use_raises(dataset):
         with pytest.raises(ValueError, match="n_components must be an integer in 1..19"):
             HapticPreprocessor(arrays, n_components=k)
     prep = HapticPreprocessor(arrays)
-    with pytest.raises(RuntimeError, match="before fit"):
+    with pytest.raises(RuntimeError, match="^HapticPreprocessor.transform called before fit$"):
         prep.transform(["brick_508_01"])
-    with pytest.raises(KeyError, match="no_such_trial_999_01"):
+    with pytest.raises(
+        KeyError, match=r"trials not in the haptic arrays: \['no_such_trial_999_01'\]"
+    ):
         prep.fit(["brick_508_01", "no_such_trial_999_01"])
-    with pytest.raises(ValueError, match="at least one trial"):
+    unknown = [f"ghost_999_{t:02d}" for t in range(1, 7)]
+    with pytest.raises(KeyError, match=re.escape(f"{unknown[:5]} (6 total)")):
+        arrays.index(unknown)
+    with pytest.raises(ValueError, match="^HapticPreprocessor.fit needs at least one trial$"):
         prep.fit([])
 
 
@@ -307,3 +325,139 @@ def test_short_dataset_raises():
     trials = [make_trial(n, seed=i) for i, n in enumerate(trial_names(1))]
     with pytest.raises(ValueError, match="yielded 2 trials, expected 3"):
         compute_haptic_arrays(Short(trials), steps=5, offsets=1)
+
+
+def test_state_restores_the_fitted_preprocessing_and_rejects_bad_state(dataset):
+    arrays = compute_haptic_arrays(dataset, steps=6, offsets=2)
+    train, test = train_test(dataset)
+    fitted = HapticPreprocessor(arrays, n_components=3).fit(train)
+    state = fitted.state()
+    assert sorted(state) == sorted(HapticPreprocessor.STATE)
+    np.testing.assert_array_equal(state["mean"], fitted.mean_)
+    np.testing.assert_array_equal(state["scale"], fitted.scale_)
+    np.testing.assert_array_equal(state["components"], fitted.components_)
+    np.testing.assert_array_equal(state["pca_mean"], fitted.pca_mean_)
+    restored = HapticPreprocessor(arrays, n_components=3).restore(state)
+    np.testing.assert_array_equal(restored.transform(test), fitted.transform(test))
+    for name in ("mean", "scale", "components", "pca_mean"):
+        np.testing.assert_array_equal(getattr(restored, f"{name}_"), state[name])
+    for name in HapticPreprocessor.STATE:
+        partial = {k: v for k, v in state.items() if k != name}
+        with pytest.raises(ValueError, match=f"^haptic preprocessing state lacks '{name}'$"):
+            HapticPreprocessor(arrays, n_components=3).restore(partial)
+    four = HapticPreprocessor(arrays, n_components=4)  # expects 4 + 4 channels per EP
+    message = r"^haptic preprocessing 'weight' has shape \(2, 4, 7, 23\), expected \(2, 4, 8, 23\) "
+    with pytest.raises(ValueError, match=message + "for 4 electrode PCs$"):
+        four.restore(state)
+    message = r"^haptic preprocessing 'bias' has shape \(2, 4, 7\), expected \(2, 4, 8\) for 4 "
+    with pytest.raises(ValueError, match=message):
+        four.restore(state | {"weight": np.zeros((2, 4, 8, 23))})
+
+
+def test_a_constant_signal_is_normalised_to_zero():
+    trials = [make_trial(n, seed=i) for i, n in enumerate(trial_names(1))]
+    for t in trials:
+        for f in t.fingers:
+            f.tac[:] = 2000
+    arrays = compute_haptic_arrays(FakeDataset(trials), steps=5, offsets=1)
+    prep = HapticPreprocessor(arrays).fit([t.name.name for t in trials])
+    np.testing.assert_array_equal(prep.scale_[:, 2], 1.0)  # TAC: no division by zero
+    out = prep.transform([t.name.name for t in trials]).reshape(3, 2, 1, 4, 8, 5)
+    np.testing.assert_allclose(out[..., 2, :], 0.0, atol=1e-4)
+    assert np.isfinite(out).all()
+
+
+def test_defaults_are_the_papers_150_steps_and_5_offsets(dataset, tmp_path, monkeypatch):
+    from tactile_exp.preprocess import haptic
+
+    few = FakeDataset([dataset._data[n.name] for n in dataset.trials[:2]])
+    assert compute_haptic_arrays(few).signals.shape[1:] == (2, 5, 4, 23, 150)
+    monkeypatch.setattr(haptic, "default_cache_dir", lambda: tmp_path)
+    assert load_haptic_arrays(few).signals.shape[1:] == (2, 5, 4, 23, 150)
+    assert len(list(tmp_path.glob("haptic-*.npz"))) == 1  # in the reader's cache dir
+
+
+def test_cache_entries_differ_by_offsets_and_pac_method(dataset, tmp_path):
+    few = FakeDataset([dataset._data[n.name] for n in dataset.trials[:2]])
+    for offsets in (1, 2):
+        for method in ("subsample", "mean"):
+            got = load_haptic_arrays(few, 5, offsets, method, cache_dir=tmp_path)
+            want = compute_haptic_arrays(few, 5, offsets, method)
+            np.testing.assert_array_equal(got.signals, want.signals)
+            again = load_haptic_arrays(few, 5, offsets, method, cache_dir=tmp_path)
+            np.testing.assert_array_equal(again.signals, want.signals)
+    assert len(list(tmp_path.glob("haptic-*.npz"))) == 4
+    trial = few._data[few.trials[0].name]
+    mean_pac = downsample_pac(trial.fingers[0].pac, trial.n_rows, "mean")
+    hold = trial.segment(EPS["hold"])
+    got = compute_haptic_arrays(few, EP_LEN, 1, "mean")
+    raw = got.signals[0, 0, 0, 1, 0] + got.centre[0, 0, 0]
+    np.testing.assert_allclose(raw, mean_pac[hold], rtol=1e-6)
+
+
+def test_progress_is_reported_for_large_data_sets(capsys):
+    trials = [make_trial(f"brick_508_{t:02d}", seed=t, ep_len=3) for t in range(1, 22)]
+    compute_haptic_arrays(FakeDataset(trials), steps=2, offsets=1)
+    out, err = capsys.readouterr()
+    lines = [f"haptic preprocessing: {k}/21 trials" for k in (*range(2, 21, 2), 21)]
+    assert out == "" and err.splitlines() == lines
+    compute_haptic_arrays(FakeDataset(trials[:19]), steps=2, offsets=1)
+    assert capsys.readouterr() == ("", "")  # small data sets: silent
+    empty = compute_haptic_arrays(FakeDataset([]), steps=2, offsets=1)
+    assert empty.trials == () and empty.signals.shape == (0, 2, 1, 4, 23, 2)
+
+
+def test_trials_out_of_order_or_extra_are_an_error():
+    trials = [make_trial(n, seed=i) for i, n in enumerate(trial_names(1))]
+
+    class Reordered(FakeDataset):
+        def iter_trials(self, names=None):
+            yield from reversed(list(super().iter_trials(names)))
+
+    class Extra(FakeDataset):
+        def iter_trials(self, names=None):
+            yield from super().iter_trials(names)
+            yield trials[0]
+
+    names = sorted(t.name.name for t in trials)
+    first, last = names[0], names[-1]
+    with pytest.raises(ValueError, match=f"^dataset yielded trial {last}, expected {first}$"):
+        compute_haptic_arrays(Reordered(trials), steps=2, offsets=1)
+    with pytest.raises(
+        ValueError, match=f"^dataset yielded trial {trials[0].name.name}, expected no more trials$"
+    ):
+        compute_haptic_arrays(Extra(trials), steps=2, offsets=1)
+
+
+def test_wrong_shapes_name_the_array_or_signal():
+    trial = make_trial("brick_508_01", seed=0)
+    n = trial.n_rows
+    trial.fingers[0].electrodes = trial.fingers[0].electrodes[:, :18]
+    with pytest.raises(
+        ValueError, match=rf"finger_0/electrodes: shape \({n}, 18\), expected {n} rows x 19$"
+    ):
+        compute_haptic_arrays(FakeDataset([trial]), steps=5, offsets=1)
+    trial = make_trial("brick_508_01", seed=0)
+    trial.fingers[1].pdc = trial.fingers[1].pdc[:-1]
+    with pytest.raises(ValueError, match=rf"finger_1/pdc: shape \({n - 1},\), expected {n} rows$"):
+        compute_haptic_arrays(FakeDataset([trial]), steps=5, offsets=1)
+    good = compute_haptic_arrays(FakeDataset([make_trial("brick_508_01", seed=0)]), 5, 1)
+    with pytest.raises(
+        ValueError, match=r"^HapticArrays.count: shape \(1, 3\), expected \(1, 4\)$"
+    ):
+        HapticArrays(
+            good.trials, good.signals, good.centre, good.count[:, :3], good.mean, good.scatter
+        )
+
+
+def test_resample_of_a_single_row_repeats_it():
+    assert resample(np.ones((4, 2)), 3).shape == (1, 3, 2)  # one copy by default
+    out = resample(np.array([[1.0, 2.0]]), 3, 2)
+    np.testing.assert_array_equal(out, np.broadcast_to([1.0, 2.0], (2, 3, 2)))
+
+
+def test_trial_signals_default_to_subsampled_pac():
+    trial = make_trial("brick_508_01", seed=0)
+    x = trial_signals(trial)
+    np.testing.assert_array_equal(x[1, :, 0], trial.fingers[1].pac[::PAC_PER_ROW])
+    np.testing.assert_array_equal(x[0, :, 1], trial.fingers[0].pdc)

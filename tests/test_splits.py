@@ -6,12 +6,13 @@ import re
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 from phac2_fixture import OBJECTS, published_groups, write_file
 
 from tactile_exp.data.layout import ADJECTIVES, Split, published_test_split
 from tactile_exp.data.phac2 import PHAC2, DataError
-from tactile_exp.data.splits import SPLITS, check_split, make_split
+from tactile_exp.data.splits import SPLITS, check_split, make_split, split_photographs
 
 ALL = tuple(OBJECTS)
 # PHAC2_FORMAT §2: trial counts of the published split (train, test).
@@ -102,7 +103,11 @@ def test_random_follows_the_authors_rule(full: PHAC2) -> None:
 
 def test_published_falls_back_to_random_when_objects_missing(tmp_path: Path) -> None:
     ds = PHAC2(write_file(tmp_path / "f.h5", (101, 410, 508, 211, 114), 2, signals=False))
-    with pytest.warns(UserWarning, match="published test object .* not in the file"):
+    warning = (
+        r": published test object \d+ \(soft=[01]\) is not in the file; "
+        "falling back to the random split with seed 0$"
+    )
+    with pytest.warns(UserWarning, match=warning):
         split = make_split(ds, "soft")
     assert split == make_split(ds, "soft", "random", seed=0)
     assert_no_leak(split)
@@ -118,7 +123,8 @@ def test_split_with_no_positive_in_test(tmp_path: Path) -> None:
     names = [f"{OBJECTS[o].group_stem}_{t:02d}" for o in (101, 410, 508, 211) for t in (1, 2)]
     groups = {"soft": (names[:6], names[6:])}  # positives 101 and 410 both in train
     path = write_file(tmp_path / "f.h5", (101, 410, 508, 211), 2, split_groups=groups)
-    with pytest.raises(DataError, match=re.escape(str(path)) + ".*'soft': test has no positive"):
+    where = re.escape(f"{path} (published split): split of 'soft': test has no positive")
+    with pytest.raises(DataError, match=where):
         make_split(PHAC2(path), "soft")
 
 
@@ -136,8 +142,14 @@ def test_check_split_rejects_shared_object() -> None:
     names = ["a_101_01", "a_101_02", "b_410_01", "c_508_01", "d_211_01"]
     labels = dict(zip(names, [1, 1, 1, 0, 0], strict=True))
     leaky = Split("soft", ("a_101_01", "b_410_01", "c_508_01"), ("a_101_02", "d_211_01"), labels)
-    with pytest.raises(DataError, match="f.h5: split of 'soft': object 101 in both"):
+    with pytest.raises(DataError, match="^f.h5: split of 'soft': object 101 in both"):
         check_split(leaky, "f.h5")
+    message = (
+        r"^split of 'soft': object 101 in both train and test \(expected no shared object "
+        r"unless it is the only object of its class\)$"
+    )
+    with pytest.raises(DataError, match=message):
+        check_split(leaky)
     del labels["b_410_01"]  # now 101 is the only positive object: a by-trial split is allowed
     ok = Split("soft", ("a_101_01", "c_508_01"), ("a_101_02", "d_211_01"), labels)
     assert check_split(ok) is ok
@@ -149,3 +161,110 @@ def test_unknown_rule_and_adjective(full: PHAC2) -> None:
         make_split(full, "soft", "nope")
     with pytest.raises(DataError, match="unknown adjective 'gritty'"):
         make_split(full, "gritty")
+
+
+def _photo_split(train: list[str], test: list[str], labels: list[int]) -> Split:
+    names = [*train, *test]
+    return Split("soft", tuple(train), tuple(test), dict(zip(names, labels, strict=True)))
+
+
+def test_photographs_follow_their_objects_trials() -> None:
+    split = _photo_split(
+        ["a_101_01", "a_101_02", "c_508_01"], ["b_410_01", "d_211_01"], [1, 1, 0, 1, 0]
+    )
+    photos = np.array([508, 101, 410, 101, 211, 999, 508])  # 999: an object of no trial
+    train, test, labels = split_photographs(split, photos)
+    assert train.tolist() == [1, 3, 0, 6]  # object by object (101, 508), views in order
+    assert test.tolist() == [4, 2]  # 211, then 410
+    assert train.dtype.kind == test.dtype.kind == "i"
+    assert labels == {101: 1, 508: 0, 410: 1, 211: 0}
+
+
+@pytest.mark.parametrize(
+    "n_train,n_test,views,k",
+    [(1, 1, 4, 2), (9, 1, 4, 3), (1, 9, 4, 1), (3, 1, 2, 1), (1, 3, 5, 1), (2, 1, 3, 2)],
+)
+def test_an_object_split_by_trial_splits_its_photographs_in_proportion(
+    n_train: int, n_test: int, views: int, k: int
+) -> None:
+    train = [f"a_101_{t:02d}" for t in range(1, n_train + 1)]
+    test = [f"a_101_{t:02d}" for t in range(n_train + 1, n_train + n_test + 1)]
+    split = _photo_split(train, test, [1] * (n_train + n_test))
+    photos = np.array([101] * views + [508])
+    got_train, got_test, labels = split_photographs(split, photos)
+    assert got_train.tolist() == list(range(k))  # first views to train, at least one per side
+    assert got_test.tolist() == list(range(k, views))
+    assert labels == {101: 1}
+
+
+def test_an_object_split_by_trial_needs_two_photographs() -> None:
+    split = _photo_split(["a_101_01"], ["a_101_02"], [1, 1])
+    with pytest.raises(
+        ValueError,
+        match=r"'soft': object 101 is split by trial \(1 train, 1 test\) "
+        r"but has 1 photograph\(s\); at least 2",
+    ):
+        split_photographs(split, np.array([101, 508]))
+
+
+def test_no_trials_give_empty_integer_sides() -> None:
+    train, test, labels = split_photographs(_photo_split([], [], []), np.array([101]))
+    assert train.shape == test.shape == (0,)
+    assert train.dtype == test.dtype == np.int64
+    assert labels == {}
+
+
+def test_a_missing_split_group_falls_back_to_the_table(
+    full: PHAC2, full_groups: PHAC2, tmp_path: Path
+) -> None:
+    path = tmp_path / "partial.h5"
+    path.write_bytes(full_groups.path.read_bytes())
+    with h5py.File(path, "a") as f:
+        del f["train_test_negative_sets/hard/test"]
+    with pytest.warns(UserWarning) as record:
+        split = make_split(PHAC2(path), "hard")
+    assert split == make_split(full, "hard")
+    (warning,) = record
+    assert (
+        str(warning.message)
+        == f"{path}: /train_test_negative_sets/hard/test missing; using the table"
+    )
+
+
+def test_a_split_group_linking_an_unknown_trial_is_an_error(tmp_path: Path) -> None:
+    path = write_file(tmp_path / "f.h5", (101, 508), 2, split_groups={"soft": ([], [])})
+    with h5py.File(path, "a") as f:
+        f["train_test_sets/soft/train/ghost_999_01"] = f["brick_508_01"]
+    with pytest.raises(
+        DataError,
+        match=f"^{re.escape(str(path))}: /train_test_sets/soft/train/ghost_999_01 is not one of "
+        "the file's trial groups$",
+    ):
+        make_split(PHAC2(path), "soft")
+
+
+def test_a_table_split_that_fails_its_check_names_the_rule_and_falls_back(tmp_path: Path) -> None:
+    test_objects = (410, 114, 508, 507, 509, 503, 120)  # the table's soft test objects, only
+    ds = PHAC2(write_file(tmp_path / "f.h5", test_objects, 2, signals=False))
+    message = re.escape(f"{ds.path} (published split): split of 'soft': train has no positive")
+    with pytest.warns(UserWarning, match=message):
+        split = make_split(ds, "soft")
+    assert split == make_split(ds, "soft", "random", seed=0)
+
+
+def test_check_split_rejects_shared_trials_and_one_class_sides() -> None:
+    pos = [f"a_101_{t:02d}" for t in range(1, 8)]
+    neg = ["c_508_01", "c_508_02", "d_211_01", "d_211_02"]
+    labels = {n: 1 for n in pos} | {n: 0 for n in neg}
+    shared = Split("soft", (*pos[:6], "c_508_01"), (*pos, "d_211_01"), labels)
+    first_five = re.escape(str(pos[:5]))
+    with pytest.raises(DataError, match=f"^split of 'soft': trial\\(s\\) {first_five} in both "):
+        check_split(shared)
+    one_class = {
+        "train has no negative trial": Split("soft", (pos[0],), (pos[1], neg[0]), labels),
+        "train has no positive trial": Split("soft", (neg[0],), (pos[1], neg[1]), labels),
+        "test has no negative trial": Split("soft", (pos[0], neg[0]), (pos[1],), labels),
+    }
+    for message, split in one_class.items():
+        with pytest.raises(DataError, match=f"^split of 'soft': {message} \\(expected at least"):
+            check_split(split)

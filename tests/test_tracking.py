@@ -1,8 +1,10 @@
 """What `mlflow ui` shows of a job: experiment kind, source tags, dataset input, row grouping."""
 
 import subprocess
+import time
 from pathlib import Path
 
+import pytest
 from mlflow.tracking import MlflowClient
 
 from tactile_exp.config import settings_from_config
@@ -14,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FAST = ["model=random", "combine_instances=separate"]
 
 
+@pytest.mark.job
 def test_job_runs_carry_ui_tags_and_the_data_file_as_input(tiny_config, mlflow_uri):
     settings = settings_from_config(tiny_config([*FAST, "seed=41"], adjectives="[hard]"))
     run(settings)
@@ -83,6 +86,7 @@ def test_run_ends_finished_failed_or_killed_with_the_error_and_every_param(mlflo
     with tracker.run("ok", params, {"level": "x"}) as ok:
         tracker.log_curves(ok, {"loss": [3.0, 2.0, 1.0]}, start=5)
         tracker.log_metrics(ok, {"auc": 0.75}, step=2)
+        tracker.log_metrics(ok, {"mean_auc": 0.5})
     with pytest.raises(ValueError), tracker.run("bad", {}, {}, parent_id=ok):
         raise ValueError("boom")
     with pytest.raises(KeyboardInterrupt), tracker.run("stop", {}, {}):
@@ -94,6 +98,7 @@ def test_run_ends_finished_failed_or_killed_with_the_error_and_every_param(mlflo
     history = client.get_metric_history(ok, "loss")
     assert sorted((m.step, m.value) for m in history) == [(5, 3.0), (6, 2.0), (7, 1.0)]
     assert [(m.step, m.value) for m in client.get_metric_history(ok, "auc")] == [(2, 0.75)]
+    assert [(m.step, m.value) for m in client.get_metric_history(ok, "mean_auc")] == [(0, 0.5)]
     assert runs["bad"].info.status == "FAILED"
     assert runs["bad"].data.tags["error"] == "ValueError: boom"
     assert runs["bad"].data.tags["mlflow.parentRunId"] == ok
@@ -111,9 +116,11 @@ def test_curves_longer_than_a_batch_are_logged_whole(mlflow_uri, monkeypatch):
     client = MlflowClient(mlflow_uri)
     assert sorted(m.step for m in client.get_metric_history(run_id, "a")) == list(range(7))
     assert len(client.get_metric_history(run_id, "b")) == 2
+    now_ms = time.time() * 1000
+    assert all(abs(m.timestamp - now_ms) < 600_000 for m in client.get_metric_history(run_id, "a"))
 
 
-def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_uri):
+def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_uri, caplog):
     import os
     import socket
 
@@ -129,18 +136,21 @@ def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_u
 
     gone = make("gone", host=host, pid=str(dead.pid), pid_start="")
     alive = make("alive", host=host, pid=me, pid_start="")
+    untimed = make("untimed", host=host, pid=me)  # no start time recorded: pid alone decides
     reused_pid = make("reused", host=host, pid=me, pid_start="1")  # same pid, other process
     elsewhere = make("elsewhere", host=host + "-other", pid=str(dead.pid))
     no_pid = make("no_pid", host=host)
     other_hash = make("other", host=host, pid=str(dead.pid), config_hash="h2")
-    ended = tracker.end_stale_runs("h1")
+    with caplog.at_level("WARNING", logger="tactile_exp.tracking"):
+        ended = tracker.end_stale_runs("h1")
+    assert caplog.messages == ["marked 2 stale RUNNING run(s) of this config KILLED"]
     assert sorted(ended) == sorted([gone.info.run_id, reused_pid.info.run_id])
     client = MlflowClient(mlflow_uri)
     status = {r: client.get_run(r.info.run_id).info.status for r in (gone, reused_pid)}
     assert set(status.values()) == {"KILLED"}
     error = client.get_run(gone.info.run_id).data.tags["error"]
     assert error == f"stale: process {dead.pid} on {host} ended without closing this run"
-    for r in (alive, elsewhere, no_pid, other_hash):
+    for r in (alive, untimed, elsewhere, no_pid, other_hash):
         assert client.get_run(r.info.run_id).info.status == "RUNNING"
     assert tracker.finished_run("h1", data_identity="any") is None  # RUNNING or KILLED: rerun
 
@@ -161,5 +171,196 @@ def test_unreachable_server_is_reported_before_any_work():
 
     from tactile_exp.tracking import TrackingError, check_server
 
-    with pytest.raises(TrackingError, match=r"^tracking.uri: no MLflow server answers at http"):
+    message = (
+        r"^tracking.uri: no MLflow server answers at http://127.0.0.1:9/ \(.*Connection refused\); "
+        r"start one \(`mlflow server`\) or use tracking=local$"
+    )
+    with pytest.raises(TrackingError, match=message):
         check_server("http://127.0.0.1:9/", timeout=1.0)
+    with pytest.raises(TrackingError, match=r"at http://\[bad \(.*IPv6.*\); start one"):
+        check_server("http://[bad")  # no `reason`: the error itself is shown
+
+
+def test_finished_run_is_the_finished_parent_of_that_config_only(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "resume")
+    parent = {"config_hash": "h1", "run_level": "parent"}
+    with pytest.raises(RuntimeError), tracker.run("crashed", {}, parent):
+        raise RuntimeError("crash")
+    with tracker.run("child", {}, {"config_hash": "h1", "run_level": "child"}):
+        pass
+    with tracker.run("other", {}, {"config_hash": "h2", "run_level": "parent"}):
+        pass
+    tracker.client.create_run(tracker.experiment_id, run_name="running", tags=parent)
+    assert tracker.finished_run("h1") is None  # FAILED, a child, another hash, RUNNING
+    with tracker.run("done", {}, parent) as done:
+        pass
+    assert tracker.finished_run("h1") == done
+    assert Tracker(mlflow_uri, "elsewhere").finished_run("h1") is None
+
+
+def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_path):
+    import os
+    import socket
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tracker = Tracker(mlflow_uri, "tags", entry_point="python -m tactile_exp.sweep")
+    (tmp_path / "f.txt").write_text("file")
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "g.txt").write_text("dir")
+    with tracker.run("r", {}, {"mine": "1"}) as run_id:
+        tracker.set_tags(run_id, {"late": "2", "later": "3"})
+        tracker.log_dataset(run_id, name="phac2.h5", digest="abc", source="/data/phac2.h5")
+        tracker.log_text(run_id, "hello", "notes/t.txt")
+        tracker.log_file(run_id, tmp_path / "f.txt", "files")
+        tracker.log_dir(run_id, tmp_path / "d", "folder")
+        figure = plt.figure(figsize=(2, 1), dpi=50)
+        tracker.log_figure(run_id, figure, "plots/f.png")
+        plt.close(figure)
+    run = MlflowClient(mlflow_uri).get_run(run_id)
+    tags = run.data.tags
+    assert tags["mlflow.runName"] == "r" and tags["mine"] == "1"
+    assert (tags["late"], tags["later"]) == ("2", "3")
+    assert tags["mlflow.source.name"] == "python -m tactile_exp.sweep"
+    assert tags["mlflow.source.type"] == "LOCAL"
+    assert tags["host"] == socket.gethostname() and tags["pid"] == str(os.getpid())
+    start = Path(f"/proc/{os.getpid()}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    assert tags["pid_start"] == start
+    (dataset,) = run.inputs.dataset_inputs
+    assert (dataset.dataset.name, dataset.dataset.digest) == ("phac2.h5", "abc")
+    assert (dataset.dataset.source, dataset.dataset.source_type) == ("/data/phac2.h5", "local")
+    root = Path(run.info.artifact_uri.removeprefix("file://"))
+    db_dir = Path(mlflow_uri.removeprefix("sqlite:///")).parent
+    assert root.is_relative_to(db_dir / "mlartifacts")  # artifacts beside the database
+    assert (root / "notes" / "t.txt").read_text() == "hello"
+    assert (root / "files" / "f.txt").read_text() == "file"
+    assert (root / "folder" / "g.txt").read_text() == "dir"
+    assert (root / "plots" / "f.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_tracking_uri_and_artifact_root(monkeypatch, tmp_path):
+    from tactile_exp import tracking
+
+    assert tracking._artifact_root("http://host:5000") is None
+    assert tracking._artifact_root(f"sqlite:///{tmp_path}/m.db") == f"file://{tmp_path}/mlartifacts"
+    monkeypatch.chdir(tmp_path)
+    assert tracking.project_root() == ROOT  # the checkout, wherever the cwd is
+    monkeypatch.setattr(tracking, "__file__", str(tmp_path / "site" / "pkg" / "tracking.py"))
+    assert tracking.project_root() == tmp_path  # an installed package: the cwd
+
+
+def test_git_commit_of_the_checkout():
+    commit = git_commit(ROOT)
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True)
+    if head.returncode != 0:  # mutmut's copy of the tree is no checkout
+        assert commit is None
+    else:
+        assert commit == head.stdout.decode().strip() and len(commit) == 40
+
+
+def test_check_server_asks_health_once():
+    import http.server
+    import threading
+
+    from tactile_exp.tracking import check_server
+
+    paths: list[str] = []
+
+    class Health(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 (the handler's name)
+            paths.append(self.path)
+            self.send_response(200)
+            self.end_headers()
+            self.wfile.write(b"OK")
+
+        def log_message(self, *args):
+            pass
+
+    server = http.server.HTTPServer(("127.0.0.1", 0), Health)
+    thread = threading.Thread(target=server.handle_request)
+    thread.start()
+    try:
+        check_server(f"http://127.0.0.1:{server.server_port}/")
+    finally:
+        thread.join(5)
+        server.server_close()
+    assert paths == ["/health"]
+
+
+def test_experiment_creation_retries_then_raises(mlflow_uri, monkeypatch):
+    from mlflow.tracking import MlflowClient as Client
+
+    from tactile_exp import tracking
+
+    waits: list[float] = []
+    monkeypatch.setattr(tracking.time, "sleep", waits.append)
+    tries: list[str] = []
+
+    def racing(self, name, **kwargs):
+        tries.append(name)
+        if len(tries) < 3:
+            raise RuntimeError("database is locked")
+        return original(self, name, **kwargs)
+
+    original = Client.create_experiment
+    monkeypatch.setattr(Client, "create_experiment", racing)
+    tracker = Tracker(mlflow_uri, "raced")
+    assert tries == ["raced"] * 3 and waits == [0.5, 1.0]
+    assert Client(mlflow_uri).get_experiment_by_name("raced").experiment_id == (
+        tracker.experiment_id
+    )
+    waits.clear()
+    monkeypatch.setattr(Client, "create_experiment", lambda self, name, **kw: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        Tracker(mlflow_uri, "never")
+    assert waits == [0.5, 1.0, 1.5, 2.0]
+
+
+def test_check_server_waits_only_its_timeout(monkeypatch):
+    from tactile_exp import tracking
+
+    calls: list[tuple[str, object]] = []
+
+    class Answer:
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *args):
+            return False
+
+        def read(self):
+            return b"OK"
+
+    def urlopen(url, timeout=None):
+        calls.append((url, timeout))
+        return Answer()
+
+    monkeypatch.setattr(tracking.urllib.request, "urlopen", urlopen)
+    tracking.check_server("http://h:5000")
+    tracking.check_server("http://h:5000/", timeout=1.5)
+    assert calls == [("http://h:5000/health", 5.0), ("http://h:5000/health", 1.5)]
+
+
+def test_alive_only_probes_and_trusts_what_it_cannot_check(monkeypatch):
+    from tactile_exp import tracking
+
+    child = subprocess.Popen(["sleep", "30"])
+    try:
+        start = tracking._process_start(child.pid)
+        assert tracking._alive(child.pid, start) and tracking._alive(child.pid, "")
+        assert not tracking._alive(child.pid, str(int(start) + 1))  # a reused pid
+        assert child.poll() is None  # probing sent no signal that ends it
+        monkeypatch.setattr(tracking, "_process_start", lambda pid: "")
+        assert tracking._alive(child.pid, "123")  # start time unreadable: assume alive
+    finally:
+        child.kill()
+        child.wait()
+
+    def not_ours(pid, signal):
+        raise PermissionError(pid)
+
+    monkeypatch.setattr(tracking.os, "kill", not_ours)
+    assert tracking._alive(child.pid, "")  # another user's live process
