@@ -181,21 +181,24 @@ def test_unreachable_server_is_reported_before_any_work():
         check_server("http://[bad")  # no `reason`: the error itself is shown
 
 
-def test_finished_run_is_the_finished_parent_of_that_config_only(mlflow_uri):
+def test_finished_run_is_the_finished_parent_of_that_config_and_data_only(mlflow_uri):
     tracker = Tracker(mlflow_uri, "resume")
-    parent = {"config_hash": "h1", "run_level": "parent"}
+    parent = {"config_hash": "h1", "run_level": "parent", "data.identity": "d1"}
     with pytest.raises(RuntimeError), tracker.run("crashed", {}, parent):
         raise RuntimeError("crash")
-    with tracker.run("child", {}, {"config_hash": "h1", "run_level": "child"}):
+    with tracker.run("child", {}, parent | {"run_level": "child"}):
         pass
-    with tracker.run("other", {}, {"config_hash": "h2", "run_level": "parent"}):
+    with tracker.run("other", {}, parent | {"config_hash": "h2"}):
+        pass
+    with tracker.run("other data", {}, parent | {"data.identity": "d2"}):
         pass
     tracker.client.create_run(tracker.experiment_id, run_name="running", tags=parent)
-    assert tracker.finished_run("h1") is None  # FAILED, a child, another hash, RUNNING
+    # FAILED, a child, another hash, RUNNING; another file's run is no match either
+    assert tracker.finished_run("h1", data_identity="d1") is None
     with tracker.run("done", {}, parent) as done:
         pass
-    assert tracker.finished_run("h1") == done
-    assert Tracker(mlflow_uri, "elsewhere").finished_run("h1") is None
+    assert tracker.finished_run("h1", data_identity="d1") == done
+    assert Tracker(mlflow_uri, "elsewhere").finished_run("h1", data_identity="d1") is None
 
 
 def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_path):
