@@ -1,8 +1,9 @@
 """The baselines' classifier: StandardScaler -> linear SVM, C chosen by leave-3-objects-out CV.
 
-On a small data set (3 training objects or fewer) C is chosen by leave-1-object-out, and with
-one training object (or no draw with both classes) the middle C of the grid is used, each with a
-warning.
+On a small data set, where no draw of 3 held-out objects keeps both classes in training and
+gives both among the held-out objects, fewer objects are held out (2, then 1), with a warning; that
+needs at least two objects of each class. With fewer, the middle C of the grid is used, also with
+a warning.
 
 The authors (BASELINES.md §1.3) drew 100 random sets of 3 training objects, held out all their
 trials, skipped draws whose training part had one class, and scored F1. Gao et al. report AUC, so
@@ -85,30 +86,27 @@ class ObjectCVLinearSVM:
         return make_pipeline(StandardScaler(), cls._svc(C))
 
     def cv_scores(self, X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> np.ndarray | None:
-        """Pooled held-out AUC per C; ``None`` when the pooled held-out part has one class.
+        """Pooled held-out AUC per C; ``None`` when no draw can score C.
 
-        With ``p_out`` or fewer training objects (a small data set) it holds out one object per
-        draw instead, with a warning; with a single object there is nothing to hold out (None).
+        Holds out ``p_out`` objects per draw; on a small data set, where no such draw keeps both
+        classes in training and gives both among the pooled held-out objects, it holds out fewer
+        (down to one), with a warning. With fewer than two objects per class none can (None).
         """
         n_objects = len(np.unique(groups))
-        if n_objects < 2:
+        for p_out in range(min(self.p_out, n_objects - 1), 0, -1):
+            draws = list(LeavePObjectsOut(p_out, self.n_draws, self.seed).split(X, y, groups))
+            held = np.concatenate([te for _, te in draws]) if draws else np.empty(0, int)
+            if len(np.unique(y[held])) == 2:
+                break
+        else:
             return None
-        p_out = self.p_out
-        if n_objects <= p_out:
-            p_out = 1
+        if p_out < self.p_out:
             warnings.warn(
-                f"only {n_objects} training objects: C chosen by leave-1-object-out instead of "
-                f"leave-{self.p_out}-objects-out",
+                f"only {n_objects} training objects: C chosen by leave-{p_out}-objects-out "
+                f"instead of leave-{self.p_out}-objects-out",
                 UserWarning,
                 2,
             )
-        splitter = LeavePObjectsOut(p_out, self.n_draws, self.seed)
-        draws = list(splitter.split(X, y, groups))
-        if not draws:
-            return None
-        held = np.concatenate([te for _, te in draws])
-        if len(np.unique(y[held])) < 2:
-            return None
         decisions = self._held_out_decisions(X, y, draws)
         return np.array([roc_auc_score(y[held], np.concatenate(d)) for d in decisions])
 
