@@ -26,7 +26,8 @@ def main(cfg: DictConfig) -> float:
 
     hc = HydraConfig.get()
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
-    sweep_id = Path(hc.sweep.dir).name if hc.mode == RunMode.MULTIRUN else ""
+    # The sweep's folder as configured (multirun/<date>/<time>): its time alone repeats daily.
+    sweep_id = str(Path(hc.sweep.dir)) if hc.mode == RunMode.MULTIRUN else ""
     try:
         with reported():
             settings = settings_from_config(

@@ -155,7 +155,8 @@ def test_parallel_sweep_runs_every_job(tiny_config, cache_dir, mlflow_uri, tmp_p
         r for r in runs if r.info.run_name in ("random-separate-c1-s21", "random-separate-c1-s22")
     ]
     assert len(parents) == 2 and all(r.info.status == "FINISHED" for r in parents)
-    assert len({r.data.tags["sweep_id"] for r in parents}) == 1
+    # one sweep id, the sweep's folder (not its last part: multirun/<date>/<time> repeats times)
+    assert {r.data.tags["sweep_id"] for r in parents} == {f"{tmp_path}/multirun"}
     assert (tmp_path / "multirun" / "0" / ".hydra" / "config.yaml").exists()
     listed = {a.path for a in client.list_artifacts(parents[0].info.run_id, ".hydra")}
     assert ".hydra/overrides.yaml" in listed

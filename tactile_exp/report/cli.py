@@ -219,7 +219,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--tracking-uri", default=None, help="default: as the jobs use")
     parser.add_argument("--experiment", default="tactile_exp", help="MLflow experiment name")
     parser.add_argument(
-        "--sweep-id", default=None, help="only runs of this sweep (the tag sweep_id: its folder)"
+        "--sweep-id",
+        default=None,
+        help="only runs of this sweep (the tag sweep_id: its folder, multirun/<date>/<time>)",
     )
     parser.add_argument("--out", type=Path, default=Path("reports"), help="output folder")
     parser.add_argument(
