@@ -6,7 +6,14 @@ import cv2
 import numpy as np
 import pytest
 
-from tactile_exp.data.render import PROPERTIES, View, render_object, render_view, write_jpeg
+from tactile_exp.data.render import (
+    ELEVATION,
+    PROPERTIES,
+    View,
+    render_object,
+    render_view,
+    write_jpeg,
+)
 from tactile_exp.data.synthetic import (
     _MATERIAL_BASE,
     SyntheticSpec,
@@ -101,8 +108,9 @@ PLAIN = {
 
 
 def test_metal_and_gloss_raise_the_highlight_fraction_and_metal_greys():
+    top_views = (1, 3, 5)  # lustre shows best from above (the top face's specular spot)
     views = {
-        name: [render_view({**PLAIN, **change}, v, 240, 160, seed=3) for v in range(3)]
+        name: [render_view({**PLAIN, **change}, v, 240, 160, seed=3) for v in top_views]
         for name, change in (
             ("plain", {}),
             ("glossy", {"gloss": 1.0}),
@@ -118,14 +126,41 @@ def test_metal_and_gloss_raise_the_highlight_fraction_and_metal_greys():
 
 
 def test_texture_and_bumps_follow_their_properties():
-    def stats(change: dict[str, float]) -> dict[str, float]:
-        return crop_stats(render_view({**PLAIN, **change}, 0, 240, 160, seed=4))
+    def stats(change: dict[str, float]) -> dict[str, float]:  # view 1: a close top view
+        return crop_stats(render_view({**PLAIN, **change}, 1, 240, 160, seed=4))
 
     plain = stats({})
     grain = stats({"texture_contrast": 1.0, "roughness": 1.0})
     bumps = stats({"bumpiness": 1.0})
     assert grain["fine"] > 2 * plain["fine"]
     assert bumps["coarse"] > 1.5 * plain["coarse"]
+
+
+def test_side_views_show_height_top_views_show_surface():
+    """Views differ in what they show: height from the side, grain and bumps from above."""
+    side, top = 0, 1  # render.ELEVATION: 0.05 and 0.95
+
+    def height_diff(view: int) -> float:
+        thick = render_view({**PLAIN, "thickness": 0.95}, view, 480, 320, seed=1)
+        thin = render_view({**PLAIN, "thickness": 0.05}, view, 480, 320, seed=1)
+        (cx, cy), r = thick.centre, thick.radius
+        diff = np.abs(thick.image.astype(int) - thin.image.astype(int)).sum(axis=2) > 40
+        return float(diff[int(cy - 1.5 * r) : int(cy - 0.5 * r), int(cx - r) : int(cx + r)].mean())
+
+    assert height_diff(side) > 1.4 * height_diff(top)  # from above a third of the height shows
+    surface = {**PLAIN, "texture_contrast": 1.0, "roughness": 1.0, "bumpiness": 1.0}
+    grain = [crop_stats(render_view(surface, v, 240, 160, seed=4)) for v in (side, top)]
+    assert grain[1]["fine"] + grain[1]["coarse"] > 2 * (grain[0]["fine"] + grain[0]["coarse"])
+
+
+def test_views_are_partial_measurements_deterministic_under_the_seed():
+    """Each view draws its own elevation jitter, light, defocus and occluder from the seed."""
+    a = render_object(PROPS[703], width=160, height=120, seed=(0, 703))
+    b = render_object(PROPS[703], width=160, height=120, seed=(0, 703))
+    c = render_object(PROPS[703], width=160, height=120, seed=(1, 703))
+    assert all(np.array_equal(x.image, y.image) for x, y in zip(a, b, strict=True))
+    assert not any(np.array_equal(x.image, y.image) for x, y in zip(a, c, strict=True))
+    assert len(ELEVATION) == 8 and ELEVATION[0] < 0.5 < ELEVATION[1]  # side and top interleave
 
 
 def test_hairy_objects_get_strands_beyond_their_outline():

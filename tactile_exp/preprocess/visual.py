@@ -20,7 +20,8 @@ from tactile_exp.data.layout import TrialName
 from tactile_exp.data.phac2 import default_cache_dir, load_photograph
 from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
 
-CODE_VERSION = 2  # bump when the cached arrays' meaning changes (2: crops padded, not clipped)
+CODE_VERSION = 3  # bump when the cached arrays' meaning changes (2: crops padded, not clipped;
+# 3: the plate fit ignores the outline above its far half, where a grey object can join it)
 IMAGENET_MEAN_RGB = (123.675, 116.28, 103.53)  # per-channel mean, RGB, 0-255 scale
 _ARRAY_KEYS = ("object_id", "view", "name", "plate", "images", "missing")
 
@@ -95,6 +96,10 @@ def _fit_rim(component: np.ndarray) -> tuple[float, float, float]:
     semi-axis is the radius. Outline points: the lowest pixel of each column (the object standing
     on the plate never hides the lower rim) and the outermost pixels of each row. Points far from
     the fitted ellipse (a grey object rising above the plate) are dropped and the fit repeated.
+    A light grey object (metal, glass showing the plate, a highlight) can join the plate's region
+    above its far rim and pull a first fit upwards; so the fit is repeated on the points no
+    higher than half the vertical semi-axis above the centre found, where the object narrower
+    than the plate cannot reach the outline.
     """
     h, w = component.shape
     cols = np.flatnonzero(component.any(axis=0))
@@ -107,6 +112,16 @@ def _fit_rim(component: np.ndarray) -> tuple[float, float, float]:
     y = np.concatenate([bottom + 0.5, rows, rows]).astype(float)
     inside = np.concatenate([bottom < h - 1, left > 0, right < w - 1])
     x, y = x[inside], y[inside]
+    cx, cy, a2, c1 = _fit_ellipse(x, y)
+    low = y >= cy - 0.5 * np.sqrt(a2 / c1)
+    if not low.all() and low.sum() >= 8:
+        cx, cy, a2, c1 = _fit_ellipse(x[low], y[low])
+    return float(cx), float(cy), float(np.sqrt(a2))
+
+
+def _fit_ellipse(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float, float]:
+    """Axis-aligned ellipse through outline points, outliers dropped: the centre (cx, cy), the
+    squared horizontal semi-axis a^2 and c1 = a^2 / b^2 (b the vertical semi-axis)."""
     for _ in range(4):
         if x.size < 8:
             raise ValueError(f"no plate found: only {x.size} outline points of the grey region")
@@ -125,7 +140,7 @@ def _fit_rim(component: np.ndarray) -> tuple[float, float, float]:
         if inliers.all():
             break
         x, y = x[inliers], y[inliers]
-    return float(cx), float(cy), float(np.sqrt(a2))
+    return cx, cy, a2, c1
 
 
 def crop_box(shape: tuple[int, ...], plate: Plate) -> tuple[int, int, int, int]:
