@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.metrics import roc_auc_score
@@ -114,6 +116,7 @@ def test_small_training_sets_hold_out_one_object_with_a_warning():
     assert [str(w.message) for w in warned] == [
         "only 4 training objects: C chosen by leave-1-object-out instead of leave-4-objects-out"
     ]
+    assert warned[0].filename == __file__  # reported where the caller asked
     held, decisions = [], []
     for train, test in LeavePObjectsOut(1, 5, 0).split(X, y, groups):
         decisions.append(svm._pipeline(1.0).fit(X[train], y[train]).decision_function(X[test]))
@@ -127,13 +130,30 @@ def test_small_training_sets_hold_out_one_object_with_a_warning():
 
 def test_c_is_the_grid_value_with_the_best_held_out_auc():
     X, y, groups = _objects_data(shift=0.7, seed=4)
-    svm = ObjectCVLinearSVM(Cs=[1e-4, 1e-2, 1.0, 10.0], n_draws=10, seed=1).fit(X, y, groups)
-    assert len(set(svm.cv_scores_)) > 1
-    assert svm.Cs[int(np.argmax(svm.cv_scores_))] == svm.C_
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a grid to choose from and usable draws: no warning
+        svm = ObjectCVLinearSVM(Cs=[10.0, 1.0, 1e-2, 1e-4], n_draws=10, seed=1).fit(X, y, groups)
+        pair = ObjectCVLinearSVM(Cs=[10.0, 1e-4], n_draws=10, seed=1).fit(X, y, groups)
+        single = ObjectCVLinearSVM(Cs=[0.5]).fit(X, y, groups)  # nothing to choose: no CV
+    best = int(np.argmax(svm.cv_scores_))
+    assert len(set(svm.cv_scores_)) > 1 and best > 0  # the best is not simply the first
+    assert svm.Cs[best] == svm.C_
     refit = svm._pipeline(svm.C_).fit(X, y)
     np.testing.assert_allclose(svm.decision_function(X), refit.decision_function(X))
-    single = ObjectCVLinearSVM(Cs=[0.5]).fit(X, y, groups)  # nothing to choose: no CV, no warning
+    assert len(pair.cv_scores_) == 2 and pair.C_ == 1e-4
     assert single.C_ == 0.5 and single.cv_scores_ is None
+
+
+def test_float32_features_give_the_float64_numbers():
+    """Instances hold float32: the SVM standardises and scores in float64 all the same."""
+    X, y, groups = _objects_data(shift=0.7)
+    X = X.astype(np.float32)
+    wide = ObjectCVLinearSVM(Cs=[0.1, 1.0], n_draws=4).fit(X.astype(np.float64), y, groups)
+    narrow = ObjectCVLinearSVM(Cs=[0.1, 1.0], n_draws=4).fit(X, y, groups)
+    np.testing.assert_array_equal(narrow.decision_function(X), wide.decision_function(X))
+    np.testing.assert_array_equal(
+        narrow.decision_function(X), wide.decision_function(X.astype(np.float64))
+    )
 
 
 def test_plain_path_gives_the_shortcut_scores():
@@ -155,6 +175,10 @@ def test_middle_c_of_an_even_grid_and_exact_input_messages():
     ):
         svm = ObjectCVLinearSVM(Cs=[0.1, 1.0, 10.0, 100.0], n_draws=5).fit(X, y, groups)
     assert svm.C_ == 10.0
+    with pytest.warns(UserWarning, match="middle C=1$") as warned:
+        pair = ObjectCVLinearSVM(Cs=[0.1, 1.0], n_draws=5).fit(X, y, groups)
+    assert pair.C_ == 1.0
+    assert warned[0].filename == __file__  # reported where fit was called
     X[3, 2] = np.inf
     with pytest.raises(ValueError, match=r"^ObjectCVLinearSVM.fit: X has NaN or infinite values$"):
         ObjectCVLinearSVM().fit(X, y, groups)
@@ -188,6 +212,8 @@ def test_stored_svm_restores_exactly_and_rejects_wrong_shapes():
 def test_c_grid_settings():
     from tactile_exp.baselines.svm import DEFAULT_CS
 
+    defaults = {"Cs": None, "n_draws": 20, "p_out": 3, "seed": 0}  # the authors' leave-3-out
+    assert LinearSVMModel().get_params() == defaults
     assert LinearSVMModel().svm.Cs == DEFAULT_CS
     assert LinearSVMModel(Cs=[2, 3]).svm.Cs == (2.0, 3.0)
     model = LinearSVMModel(Cs=[2], n_draws=7, p_out=2, seed=5)
@@ -196,3 +222,17 @@ def test_c_grid_settings():
         ValueError, match=r"^Cs must be a list of numbers, null or 'authors', got 'x'$"
     ):
         LinearSVMModel(Cs="x")
+
+
+def test_defaults_are_the_authors_protocol_and_classes_are_balanced():
+    """Leave 3 objects out, 20 draws, seed 0; a rare adjective's positives are not outvoted."""
+    draws = LeavePObjectsOut()
+    assert (draws.p, draws.n_draws, draws.seed) == (3, 20, 0)
+    svm = ObjectCVLinearSVM()
+    assert (svm.n_draws, svm.p_out, svm.seed) == (20, 3, 0)
+    X, y, groups = _objects_data(shift=1.0)
+    y = (groups % 10 == 0).astype(int)  # 2 positive objects of 20
+    X[:, 0] += y
+    fitted = ObjectCVLinearSVM(Cs=[1e-2]).fit(X, y, groups)
+    decisions = fitted.decision_function(X)
+    assert (decisions[y == 1] > 0).mean() >= 0.5  # unweighted: every trial scores negative

@@ -431,9 +431,13 @@ def test_process_start_survives_parentheses_in_the_process_name(tmp_path):
     assert tracking._process_start(child.pid) == ""  # gone: unknown
 
 
-def test_a_tracking_server_is_checked_before_mlflow_is_asked(mlflow_uri):
+def test_a_tracking_server_is_checked_before_mlflow_is_asked(mlflow_uri, monkeypatch):
     """http(s) URIs get one short /health request (MLflow itself would retry for minutes)."""
     from tactile_exp.tracking import TrackingError
+
+    # Were the check skipped, MLflow's own request must fail at once, not after its backoff.
+    monkeypatch.setenv("MLFLOW_HTTP_REQUEST_MAX_RETRIES", "0")
+    monkeypatch.setenv("MLFLOW_HTTP_REQUEST_TIMEOUT", "2")
 
     for uri in ("http://127.0.0.1:9", "https://127.0.0.1:9"):
         with pytest.raises(
