@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from baselines_fixture import make_trial
@@ -270,7 +272,9 @@ def test_fitted_features_round_trip_their_arrays_and_both_paths_agree(tiny_grid)
 
     trials, split = _trials()
     table = dyn.SequenceTable.from_trials(trials, (8,))
-    model = _fit(table, split)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", dyn.DynamicWarning)  # settings chosen: nothing to warn
+        model = _fit(table, split)
     assert model.settings() == {
         "grid": TINY_GRID,
         "leak_test_positives": False,
@@ -311,6 +315,14 @@ def test_no_positive_or_one_positive_object_is_refused_or_warned(tiny_grid):
         model = _fit(table, Split("hard", split.train, split.test, one))
     assert model.params_ == [(2, 8, 3)] * 16
     assert sorted(model.fit_trials_) == ["o_101_01", "o_101_02"]
+    dyn.GRIDS["one"] = {"n_states": (3,), "length": (8,), "symbols": (3,)}
+    try:  # a grid of one: nothing to choose, so nothing to warn about
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", dyn.DynamicWarning)
+            alone = dyn.DynamicFeatures("one").fit(table, Split("hard", split.train, (), one))
+    finally:
+        del dyn.GRIDS["one"]
+    assert alone.params_ == [(3, 8, 3)] * 16
 
 
 def test_held_out_objects_are_the_holdout_fraction_of_training_positives():
@@ -328,3 +340,7 @@ def test_held_out_objects_are_the_holdout_fraction_of_training_positives():
     assert len(held(0.2)) == 1 and len(held(0.5)) == 2 and len(held(0.01)) == 1
     assert {frozenset(held(0.5, seed)) for seed in range(6)} != {frozenset(held(0.5))}
     assert held(0.5, 3) == held(0.5, 3)
+    two = [t for t in positives if t.startswith(("o_101", "o_102"))]  # 2 objects: one is held
+    fit, score = dyn.DynamicFeatures()._selection_sets(split, two)
+    assert len({t[:5] for t in fit}) == len({t[:5] for t in score}) == 1
+    assert dyn.DynamicFeatures()._selection_sets(split, two[:2]) == (two[:2], [])  # 1 object
