@@ -311,8 +311,9 @@ def test_no_positive_or_one_positive_object_is_refused_or_warned(tiny_grid):
         r"^adjective 'hard': fewer than 2 positive training objects; HMM settings not chosen, "
         r"using \(N, T, K\) = \(2, 8, 3\)$"
     )
-    with pytest.warns(dyn.DynamicWarning, match=message):
+    with pytest.warns(dyn.DynamicWarning, match=message) as warned:
         model = _fit(table, Split("hard", split.train, split.test, one))
+    assert [w.category for w in warned] == [dyn.DynamicWarning]  # no empty scoring either
     assert model.params_ == [(2, 8, 3)] * 16
     assert sorted(model.fit_trials_) == ["o_101_01", "o_101_02"]
     dyn.GRIDS["one"] = {"n_states": (3,), "length": (8,), "symbols": (3,)}
@@ -323,6 +324,28 @@ def test_no_positive_or_one_positive_object_is_refused_or_warned(tiny_grid):
     finally:
         del dyn.GRIDS["one"]
     assert alone.params_ == [(3, 8, 3)] * 16
+
+
+def test_each_candidate_is_fitted_and_scored_only_when_there_is_a_choice(tiny_grid, monkeypatch):
+    trials, split = _trials()
+    table = dyn.SequenceTable.from_trials(trials, (8,))
+    fits: list[int] = []
+    fit = dyn.HMMChain.fit
+
+    def counted(self, *args):
+        fits.append(self.n_states)
+        return fit(self, *args)
+
+    monkeypatch.setattr(dyn.HMMChain, "fit", counted)
+    _fit(table, split)
+    assert len(fits) == 16 * (2 + 1)  # per chain: both candidates, then the chosen one refitted
+    fits.clear()
+    dyn.GRIDS["one"] = {"n_states": (3,), "length": (8,), "symbols": (3,)}
+    try:
+        dyn.DynamicFeatures("one").fit(table, split)
+    finally:
+        del dyn.GRIDS["one"]
+    assert fits == [3] * 16  # a grid of one: the final chains only
 
 
 def test_held_out_objects_are_the_holdout_fraction_of_training_positives():
@@ -340,6 +363,7 @@ def test_held_out_objects_are_the_holdout_fraction_of_training_positives():
     assert len(held(0.2)) == 1 and len(held(0.5)) == 2 and len(held(0.01)) == 1
     assert {frozenset(held(0.5, seed)) for seed in range(6)} != {frozenset(held(0.5))}
     assert held(0.5, 3) == held(0.5, 3)
+    assert all(len(held(0.5, seed)) == 2 for seed in range(20))  # distinct objects
     two = [t for t in positives if t.startswith(("o_101", "o_102"))]  # 2 objects: one is held
     fit, score = dyn.DynamicFeatures()._selection_sets(split, two)
     assert len({t[:5] for t in fit}) == len({t[:5] for t in score}) == 1
