@@ -298,6 +298,12 @@ def test_fitted_features_round_trip_their_arrays_and_both_paths_agree(tiny_grid)
         np.testing.assert_allclose(model.transform(table, names), X, rtol=1e-12)
     other = dyn.SequenceTable.from_trials(trials[::-1], (8,))  # another table: scored anew
     np.testing.assert_allclose(model.transform(other, names), X, rtol=1e-12)
+    scored = []
+    score = model._score
+    model._score = lambda table, idx: scored.append(len(idx)) or score(table, idx)
+    model.transform(other, names[:2])
+    model.transform(other, names[2:])
+    assert scored == []  # the table's trials were scored once, by the first transform
 
 
 def test_no_positive_or_one_positive_object_is_refused_or_warned(tiny_grid):
