@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from baselines_fixture import make_trial
@@ -198,3 +200,177 @@ def test_fitted_chains_are_cached_per_data_split_settings_and_seed(
             features().fit(split)
     finally:
         del dyn.GRIDS["tiny2"]
+
+
+# ---------------------------------------------------------------- building blocks, direct
+def test_sensor_rows_put_both_fingers_side_by_side():
+    trial = make_trial("o_101_01", lengths=(30, 40, 30, 20))
+    rows = trial.ep_segments()["hold"]
+    f0, f1 = trial.fingers
+    pdc = dyn.sensor_rows(trial, rows, "pdc")
+    np.testing.assert_array_equal(pdc, np.column_stack([f0.pdc[rows], f1.pdc[rows]]))
+    assert pdc.dtype == float and pdc.shape == (40, 2)
+    electrodes = dyn.sensor_rows(trial, rows, "electrodes")
+    np.testing.assert_array_equal(electrodes[:, 19:], f1.electrodes[rows])
+    pac = dyn.sensor_rows(trial, rows, "pac")
+    np.testing.assert_array_equal(pac[:, :22], f0.pac.reshape(trial.n_rows, 22)[rows])
+    assert (electrodes.shape, pac.shape) == ((40, 38), (40, 44))
+
+
+def test_sequence_table_holds_row_moments_and_round_trips_its_arrays():
+    trials = [make_trial(f"o_10{i}_01", lengths=(30, 40, 30, 20), seed=i) for i in (1, 2)]
+    table = dyn.SequenceTable.from_trials(trials, (4, 6))
+    assert table.trials == ["o_101_01", "o_102_01"]
+    c = dyn.CHAINS.index(("hold", "tac"))
+    x = dyn.sensor_rows(trials[1], trials[1].ep_segments()["hold"], "tac")
+    assert table.count[1, c] == 40
+    np.testing.assert_allclose(table.mean[c][1], x.mean(axis=0))
+    np.testing.assert_allclose(table.scatter[c][1], (x - x.mean(0)).T @ (x - x.mean(0)))
+    np.testing.assert_allclose(table.seqs[6][c][1], dyn.resample(x, 6))
+    arrays = table.arrays()
+    assert sorted(arrays) == sorted(dyn.SequenceTable.keys((4, 6)))
+    again = dyn.SequenceTable.from_arrays(arrays, (4, 6))
+    assert again.trials == table.trials
+    np.testing.assert_array_equal(again.count, table.count)
+    for c in range(len(dyn.CHAINS)):
+        np.testing.assert_array_equal(again.mean[c], table.mean[c])
+        np.testing.assert_array_equal(again.scatter[c], table.scatter[c])
+        for T in (4, 6):
+            np.testing.assert_array_equal(again.seqs[T][c], table.seqs[T][c])
+    np.testing.assert_array_equal(table.index(["o_102_01", "o_101_01"]), [1, 0])
+    with pytest.raises(KeyError, match=r"unknown trial\(s\) \['o_9_01'\]"):
+        table.index(["o_101_01", "o_9_01"])
+
+
+def test_pca_of_constant_rows_keeps_one_axis():
+    assert dyn.pca_axes(np.zeros((3, 3))).shape == (3, 1)
+    assert dyn.pca_axes(np.diag([50.0, 50.0, 0.0])).shape == (3, 2)
+
+
+def test_forward_pass_by_hand_and_unseen_symbols_stay_finite():
+    start = np.array([1.0, 0.0])
+    trans = np.array([[0.5, 0.5], [0.0, 1.0]])
+    emit = np.array([[0.5, 0.5], [1.0, 0.0]])
+    # P(0, 1) = sum over paths: (s0 -> s0) 0.5*0.5*0.5 + (s0 -> s1) 0.5*0.5*0 = 0.125
+    out = dyn.forward_loglik(start, trans, emit, np.array([[0, 1], [0, 0]]))
+    np.testing.assert_allclose(out, np.log([0.125, 0.5 * (0.5 * 0.5 + 0.5 * 1.0)]), rtol=1e-8)
+    never = dyn.forward_loglik(
+        start, np.eye(2), np.array([[1.0, 0.0], [1.0, 0.0]]), np.array([[1]])
+    )
+    assert np.isfinite(never).all() and never[0] == pytest.approx(np.log(1e-10), rel=1e-3)
+
+
+def test_candidates_put_the_fallback_first():
+    grid = {"n_states": (2, 3), "length": (8, 9), "symbols": (4, 5)}
+    cands = dyn._candidates(grid)
+    assert cands[0] == (2, 8, 4) and len(set(cands)) == 8
+    assert cands[:3] == [(2, 8, 4), (3, 8, 4), (2, 8, 5)]
+
+
+def test_fitted_features_round_trip_their_arrays_and_both_paths_agree(tiny_grid):
+    from tactile_exp.baselines import shortcuts
+
+    trials, split = _trials()
+    table = dyn.SequenceTable.from_trials(trials, (8,))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", dyn.DynamicWarning)  # settings chosen: nothing to warn
+        model = _fit(table, split)
+    assert model.settings() == {
+        "grid": TINY_GRID,
+        "leak_test_positives": False,
+        "holdout": 0.2,
+        "n_init": 10,
+        "seed": 0,
+        "hmm": [dyn.HMM_ITER, dyn.HMM_TOL, dyn.VARIANCE_KEPT],
+    }
+    assert model.feature_names[0] == "dyn/squeeze/electrodes" and len(model.feature_names) == 16
+    assert dyn.DynamicFeatures.lengths("tiny") == (8,)
+    arrays = model.arrays()
+    assert sorted(arrays) == sorted(dyn.DynamicFeatures.KEYS)
+    loaded = dyn.DynamicFeatures("tiny").load_arrays(arrays)
+    assert loaded.params_ == model.params_ and loaded.fit_trials_ == model.fit_trials_
+    chain = loaded.chains_[0]
+    assert (chain.n_states, chain.n_symbols) == model.chains_[0].emissionprob_.shape
+    names = list(split.test) + list(split.train[:3])
+    X = model.transform(table, names)
+    np.testing.assert_array_equal(loaded.transform(table, names), X)
+    with shortcuts.disabled():
+        np.testing.assert_allclose(model.transform(table, names), X, rtol=1e-12)
+    other = dyn.SequenceTable.from_trials(trials[::-1], (8,))  # another table: scored anew
+    np.testing.assert_allclose(model.transform(other, names), X, rtol=1e-12)
+    scored = []
+    score = model._score
+    model._score = lambda table, idx: scored.append(len(idx)) or score(table, idx)
+    model.transform(other, names[:2])
+    model.transform(other, names[2:])
+    assert scored == []  # the table's trials were scored once, by the first transform
+
+
+def test_no_positive_or_one_positive_object_is_refused_or_warned(tiny_grid):
+    trials, split = _trials()
+    table = dyn.SequenceTable.from_trials(trials, (8,))
+    none = Split("hard", split.train, split.test, {n: 0 for n in split.labels})
+    with pytest.raises(ValueError, match="^adjective 'hard': no positive training trial$"):
+        _fit(table, none)
+    one = {n: int(n.startswith("o_101")) for n in split.labels}
+    message = (
+        r"^adjective 'hard': fewer than 2 positive training objects; HMM settings not chosen, "
+        r"using \(N, T, K\) = \(2, 8, 3\)$"
+    )
+    with pytest.warns(dyn.DynamicWarning, match=message) as warned:
+        model = _fit(table, Split("hard", split.train, split.test, one))
+    assert [w.category for w in warned] == [dyn.DynamicWarning]  # no empty scoring either
+    assert model.params_ == [(2, 8, 3)] * 16
+    assert sorted(model.fit_trials_) == ["o_101_01", "o_101_02"]
+    dyn.GRIDS["one"] = {"n_states": (3,), "length": (8,), "symbols": (3,)}
+    try:  # a grid of one: nothing to choose, so nothing to warn about
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", dyn.DynamicWarning)
+            alone = dyn.DynamicFeatures("one").fit(table, Split("hard", split.train, (), one))
+    finally:
+        del dyn.GRIDS["one"]
+    assert alone.params_ == [(3, 8, 3)] * 16
+
+
+def test_each_candidate_is_fitted_and_scored_only_when_there_is_a_choice(tiny_grid, monkeypatch):
+    trials, split = _trials()
+    table = dyn.SequenceTable.from_trials(trials, (8,))
+    fits: list[int] = []
+    fit = dyn.HMMChain.fit
+
+    def counted(self, *args):
+        fits.append(self.n_states)
+        return fit(self, *args)
+
+    monkeypatch.setattr(dyn.HMMChain, "fit", counted)
+    _fit(table, split)
+    assert len(fits) == 16 * (2 + 1)  # per chain: both candidates, then the chosen one refitted
+    fits.clear()
+    dyn.GRIDS["one"] = {"n_states": (3,), "length": (8,), "symbols": (3,)}
+    try:
+        dyn.DynamicFeatures("one").fit(table, split)
+    finally:
+        del dyn.GRIDS["one"]
+    assert fits == [3] * 16  # a grid of one: the final chains only
+
+
+def test_held_out_objects_are_the_holdout_fraction_of_training_positives():
+    trials, split = _trials()  # 4 positive training objects: 101-104
+    positives = [t for t in split.train if split.labels[t] == 1]
+
+    def held(holdout, seed=0):
+        model = dyn.DynamicFeatures(holdout=holdout, seed=seed)
+        fit, score = model._selection_sets(split, positives)
+        assert sorted(fit + score) == sorted(positives)
+        objects = {t.split("_")[1] for t in score}
+        assert not objects & {t.split("_")[1] for t in fit}
+        return objects
+
+    assert len(held(0.2)) == 1 and len(held(0.5)) == 2 and len(held(0.01)) == 1
+    assert {frozenset(held(0.5, seed)) for seed in range(6)} != {frozenset(held(0.5))}
+    assert held(0.5, 3) == held(0.5, 3)
+    assert all(len(held(0.5, seed)) == 2 for seed in range(20))  # distinct objects
+    two = [t for t in positives if t.startswith(("o_101", "o_102"))]  # 2 objects: one is held
+    fit, score = dyn.DynamicFeatures()._selection_sets(split, two)
+    assert len({t[:5] for t in fit}) == len({t[:5] for t in score}) == 1
+    assert dyn.DynamicFeatures()._selection_sets(split, two[:2]) == (two[:2], [])  # 1 object

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.metrics import roc_auc_score
@@ -88,3 +90,147 @@ def test_authors_c_grid_is_selectable_by_name():
     assert LinearSVMModel(Cs="authors").svm.Cs == AUTHORS_CS
     with pytest.raises(ValueError, match="'authors'"):
         LinearSVMModel(Cs="author")
+
+
+def test_draws_need_more_objects_than_they_hold_out_and_follow_the_seed():
+    X, y, groups = _objects_data(n_objects=3)
+    with pytest.raises(ValueError, match="^leave-3-objects-out needs more than 3 objects$"):
+        list(LeavePObjectsOut(p=3).split(X, y, groups))
+    X, _, groups = _objects_data(n_objects=12)
+    y = np.isin(groups, [0, 3]).astype(int)
+
+    def held(seed, n_draws=6):
+        draws = LeavePObjectsOut(p=2, n_draws=n_draws, seed=seed).split(X, y, groups)
+        return [tuple(np.unique(groups[test])) for _, test in draws]
+
+    assert len(held(0)) == 6 and held(0) == held(0) and held(0) != held(1)
+    assert len(held(0, n_draws=66)) == 66 - 1  # every pair but {0, 3} (one-class training set)
+
+
+def test_small_training_sets_hold_out_one_object_with_a_warning():
+    X, y, groups = _objects_data(n_objects=4, shift=0.5)
+    y = (groups < 2).astype(int)
+    svm = ObjectCVLinearSVM(Cs=[0.01, 1.0], n_draws=5, p_out=4)
+    with pytest.warns(UserWarning) as warned:
+        scores = svm.cv_scores(X, y, groups)
+    assert [str(w.message) for w in warned] == [
+        "only 4 training objects: C chosen by leave-1-object-out instead of leave-4-objects-out"
+    ]
+    held, decisions = [], []
+    for train, test in LeavePObjectsOut(1, 5, 0).split(X, y, groups):
+        decisions.append(svm._pipeline(1.0).fit(X[train], y[train]).decision_function(X[test]))
+        held.append(test)
+    assert len(held) == 4  # leave-1-object-out over the 4 objects
+    expected = roc_auc_score(y[np.concatenate(held)], np.concatenate(decisions))
+    assert scores[1] == pytest.approx(expected, abs=1e-12)
+    one = groups == 0
+    assert svm.cv_scores(X[one], y[one], groups[one]) is None  # nothing to hold out
+
+
+def test_c_is_the_grid_value_with_the_best_held_out_auc():
+    X, y, groups = _objects_data(shift=0.7, seed=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a grid to choose from and usable draws: no warning
+        svm = ObjectCVLinearSVM(Cs=[10.0, 1.0, 1e-2, 1e-4], n_draws=10, seed=1).fit(X, y, groups)
+        pair = ObjectCVLinearSVM(Cs=[10.0, 1e-4], n_draws=10, seed=1).fit(X, y, groups)
+        single = ObjectCVLinearSVM(Cs=[0.5]).fit(X, y, groups)  # nothing to choose: no CV
+    best = int(np.argmax(svm.cv_scores_))
+    assert len(set(svm.cv_scores_)) > 1 and best > 0  # the best is not simply the first
+    assert svm.Cs[best] == svm.C_
+    refit = svm._pipeline(svm.C_).fit(X, y)
+    np.testing.assert_allclose(svm.decision_function(X), refit.decision_function(X))
+    assert len(pair.cv_scores_) == 2 and pair.C_ == 1e-4
+    assert single.C_ == 0.5 and single.cv_scores_ is None
+
+
+def test_float32_features_give_the_float64_numbers():
+    """Instances hold float32: the SVM standardises and scores in float64 all the same."""
+    X, y, groups = _objects_data(shift=0.7)
+    X = X.astype(np.float32)
+    wide = ObjectCVLinearSVM(Cs=[0.1, 1.0], n_draws=4).fit(X.astype(np.float64), y, groups)
+    narrow = ObjectCVLinearSVM(Cs=[0.1, 1.0], n_draws=4).fit(X, y, groups)
+    np.testing.assert_array_equal(narrow.decision_function(X), wide.decision_function(X))
+    np.testing.assert_array_equal(
+        narrow.decision_function(X), wide.decision_function(X.astype(np.float64))
+    )
+
+
+def test_plain_path_gives_the_shortcut_scores():
+    from tactile_exp.baselines import shortcuts
+
+    X, y, groups = _objects_data(shift=0.7)
+    svm = ObjectCVLinearSVM(Cs=[0.01, 1.0, 10.0], n_draws=6, seed=3)
+    fast = svm.cv_scores(X, y, groups)
+    with shortcuts.disabled():
+        plain = svm.cv_scores(X, y, groups)
+    np.testing.assert_allclose(plain, fast, rtol=1e-9)
+
+
+def test_middle_c_of_an_even_grid_and_exact_input_messages():
+    X, y, groups = _objects_data(n_objects=6)
+    y = (groups == 0).astype(int)
+    with pytest.warns(
+        UserWarning, match="^no draw of held-out objects gives both classes; middle "
+    ):
+        svm = ObjectCVLinearSVM(Cs=[0.1, 1.0, 10.0, 100.0], n_draws=5).fit(X, y, groups)
+    assert svm.C_ == 10.0
+    with pytest.warns(UserWarning, match="middle C=1$"):
+        pair = ObjectCVLinearSVM(Cs=[0.1, 1.0], n_draws=5).fit(X, y, groups)
+    assert pair.C_ == 1.0
+    X[3, 2] = np.inf
+    with pytest.raises(ValueError, match=r"^ObjectCVLinearSVM.fit: X has NaN or infinite values$"):
+        ObjectCVLinearSVM().fit(X, y, groups)
+    X[3, 2] = 0.0
+    with pytest.raises(ValueError, match=r"^ObjectCVLinearSVM.fit: y needs both classes$"):
+        ObjectCVLinearSVM().fit(X, np.zeros_like(y), groups)
+
+
+def test_stored_svm_restores_exactly_and_rejects_wrong_shapes():
+    X, y, groups = _objects_data(shift=3.0)
+    train = Instances(X.reshape(-1, 2, 3), y, np.array([f"t{i}" for i in range(len(y))]), groups)
+    fitted = LinearSVMModel(Cs=[0.1, 1.0], n_draws=4)
+    fitted.fit(train)
+    tensors, arrays = fitted.state()
+    assert tensors == {} and float(arrays["C"]) == fitted.svm.C_
+    restored = LinearSVMModel(Cs=[0.1, 1.0], n_draws=4).restore((2, 3), tensors, arrays)
+    assert restored.input_shape_ == (2, 3) and restored.svm.C_ == fitted.svm.C_
+    np.testing.assert_array_equal(
+        restored.decision_function(train.X), fitted.decision_function(train.X)
+    )
+    for key, bad, message in [
+        ("mean", np.zeros(5), r"^mean: shape \(5,\), expected \(6,\)$"),
+        ("scale", np.zeros((6, 1)), r"^scale: shape \(6, 1\), expected \(6,\)$"),
+        ("coef", np.zeros((6,)), r"^coef: shape \(6,\), expected \(1, 6\)$"),
+        ("intercept", np.zeros(2), r"^intercept: shape \(2,\), expected \(1,\)$"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            LinearSVMModel().restore((2, 3), {}, arrays | {key: bad})
+
+
+def test_c_grid_settings():
+    from tactile_exp.baselines.svm import DEFAULT_CS
+
+    defaults = {"Cs": None, "n_draws": 20, "p_out": 3, "seed": 0}  # the authors' leave-3-out
+    assert LinearSVMModel().get_params() == defaults
+    assert LinearSVMModel().svm.Cs == DEFAULT_CS
+    assert LinearSVMModel(Cs=[2, 3]).svm.Cs == (2.0, 3.0)
+    model = LinearSVMModel(Cs=[2], n_draws=7, p_out=2, seed=5)
+    assert (model.svm.n_draws, model.svm.p_out, model.svm.seed) == (7, 2, 5)
+    with pytest.raises(
+        ValueError, match=r"^Cs must be a list of numbers, null or 'authors', got 'x'$"
+    ):
+        LinearSVMModel(Cs="x")
+
+
+def test_defaults_are_the_authors_protocol_and_classes_are_balanced():
+    """Leave 3 objects out, 20 draws, seed 0; a rare adjective's positives are not outvoted."""
+    draws = LeavePObjectsOut()
+    assert (draws.p, draws.n_draws, draws.seed) == (3, 20, 0)
+    svm = ObjectCVLinearSVM()
+    assert (svm.n_draws, svm.p_out, svm.seed) == (20, 3, 0)
+    X, y, groups = _objects_data(shift=1.0)
+    y = (groups % 10 == 0).astype(int)  # 2 positive objects of 20
+    X[:, 0] += y
+    fitted = ObjectCVLinearSVM(Cs=[1e-2]).fit(X, y, groups)
+    decisions = fitted.decision_function(X)
+    assert (decisions[y == 1] > 0).mean() >= 0.5  # unweighted: every trial scores negative

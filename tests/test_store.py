@@ -388,3 +388,79 @@ def test_stored_model_settings_are_checked_before_loading(tmp_path):
     torch.save([torch.zeros(1)], tmp_path / "weights.pt")
     with pytest.raises(store.ArtifactError, match=r"^w/weights.pt: expected a mapping"):
         store.read_model(tmp_path, "w")
+
+
+def test_model_name_is_the_registry_name_that_read_model_builds(tmp_path):
+    """A stored model is rebuilt from the name ``model_name`` gives: it must be its own class's."""
+    model, data = _linear()
+    assert store.model_name(model) == "linear"
+    assert store.model_name(HapticCNN(widths=(2, 2, 2))) == "haptic_cnn"
+    store.write_model(tmp_path, store.model_name(model), model)
+    assert type(store.read_model(tmp_path, "here")) is type(model)
+    with pytest.raises(KeyError, match="^'Instances is not a registered model'$"):
+        store.model_name(data)
+
+
+def test_models_configured_with_numpy_values_are_stored_as_plain_json(tmp_path):
+    """Settings from array code (a C grid made by np.logspace, a numpy int seed) are stored."""
+    model = MODELS.build("linear_svm", Cs=tuple(np.logspace(-2, 0, 3)), n_draws=4, seed=np.int64(3))
+    X, y = _instances(shape=(7,)).X, np.arange(40) % 2
+    data = Instances(X, y, np.array([f"t{i}" for i in range(40)], dtype=object), np.arange(40) // 2)
+    model.fit(data)
+    store.write_model(tmp_path, "linear_svm", model)
+    params = json.loads((tmp_path / "settings.json").read_text())["params"]
+    assert params["Cs"] == [0.01, 0.1, 1.0] and params["seed"] == 3
+    loaded = store.read_model(tmp_path, "here")
+    np.testing.assert_array_equal(loaded.decision_function(X), model.decision_function(X))
+
+
+def test_a_model_that_does_not_load_from_its_run_names_the_run_and_artifact(mlflow_uri):
+    model, _ = _linear()
+    tracker = Tracker(mlflow_uri, "store")
+
+    def broken(folder: Path) -> None:
+        store.write_model(folder, "linear", model)
+        (folder / "settings.json").write_text('{"format": 0}')
+
+    with tracker.run("r", {}, {}) as run_id:
+        store.log_folder(tracker, run_id, "model", broken)
+    with pytest.raises(
+        store.ArtifactError,
+        match=rf"^run {run_id}: artifact model/settings.json: expected a mapping with format 1$",
+    ):
+        store.load_model(tracker, run_id, "model")
+
+
+class _Marker:
+    """Pickles as a call that creates a file: what a crafted weights.pt could run on load."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (self.path.touch, ())
+
+
+def test_stored_weights_never_run_code_and_arrays_are_checked(tmp_path):
+    model, _ = _linear()
+    store.write_model(tmp_path, "linear", model)
+    ran = tmp_path / "ran"
+    torch.save({"body.w": torch.zeros(1), "x": _Marker(ran)}, tmp_path / "weights.pt")
+    with pytest.raises(store.ArtifactError, match=r"^w/weights.pt is not a readable state_dict"):
+        store.read_model(tmp_path, "w")
+    assert not ran.exists()
+    store.write_model(tmp_path, "linear", model)
+    (tmp_path / "arrays.npz").write_bytes(b"garbage")
+    with pytest.raises(store.ArtifactError, match=r"^w/arrays.npz is not a readable npz file"):
+        store.read_model(tmp_path, "w")
+
+
+def test_weights_saved_on_a_gpu_load_on_the_cpu(tmp_path, monkeypatch):
+    """A model trained on a GPU machine loads where there is none (the CPU-only test machine)."""
+    model, data = _linear()
+    with monkeypatch.context() as patch:  # stored as if its tensors lived on the GPU
+        patch.setattr(torch.serialization, "location_tag", lambda storage: "cuda:0")
+        store.write_model(tmp_path, "linear", model)
+    loaded = store.read_model(tmp_path, "w")
+    assert all(t.device.type == "cpu" for t in loaded.state()[0].values())
+    np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))

@@ -42,8 +42,10 @@ def test_job_runs_carry_ui_tags_and_the_data_file_as_input(tiny_config, mlflow_u
     assert parent.data.tags["row_hash"] == settings.row_hash
 
 
-def test_existing_experiment_gets_the_kind_tag(mlflow_uri):
+def test_new_and_existing_experiments_get_the_kind_tag(mlflow_uri):
     client = MlflowClient(mlflow_uri)
+    fresh = Tracker(mlflow_uri, "fresh").experiment_id
+    assert client.get_experiment(fresh).tags["mlflow.experimentKind"] == "custom_model_development"
     created = client.create_experiment("older")
     assert "mlflow.experimentKind" not in client.get_experiment(created).tags
     assert Tracker(mlflow_uri, "older").experiment_id == created
@@ -111,8 +113,18 @@ def test_curves_longer_than_a_batch_are_logged_whole(mlflow_uri, monkeypatch):
 
     monkeypatch.setattr(tracking, "MAX_BATCH", 4)
     tracker = Tracker(mlflow_uri, "curves")
+    batches: list[int] = []
+    log_batch = tracker.client.log_batch
+
+    def counted(run_id, metrics=(), **kwargs):
+        batches.append(len(metrics))
+        return log_batch(run_id, metrics=metrics, **kwargs)
+
     with tracker.run("r", {}, {}) as run_id:
+        monkeypatch.setattr(tracker.client, "log_batch", counted)
         tracker.log_curves(run_id, {"a": [float(i) for i in range(7)], "b": [1.0, 2.0]})
+        monkeypatch.undo()
+    assert batches == [4, 4, 1]  # as few calls as the batch limit allows
     client = MlflowClient(mlflow_uri)
     assert sorted(m.step for m in client.get_metric_history(run_id, "a")) == list(range(7))
     assert len(client.get_metric_history(run_id, "b")) == 2
@@ -161,9 +173,17 @@ def test_reading_a_missing_experiment_names_the_ones_there(mlflow_uri):
     from tactile_exp.tracking import ExperimentNotFound
 
     Tracker(mlflow_uri, "present")
-    with pytest.raises(ExperimentNotFound, match=r"no MLflow experiment 'absent' in .*present"):
+    message = (
+        rf"^no MLflow experiment 'absent' in {mlflow_uri}; experiments there: Default, present$"
+    )
+    with pytest.raises(ExperimentNotFound, match=message):
         Tracker(mlflow_uri, "absent", create=False)
     assert Tracker(mlflow_uri, "present", create=False).experiment_id
+    client = MlflowClient(mlflow_uri)
+    for experiment in client.search_experiments():
+        client.delete_experiment(experiment.experiment_id)
+    with pytest.raises(ExperimentNotFound, match=r"; experiments there: none$"):
+        Tracker(mlflow_uri, "absent", create=False)
 
 
 def test_unreachable_server_is_reported_before_any_work():
@@ -344,7 +364,12 @@ def test_check_server_waits_only_its_timeout(monkeypatch):
     monkeypatch.setattr(tracking.urllib.request, "urlopen", urlopen)
     tracking.check_server("http://h:5000")
     tracking.check_server("http://h:5000/", timeout=1.5)
-    assert calls == [("http://h:5000/health", 5.0), ("http://h:5000/health", 1.5)]
+    tracking.check_server("http://mlflowX//")
+    assert calls == [
+        ("http://h:5000/health", 5.0),
+        ("http://h:5000/health", 1.5),
+        ("http://mlflowX/health", 5.0),
+    ]
 
 
 def test_alive_only_probes_and_trusts_what_it_cannot_check(monkeypatch):
@@ -367,3 +392,56 @@ def test_alive_only_probes_and_trusts_what_it_cannot_check(monkeypatch):
 
     monkeypatch.setattr(tracking.os, "kill", not_ours)
     assert tracking._alive(child.pid, "")  # another user's live process
+
+
+def test_source_tags_name_the_commit_of_the_checkout_when_there_is_one(monkeypatch):
+    from tactile_exp import tracking
+
+    asked: list[Path] = []
+
+    def commit(root):
+        asked.append(root)
+        return "c0ffee"
+
+    monkeypatch.setattr(tracking, "git_commit", commit)
+    assert tracking.source_tags("python -m x") == {
+        "mlflow.source.name": "python -m x",
+        "mlflow.source.type": "LOCAL",
+        "mlflow.source.git.commit": "c0ffee",
+    }
+    assert asked == [ROOT]  # the checkout holding the package, not the cwd's repository
+    monkeypatch.setattr(tracking, "git_commit", lambda root: None)
+    assert "mlflow.source.git.commit" not in tracking.source_tags("python -m x")
+
+
+def test_process_start_survives_parentheses_in_the_process_name(tmp_path):
+    from tactile_exp import tracking
+
+    odd = tmp_path / "a) b c"  # /proc/<pid>/stat: "<pid> (a) b c) S ...": split at the last ")"
+    odd.symlink_to("/bin/sleep")
+    child = subprocess.Popen([str(odd), "30"])
+    try:
+        stat = Path(f"/proc/{child.pid}/stat").read_text()
+        assert "(a) b c)" in stat
+        start = tracking._process_start(child.pid)
+        assert start == stat[stat.rindex(")") + 1 :].split()[19] and start.isdigit()
+    finally:
+        child.kill()
+        child.wait()
+    assert tracking._process_start(child.pid) == ""  # gone: unknown
+
+
+def test_a_tracking_server_is_checked_before_mlflow_is_asked(mlflow_uri, monkeypatch):
+    """http(s) URIs get one short /health request (MLflow itself would retry for minutes)."""
+    from tactile_exp.tracking import TrackingError
+
+    # Were the check skipped, MLflow's own request must fail at once, not after its backoff.
+    monkeypatch.setenv("MLFLOW_HTTP_REQUEST_MAX_RETRIES", "0")
+    monkeypatch.setenv("MLFLOW_HTTP_REQUEST_TIMEOUT", "2")
+
+    for uri in ("http://127.0.0.1:9", "https://127.0.0.1:9"):
+        with pytest.raises(
+            TrackingError, match=rf"^tracking.uri: no MLflow server answers at {uri} "
+        ):
+            Tracker(uri, "x")
+    assert Tracker(mlflow_uri, "x").source_tags["mlflow.source.name"] == "python -m tactile_exp"
