@@ -35,12 +35,8 @@ On top of that each view is a noisy measurement: lighting level and direction, o
 and camera offset vary, some views are out of focus on the object (``DEFOCUS_P``: fine grain and
 fuzz wash out) and some have a dark gripper finger hanging into the crop in front of the object
 (``OCCLUDE_P``). So one photograph tells part of the properties, and pooling an object's views
-tells more. With version 4's renderer the 8 views differed only in rotation, lighting and camera
-offset and were near-duplicates to the pretrained trunk (10.5 % of the feature variance within
-objects), so 8 views told no more than one (rows K 0.694, L 0.691, 3 random splits). Version 5,
-each version's own pretrained trunk: 34 % of the variance lies within objects (of the simple
-features of ``bench_difficulty``: 10 % -> 45 %) and row L beats row K on every split (mean AUC
-K 0.666, L 0.715; README).
+tells more (version 4's views differed only in rotation, lighting and offset and were
+near-duplicates; the measurements of both versions are in ``synthetic``'s docstring).
 
 ``render_view`` returns the true plate geometry so tests can check a crop; ``render_object``
 renders all views of one object.
