@@ -8,9 +8,11 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import torch
 
+from tactile_exp.models import grouped_conv_numba as kernels
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
 
 # (batch, channels, steps, groups, kernel_sizes, widths, strides)
@@ -101,3 +103,37 @@ def test_numba_cache_goes_to_the_user_cache_folder(tmp_path):
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     ).stdout.splitlines()
     assert lines[0] == str(tmp_path / "numba")
+
+
+def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
+    """Layout arrays are reused across steps (``_POOL``): two forwards in flight, each
+    backward run afterwards in reverse order, still give each batch torch's gradients."""
+    torch.manual_seed(3)
+    net = GroupedTemporalConvNet(32, 150)
+    head = torch.nn.Linear(net.n_features, 1)
+    batches = [(torch.randn(40, 32, 150), torch.randn(40)) for _ in range(2)]
+    expected = [_scores_and_grads(net, head, x, y, "torch")[1] for x, y in batches]
+    net.impl = "compiled"
+    with torch.no_grad():  # a forward without backward hands its arrays back at once
+        net(batches[0][0])
+    pending = [(net.scores(x, head) * y).sum() for x, y in batches]
+    for value, want in zip(pending[::-1], expected[::-1], strict=True):
+        net.zero_grad()
+        head.zero_grad()
+        value.backward()
+        got = [p.grad for p in [*net.parameters(), *head.parameters()]]
+        for g_c, g_t in zip(got, want, strict=True):
+            torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
+
+
+def test_buffer_pool_reuses_released_arrays_and_drops_the_oldest_beyond_its_size():
+    pool = kernels._BufferPool(max_bytes=3 * 400)
+    first = pool.take((10, 10))
+    assert pool.take((10, 10)) is not first  # not released: never handed out twice
+    pool.give(first)
+    assert pool.take((10, 10)) is first
+    old, new = np.zeros((10, 10), np.float32), np.zeros((2, 50), np.float32)
+    pool.give(old, first, new, np.zeros((2, 50), np.float32))  # 4 x 400 bytes > 1,200
+    assert pool.take((10, 10)) is first  # the oldest, ``old``, was dropped
+    assert pool.take((10, 10)) is not old
+    assert any(pool.take((2, 50)) is new for _ in range(2))  # both (2, 50) arrays were kept
