@@ -185,3 +185,18 @@ def test_separate_takes_one_trial(compose_config):
         settings_from_config(
             compose_config(["experiment=table1_h_haptic_cnn_separate", "combine=10"])
         )
+
+
+def test_one_trunk_override_reaches_every_visual_row(compose_config):
+    """-m sweep=table1 trunk.weights=FILE trunk.layout=caffe: K, L, M and N all get the file."""
+    trunk = ["trunk.weights=/weights/material.pth", "trunk.layout=caffe"]
+    for row, node in (
+        ("table1_k_image_googlenet_1view", "modality"),
+        ("table1_l_image_googlenet_8views", "modality"),
+        ("table1_m_multimodal_i_l", "modality.visual"),
+        ("table1_n_multimodal_j_l", "modality.visual"),
+    ):
+        visual = OmegaConf.select(compose_config([f"experiment={row}", *trunk]), node)
+        assert (visual.weights, visual.layout) == ("/weights/material.pth", "caffe"), row
+    one_job = compose_config(["experiment=table1_l_image_googlenet_8views", "modality.weights=w"])
+    assert one_job.modality.weights == "w"
