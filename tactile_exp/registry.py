@@ -5,7 +5,7 @@ line and ``MODELS["haptic_cnn"]`` in code are the same word.
 
 A registry lives in a small module of its own that implementation files import (timm's
 ``_registry.py`` idiom), and names the modules that fill it: they are imported on the first
-lookup, so importing the registry (or a base class beside it) never drags in torch or hmmlearn,
+lookup, so importing the registry (or a base class beside it) never drags in torch or numba,
 and an import error in an implementation still surfaces, at the lookup, with its traceback.
 """
 

@@ -374,3 +374,41 @@ def test_held_out_objects_are_the_holdout_fraction_of_training_positives():
     fit, score = dyn.DynamicFeatures()._selection_sets(split, two)
     assert len({t[:5] for t in fit}) == len({t[:5] for t in score}) == 1
     assert dyn.DynamicFeatures()._selection_sets(split, two[:2]) == (two[:2], [])  # 1 object
+
+
+@pytest.mark.parametrize(
+    ("m", "T", "n_states", "n_symbols", "seed"),
+    [
+        (120, 20, 6, 5, 0),  # runs all 100 iterations
+        (120, 20, 12, 5, 3),
+        (40, 25, 15, 10, 1),
+        (9, 30, 18, 12, 2),  # stops early (tol), more parameters than symbols
+        (30, 1, 3, 4, 5),  # length 1: no transitions to count
+    ],
+)
+def test_hmm_em_equals_hmmlearn_categorical_hmm(m, T, n_states, n_symbols, seed):
+    """``fit_categorical_hmm`` reproduces hmmlearn's EM (init draws, updates, stopping)."""
+    rng = np.random.default_rng(seed)
+    regime = np.cumsum(rng.random((m, T)) < 0.2, axis=1) % 3  # sticky hidden regimes
+    symbols = (2 * regime + (rng.random((m, T)) < 0.3)) % n_symbols
+    reference = hmm.CategoricalHMM(
+        n_components=n_states,
+        n_features=n_symbols,
+        n_iter=dyn.HMM_ITER,
+        tol=dyn.HMM_TOL,
+        random_state=seed,
+        implementation="scaling",
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # hmmlearn: "degenerate solution" on few points
+        reference.fit(symbols.reshape(-1, 1), lengths=[T] * m)
+    got = dyn.fit_categorical_hmm(symbols, n_states, n_symbols, seed=seed)
+    expected = (reference.startprob_, reference.transmat_, reference.emissionprob_)
+    for name, ours, theirs in zip(("start", "trans", "emission"), got, expected, strict=True):
+        np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-9, err_msg=name)
+    assert reference.monitor_.iter > 1  # EM really moved the parameters
+
+
+def test_hmm_em_rejects_symbols_outside_the_alphabet():
+    with pytest.raises(ValueError, match=r"symbols must lie in \[0, 3\), got 0..3"):
+        dyn.fit_categorical_hmm(np.array([[0, 1, 3]]), 2, 3, seed=0)
