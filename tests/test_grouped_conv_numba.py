@@ -8,12 +8,12 @@ import os
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 import torch
 
-from tactile_exp.models import grouped_conv_numba as kernels
+from tactile_exp.models import scratch as scratch_module
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
+from tactile_exp.models.scratch import scratch
 
 # (batch, channels, steps, groups, kernel_sizes, widths, strides)
 SHAPES = [
@@ -106,7 +106,7 @@ def test_numba_cache_goes_to_the_user_cache_folder(tmp_path):
 
 
 def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
-    """Layout arrays are reused across steps (``_POOL``): two forwards in flight, each
+    """Layout arrays are reused across steps (``scratch``): two forwards in flight, each
     backward run afterwards in reverse order, still give each batch torch's gradients."""
     torch.manual_seed(3)
     net = GroupedTemporalConvNet(32, 150)
@@ -114,7 +114,7 @@ def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
     batches = [(torch.randn(40, 32, 150), torch.randn(40)) for _ in range(2)]
     expected = [_scores_and_grads(net, head, x, y, "torch")[1] for x, y in batches]
     net.impl = "compiled"
-    with torch.no_grad():  # a forward without backward hands its arrays back at once
+    with torch.no_grad():  # a forward without backward frees its arrays for reuse at once
         net(batches[0][0])
     pending = [(net.scores(x, head) * y).sum() for x, y in batches]
     for value, want in zip(pending[::-1], expected[::-1], strict=True):
@@ -126,14 +126,19 @@ def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
             torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
 
 
-def test_buffer_pool_reuses_released_arrays_and_drops_the_oldest_beyond_its_size():
-    pool = kernels._BufferPool(max_bytes=3 * 400)
-    first = pool.take((10, 10))
-    assert pool.take((10, 10)) is not first  # not released: never handed out twice
-    pool.give(first)
-    assert pool.take((10, 10)) is first
-    old, new = np.zeros((10, 10), np.float32), np.zeros((2, 50), np.float32)
-    pool.give(old, first, new, np.zeros((2, 50), np.float32))  # 4 x 400 bytes > 1,200
-    assert pool.take((10, 10)) is first  # the oldest, ``old``, was dropped
-    assert pool.take((10, 10)) is not old
-    assert any(pool.take((2, 50)) is new for _ in range(2))  # both (2, 50) arrays were kept
+def test_scratch_reuses_only_arrays_nothing_holds_and_drops_free_ones_beyond_its_size(
+    monkeypatch,
+):
+    monkeypatch.setattr(scratch_module, "_POOL", [])
+    monkeypatch.setattr(scratch_module, "POOL_BYTES", 3 * 400)
+    held = scratch(10, 10)
+    assert scratch(10, 10) is not held  # held by this test: never handed out twice
+    view = held.reshape(-1)
+    address = held.ctypes.data
+    del held
+    assert scratch(10, 10).ctypes.data != address  # a view still holds it
+    del view
+    assert scratch(10, 10).ctypes.data == address  # nothing holds it: reused
+    assert len(scratch_module._POOL) == 2
+    kept = [scratch(2, 50), scratch(2, 50)]  # 4 x 400 bytes > 1,200: a free (10, 10) dropped
+    assert len(scratch_module._POOL) == 3 and kept

@@ -8,7 +8,7 @@ kernels never handle a tail. Forward and backward of the whole three-layer stack
 ``torch.autograd.Function``: one transpose into the layout at entry, one out of it at exit. The
 training step (``GroupedConvHead``) also runs the one-output classification layer in the layout,
 so neither conv3's features nor their gradient are transposed (a step's CPU time -19%, measured).
-Layout arrays come from a pool (``_BufferPool``) and go back to it when their backward is done.
+Layout arrays are reused across steps (``scratch``).
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
@@ -16,8 +16,6 @@ install), and its on-disk cache (``numba_setup``) makes the compile a once-per-m
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
 from collections.abc import Sequence
 
 import numpy as np
@@ -26,6 +24,7 @@ from numba import prange
 from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.numba_setup import numba
+from tactile_exp.models.scratch import scratch
 
 LANES = 16  # batch padding: two AVX2 float32 vectors
 CHUNK = 128  # batch columns per task of the classification layer's forward
@@ -284,48 +283,6 @@ def _padded(n: int) -> int:
     return -(-n // LANES) * LANES
 
 
-class _BufferPool:
-    """Layout arrays released by a finished backward (or a forward without one), reused by the
-    next step. A step needs ~150 MB of activations and gradients at batch 1000; fresh
-    ``np.empty`` memory is page-faulted and zeroed by the OS on first touch, every step
-    (bench/bench_haptic_cnn.py's step: 73 -> 55 ms with the pool). An array is handed out again
-    only after ``give`` (nothing alive is overwritten); beyond ``max_bytes`` the oldest released
-    arrays of the least recently used shapes are dropped."""
-
-    def __init__(self, max_bytes: int) -> None:
-        self.max_bytes = max_bytes
-        self._free: OrderedDict[tuple[int, ...], list[np.ndarray]] = OrderedDict()
-        self._bytes = 0
-        self._lock = threading.Lock()
-
-    def take(self, shape: tuple[int, ...]) -> np.ndarray:
-        """A float32 array of ``shape`` with arbitrary contents."""
-        with self._lock:
-            arrays = self._free.get(shape)
-            if arrays:
-                self._free.move_to_end(shape)
-                self._bytes -= arrays[-1].nbytes
-                return arrays.pop()
-        return np.empty(shape, np.float32)
-
-    def give(self, *arrays: np.ndarray) -> None:
-        """Hand back arrays from ``take`` that nothing reads any more."""
-        with self._lock:
-            for array in arrays:
-                self._free.setdefault(array.shape, []).append(array)
-                self._free.move_to_end(array.shape)
-                self._bytes += array.nbytes
-            while self._bytes > self.max_bytes:
-                shape, oldest = next(iter(self._free.items()))
-                self._bytes -= oldest.pop(0).nbytes
-                if not oldest:
-                    del self._free[shape]
-
-
-# ours: one training step's arrays (both batch sizes of an epoch) at batch 1000, 2 fingers
-_POOL = _BufferPool(max_bytes=512 * 2**20)
-
-
 def _forward_acts(
     x: torch.Tensor, params: Sequence[torch.Tensor], groups: int, strides: Sequence[int]
 ) -> list[np.ndarray]:
@@ -334,14 +291,14 @@ def _forward_acts(
         raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
     n, channels, steps = x.shape
     n_pad = _padded(n)
-    h = _POOL.take((groups, channels // groups, steps, n_pad))
+    h = scratch(groups, channels // groups, steps, n_pad)
     to_layout(np.ascontiguousarray(x.detach().numpy()), groups, h)
     acts = [h]
     for weight, bias, stride in zip(params[0::2], params[1::2], strides, strict=True):
         c_out, _, k = weight.shape
         w = weight.detach().numpy().reshape(groups, c_out // groups, -1, k)
         t_out = conv_out_len(h.shape[2], k, stride)
-        out = _POOL.take((groups, c_out // groups, t_out, n_pad))
+        out = scratch(groups, c_out // groups, t_out, n_pad)
         conv_relu_forward(h, w, bias.detach().numpy().reshape(groups, -1), stride, out)
         acts.append(out)
         h = out
@@ -356,8 +313,7 @@ def _backward_params(
     strides: Sequence[int],
 ) -> list[torch.Tensor]:
     """Weight and bias gradients of every layer (in parameter order) from conv3's gradient
-    ``grad`` in the layout; ``grad`` and each layer's input gradient are masked in place, then
-    handed back to the pool."""
+    ``grad`` in the layout; ``grad`` and each layer's input gradient are masked in place."""
     grads: list[torch.Tensor] = []
     for layer in range(len(weights) - 1, -1, -1):
         weight, stride = weights[layer], strides[layer]
@@ -372,11 +328,9 @@ def _backward_params(
             torch.from_numpy(grad_b).view(-1),
         ]
         if layer > 0:
-            grad_x = _POOL.take(x.shape)
+            grad_x = scratch(*x.shape)
             conv_grad_input(grad, w, stride, grad_x)
-            _POOL.give(grad)
             grad = grad_x
-    _POOL.give(grad)
     return grads
 
 
@@ -384,17 +338,13 @@ class GroupedConvStack(torch.autograd.Function):
     """conv1..conv3 + ReLU on (n, C, T) float32 CPU input -> conv3 flattened (n, G * W * T3)."""
 
     @staticmethod
-    def forward(ctx, x, groups: int, strides: Sequence[int], keep: bool, *params: torch.Tensor):
-        """``keep``: whether a backward will follow (else the activations go back at once)."""
+    def forward(ctx, x, groups: int, strides: Sequence[int], *params: torch.Tensor):
         acts = _forward_acts(x, params, groups, strides)
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         result = np.empty((len(x), h.shape[0]), np.float32)
         from_layout(h, len(x), result)
-        if keep:
-            ctx.acts, ctx.groups, ctx.strides = acts, groups, tuple(strides)
-            ctx.save_for_backward(*params[0::2])
-        else:
-            _POOL.give(*acts)
+        ctx.acts, ctx.groups, ctx.strides = acts, groups, tuple(strides)
+        ctx.save_for_backward(*params[0::2])
         return torch.from_numpy(result)
 
     @staticmethod
@@ -402,11 +352,10 @@ class GroupedConvStack(torch.autograd.Function):
     def backward(ctx, grad_out):
         acts = ctx.acts
         del ctx.acts  # free the activations as soon as the backward is done with them
-        grad = _POOL.take(acts[-1].shape)
+        grad = scratch(*acts[-1].shape)
         into_layout(np.ascontiguousarray(grad_out.numpy()), grad.reshape(-1, grad.shape[3]))
         grads = _backward_params(acts, grad, ctx.saved_tensors, ctx.groups, ctx.strides)
-        _POOL.give(*acts)
-        return (None, None, None, None, *grads)
+        return (None, None, None, *grads)
 
 
 class GroupedConvHead(torch.autograd.Function):
@@ -433,12 +382,11 @@ class GroupedConvHead(torch.autograd.Function):
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         padded = np.zeros(h.shape[1], np.float32)  # zero gradient in the padding columns
         padded[: len(grad_scores)] = grad_scores.numpy()
-        grad, grad_head = _POOL.take(acts[-1].shape), np.empty(h.shape[0], np.float32)
+        grad, grad_head = scratch(*acts[-1].shape), np.empty(h.shape[0], np.float32)
         head_backward(
             h, head_weight.detach().numpy().reshape(-1), padded, grad.reshape(h.shape), grad_head
         )
         grads = _backward_params(acts, grad, weights, ctx.groups, ctx.strides)
-        _POOL.give(*acts)
         grad_head_bias = torch.from_numpy(padded.sum(dtype=np.float32, keepdims=True))
         return (None, None, None, torch.from_numpy(grad_head).view(1, -1), grad_head_bias, *grads)
 
@@ -457,8 +405,7 @@ def grouped_conv_stack(
 ) -> torch.Tensor:
     """The compiled three-layer grouped conv + ReLU stack; same result as ``F.conv1d`` + relu."""
     params = _interleaved(weights, biases)
-    keep = torch.is_grad_enabled() and any(p.requires_grad for p in params)
-    return GroupedConvStack.apply(x.contiguous(), groups, tuple(strides), keep, *params)
+    return GroupedConvStack.apply(x.contiguous(), groups, tuple(strides), *params)
 
 
 def grouped_conv_head(

@@ -16,19 +16,16 @@ numba's compiled-code cache: see ``numba_setup``.
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 import torch
 
 from tactile_exp.models.numba_setup import numba
+from tactile_exp.models.scratch import scratch
 
 # error_model="numpy": no ZeroDivisionError check inside the loops, which blocks vectorisation.
 _JIT = dict(fastmath=True, error_model="numpy", cache=True)
 _CLAMP = np.float32(7.90531110763549805)  # tanh is 1 - 2e-7 here: the approximation's range
 _HALF = np.float32(0.5)
-_POOL: list[np.ndarray] = []  # reusable kernel buffers, see _buffer
-_POOL_BYTES = 512 * 2**20
 _ONE = np.float32(1.0)
 
 
@@ -133,26 +130,6 @@ def _backward(dh_last, w_hh, acts, c_prev, tanh_c, d_gates):
                     dh[k, b] += w * d_gates[gate, t, b]
 
 
-def _buffer(*shape: int) -> np.ndarray:
-    """A float32 array of ``shape``, taken from ``_POOL`` when nothing else holds one.
-
-    The buffers of one batch total ~100 MB; writing freshly allocated pages every step costs more
-    than the kernels. A buffer held by a pending backward (or anything else) is never handed out.
-    """
-    for arr in _POOL:
-        if arr.shape == shape and sys.getrefcount(arr) == 3:  # _POOL, `arr` and this call
-            return arr
-    nbytes = 4 * int(np.prod(shape))
-    for arr in list(_POOL):
-        if sum(a.nbytes for a in _POOL) + nbytes <= _POOL_BYTES:
-            break
-        if sys.getrefcount(arr) == 3:  # the same three: list(_POOL) is one more, `arr` one less
-            _POOL.remove(arr)
-    arr = np.empty(shape, np.float32)
-    _POOL.append(arr)
-    return arr
-
-
 class LSTMLastHidden(torch.autograd.Function):
     """The last hidden state (B, H) of a one-layer LSTM over (B, C, T) float32 CPU input, with
     ``nn.LSTM``'s parameters (weight_ih (4H, C), weight_hh (4H, H), bias_ih, bias_hh)."""
@@ -161,10 +138,10 @@ class LSTMLastHidden(torch.autograd.Function):
     def forward(ctx, x, w_ih, w_hh, b_ih, b_hh):  # type: ignore[override]
         B, C, T = x.shape
         H = w_hh.shape[1]
-        inputs = _buffer(C + H, T, B)  # x and h_{t-1}, stacked: one gemm for both gradients
+        inputs = scratch(C + H, T, B)  # x and h_{t-1}, stacked: one gemm for both gradients
         xs, h_prev = inputs[:C], inputs[C:]
-        acts = _buffer(4 * H, T, B)
-        c_prev, tanh_c = _buffer(H, T, B), _buffer(H, T, B)
+        acts = scratch(4 * H, T, B)
+        c_prev, tanh_c = scratch(H, T, B), scratch(H, T, B)
         h_last = np.empty((H, B), np.float32)
         _to_feature_time_batch(x.detach().contiguous().numpy(), xs)
         torch.addmm(
@@ -183,7 +160,7 @@ class LSTMLastHidden(torch.autograd.Function):
         w_ih, w_hh = ctx.saved_tensors
         inputs, acts, c_prev, tanh_c = ctx.arrays
         G, T, B = acts.shape
-        d_gates = _buffer(G, T, B)
+        d_gates = scratch(G, T, B)
         dh = dh.t().contiguous().numpy()
         _backward(dh, w_hh.detach().numpy(), acts, c_prev, tanh_c, d_gates)
         flat = torch.from_numpy(d_gates).view(G, T * B)

@@ -1,0 +1,44 @@
+"""Reusable float32 scratch arrays for the compiled CPU kernels (haptic ConvNet and LSTM).
+
+A training step at batch 1000 needs 100-150 MB of activations and gradients. Freshly allocated
+memory is page-faulted and zeroed by the OS on its first touch, every step, which cost more than
+some kernels themselves (the ConvNet's step in bench/bench_haptic_cnn.py: 73 -> 55 ms with
+reuse). ``scratch`` hands out a pooled array only when nothing else references it, so an array
+held by a pending backward, a view or a tensor is never handed out twice. One thread per process
+(the kernels parallelise inside numba; Hydra's launchers run jobs in processes).
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+POOL_BYTES = 512 * 2**20  # ours: a training step of either model, both batch sizes of an epoch
+_POOL: list[np.ndarray] = []
+
+
+def _free(i: int) -> bool:
+    """Whether nothing but the pool references ``_POOL[i]`` (2: the pool and this argument)."""
+    return sys.getrefcount(_POOL[i]) == 2
+
+
+def scratch(*shape: int) -> np.ndarray:
+    """A float32 array of ``shape`` with arbitrary contents, reused from the pool if one is free.
+
+    Free arrays are dropped, oldest first, while a new one would take the pool past
+    ``POOL_BYTES``; arrays in use are never dropped (the pool may then exceed it).
+    """
+    for i in range(len(_POOL)):
+        if _POOL[i].shape == shape and _free(i):
+            return _POOL[i]
+    nbytes = 4 * int(np.prod(shape))
+    i = 0
+    while i < len(_POOL) and sum(a.nbytes for a in _POOL) + nbytes > POOL_BYTES:
+        if _free(i):
+            del _POOL[i]
+        else:
+            i += 1
+    arr = np.empty(shape, np.float32)
+    _POOL.append(arr)
+    return arr
