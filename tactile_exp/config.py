@@ -20,8 +20,9 @@ from tactile_exp.data.layout import ADJECTIVES
 
 DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
 # Keys that change where results go or what they are compared with, not what they are: left out
-# of the config hash.
-UNHASHED = ("tracking", "hydra", "paper")
+# of the config hash. ``trunk`` only feeds the visual modalities' nodes, hashed there: a haptic
+# row is the same job whatever trunk weights the grid was given.
+UNHASHED = ("tracking", "hydra", "paper", "trunk")
 
 
 class ConfigError(ValueError):

@@ -200,3 +200,11 @@ def test_one_trunk_override_reaches_every_visual_row(compose_config):
         assert (visual.weights, visual.layout) == ("/weights/material.pth", "caffe"), row
     one_job = compose_config(["experiment=table1_l_image_googlenet_8views", "modality.weights=w"])
     assert one_job.modality.weights == "w"
+    for row, changes in (
+        ("table1_a_haptic_static_1trial", False),
+        ("table1_m_multimodal_i_l", True),
+    ):
+        plain = settings_from_config(compose_config([f"experiment={row}"]))
+        given = settings_from_config(compose_config([f"experiment={row}", *trunk]))
+        assert (given.config_hash != plain.config_hash) is changes, row  # resume skips A
+        assert (given.row_hash != plain.row_hash) is changes, row

@@ -28,7 +28,7 @@ RUNS = [
     ("a", ROW_A, 1, "", False, 0.50),  # superseded by the rerun of seed 1 below
     ("a", ROW_A, 1, "", False, 0.70),
     ("a", ROW_A, 2, "", True, 0.10),  # failed: never counted
-    ("k", ROW_K, 0, "split=random data=phac2", False, 0.55),
+    ("k", ROW_K, 0, "split=random data=phac2 trunk.weights=w.pth trunk.layout=caffe", False, 0.55),
     ("i-quick", {**ROW_I, "choice.schedule": "quick"}, 0, "", False, 0.65),
     ("i-c10", ROW_I, 0, "combine=10", False, 0.75),  # a stronger variant, not row I
     ("i", ROW_I, 0, "", False, 0.68),
@@ -74,7 +74,7 @@ def test_groups_count_each_seed_once_and_label_variants(tracker):
     assert sorted(a.runs) == [0, 1] and a.at_paper_settings
     mean_a = np.mean(0.01 * np.arange(24))
     assert a.aucs == pytest.approx([0.60 + mean_a, 0.70 + mean_a])  # the rerun of seed 1
-    assert groups["k"].at_paper_settings  # split and data overrides keep the paper's method
+    assert groups["k"].at_paper_settings  # split, data, weights overrides keep the paper's method
     assert groups["i-quick"].differences == ("schedule=quick",)
     assert groups["i-c10"].differences == ("combine=10",)
     assert groups["a-1adj"].differences == ("1 adjectives",)

@@ -27,6 +27,9 @@ NEUTRAL_OVERRIDES = (
     "cache_dir",
     "modality.weights",
     "modality.layout",
+    "modality.visual.weights",
+    "modality.visual.layout",
+    "trunk",
     "sweep",
     "hydra",
 )
