@@ -202,14 +202,15 @@ def fit_categorical_hmm(
                 raise ValueError("HMM forward pass underflowed: a sequence has probability 0")
             scale[:, t] = 1.0 / total
             fwd[:, t] = a * scale[:, t, None]
-        bwd = np.empty_like(fwd)
+        bwd, ahead = np.empty_like(fwd), np.empty_like(fwd)  # ahead[t] = frame[t] * bwd[t]
         bwd[:, T - 1] = scale[:, T - 1, None]
         for t in range(T - 2, -1, -1):
-            bwd[:, t] = ((frame[:, t + 1] * bwd[:, t + 1]) @ trans.T) * scale[:, t, None]
+            ahead[:, t + 1] = frame[:, t + 1] * bwd[:, t + 1]
+            bwd[:, t] = (ahead[:, t + 1] @ trans.T) * scale[:, t, None]
         loglik = -np.log(scale).sum()
         post = fwd * bwd
         post /= post.sum(axis=2, keepdims=True)
-        pairs = (frame[:, 1:] * bwd[:, 1:]).reshape(-1, n_states)
+        pairs = ahead[:, 1:].reshape(-1, n_states)
         xi = fwd[:, :-1].reshape(-1, n_states).T @ pairs  # expected transitions / trans
         start = _normalised(np.where(start == 0, 0.0, post[:, 0].sum(axis=0)))
         trans = _normalised(np.where(trans == 0, 0.0, xi * trans))
