@@ -158,7 +158,7 @@ def test_weights_file_and_fitted_mean(dataset, cache_dir, tmp_path):
     a, b, c = (m.instances(split)[0].X for m in (from_file, random7, fitted))
     np.testing.assert_allclose(a, b, atol=1e-5)
     assert np.abs(c - b).max() > 1e-3  # a different mean is subtracted before the trunk
-    with pytest.raises(FileNotFoundError, match="missing.pth"):
+    with pytest.raises(FileNotFoundError, match=r"trunk.weights .*missing.pth not found"):
         _small_visual(dataset, cache_dir, weights=str(tmp_path / "missing.pth"))
     with pytest.raises(ValueError, match="modality.mean must be"):
         _small_visual(dataset, cache_dir, mean="dataset")

@@ -56,9 +56,15 @@ class Visual(Modality):
         if mean not in ("imagenet", "train"):
             raise ValueError(f"modality.mean must be 'imagenet' or 'train', got {mean!r}")
         if layout not in ("torchvision", "caffe"):
-            raise ValueError(f"modality.layout must be 'torchvision' or 'caffe', got {layout!r}")
+            raise ValueError(
+                f"modality.layout must be 'torchvision' or 'caffe' (trunk.layout for every visual "
+                f"row), got {layout!r}"
+            )
         if weights is not None and not Path(weights).is_file():
-            raise FileNotFoundError(f"modality.weights: GoogLeNet weights file {weights} not found")
+            raise FileNotFoundError(
+                f"modality.weights (trunk.weights for every visual row): GoogLeNet weights file "
+                f"{weights} not found"
+            )
         if batch_size < 1:
             raise ValueError(f"modality.batch_size must be >= 1, got {batch_size}")
         resolve_device(device)  # a bad device fails here, before any work
