@@ -42,15 +42,17 @@ IMPLS = ("torch", "compiled")
 
 
 def sgd_step(impl: str) -> Callable[[], None]:
-    """One SGD step (forward, backward, update) of the default net + linear head at batch 1000."""
+    """One SGD step (forward, backward, update) of the default net + linear head at batch 1000,
+    on a fresh shuffled batch of a full-size training set each step, as ``HapticCNN`` trains."""
     torch.manual_seed(0)
     net = GroupedTemporalConvNet(CHANNELS, STEPS, impl=impl)
     head = torch.nn.Linear(net.n_features, 1)
     optimiser = torch.optim.SGD([*net.parameters(), *head.parameters()], lr=0.01, momentum=0.9)
-    x, y = torch.randn(BATCH, CHANNELS, STEPS), (torch.rand(BATCH) > 0.5).float()
+    X, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
 
     def step() -> None:  # HapticCNN's stage 1 step: net.scores (compiled: fused with the head)
-        loss = LOSSES["logistic"](net.scores(x, head), y)
+        rows = torch.randperm(N_TRAIN)[:BATCH]
+        loss = LOSSES["logistic"](net.scores(X, head, rows=rows), y[rows])
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()

@@ -102,7 +102,7 @@ def validate_sgd_args(
 
 
 def sgd_epochs(
-    forward: Callable[[torch.Tensor], torch.Tensor],
+    forward: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
     params: list[nn.Parameter],
     X: torch.Tensor,
     y: torch.Tensor,
@@ -115,7 +115,10 @@ def sgd_epochs(
     generator: torch.Generator,
     report: Callable[[float], None] | None = None,
 ) -> list[float]:
-    """Minibatch SGD with momentum over shuffled ``X``; returns the mean loss of each epoch."""
+    """Minibatch SGD with momentum over shuffled ``X``; returns the mean loss of each epoch.
+
+    ``forward(X, index)`` gives the scores of the rows ``index`` of ``X``: a model may read
+    them in place rather than from a copied batch (the compiled haptic ConvNet does)."""
     optimiser = torch.optim.SGD(params, lr=lr, momentum=momentum)
     n = len(X)
     curve = []
@@ -124,7 +127,7 @@ def sgd_epochs(
         total = torch.zeros((), device=X.device)
         for start in range(0, n, batch_size):
             index = order[start : start + batch_size]
-            value = loss(forward(X[index]), y[index])
+            value = loss(forward(X, index), y[index])
             optimiser.zero_grad(set_to_none=True)
             value.backward()
             optimiser.step()

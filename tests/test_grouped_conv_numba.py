@@ -105,6 +105,21 @@ def test_numba_cache_goes_to_the_user_cache_folder(tmp_path):
     assert lines[0] == str(tmp_path / "numba")
 
 
+def test_threading_layer_is_workqueue_even_with_a_given_numba_cache_dir(tmp_path):
+    """numba imported before ``numba_setup`` (any ``from numba import ...``) once kept its
+    default threading layer whenever $NUMBA_CACHE_DIR was set, as in this test suite."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_THREADING_LAYER"}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path)
+    code = (
+        "import numba; import tactile_exp.models.grouped_conv_numba; "
+        "print(numba.config.THREADING_LAYER, numba.config.CACHE_DIR)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == ["workqueue", str(tmp_path)]
+
+
 def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
     """Layout arrays are reused across steps (``scratch``): two forwards in flight, each
     backward run afterwards in reverse order, still give each batch torch's gradients."""
@@ -142,3 +157,23 @@ def test_scratch_reuses_only_arrays_nothing_holds_and_drops_free_ones_beyond_its
     assert len(scratch_module._POOL) == 2
     kept = [scratch(2, 50), scratch(2, 50)]  # 4 x 400 bytes > 1,200: a free (10, 10) dropped
     assert len(scratch_module._POOL) == 3 and kept
+
+
+def test_training_scores_read_the_batch_rows_in_place_like_a_copied_batch():
+    """SGD steps pass the whole input and the batch's row index (no ``X[index]`` copy): scores
+    and every gradient equal torch's on the copied rows, in the index's order."""
+    torch.manual_seed(5)
+    net = GroupedTemporalConvNet(64, 30, kernel_sizes=(5, 3, 3))
+    head = torch.nn.Linear(net.n_features, 1)
+    X, rows = torch.randn(50, 64, 30), torch.tensor([41, 3, 17, 3, 49, 0, 22])
+    y = torch.randn(len(rows))
+    want_scores, want = _scores_and_grads(net, head, X[rows], y, "torch")
+    net.impl = "compiled"
+    net.zero_grad()
+    head.zero_grad()
+    scores = net.scores(X, head, rows=rows)
+    (scores * y).sum().backward()
+    torch.testing.assert_close(scores.detach(), want_scores, rtol=1e-5, atol=1e-5)
+    got = [p.grad for p in [*net.parameters(), *head.parameters()]]
+    for g_c, g_t in zip(got, want, strict=True):
+        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)

@@ -88,7 +88,7 @@ def test_sgd_epochs_lowers_the_loss_and_reports_each_epoch():
     layer = torch.nn.Linear(5, 1)
     reported = []
     curve = sgd_epochs(
-        lambda x: layer(x).squeeze(1),
+        lambda X, index: layer(X[index]).squeeze(1),
         list(layer.parameters()),
         X,
         y,
@@ -114,7 +114,7 @@ def test_sgd_epochs_batch_larger_than_data_is_one_full_batch():
     before = loss(layer(X).squeeze(1), y)
     gw, gb = torch.autograd.grad(before, [layer.weight, layer.bias])
     curve = sgd_epochs(
-        lambda x: layer(x).squeeze(1),
+        lambda X, index: layer(X[index]).squeeze(1),
         list(layer.parameters()),
         X,
         y,

@@ -20,7 +20,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch
-from numba import prange
 from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.numba_setup import numba
@@ -103,7 +102,7 @@ def conv_relu_forward(x, w, b, stride, out):  # pragma: no cover (compiled)
     c_out, k = w.shape[1], w.shape[3]
     t_out = out.shape[2]
     pad = k // 2
-    for g in prange(groups):
+    for g in numba.prange(groups):
         chans = np.empty(c_in * k, np.int64)
         times = np.empty(c_in * k, np.int64)
         weights = np.empty(c_in * k, np.float32)
@@ -135,7 +134,7 @@ def relu_grad_weight_bias(y, grad, x, stride, grad_w, grad_b):  # pragma: no cov
     c_out, k = grad_w.shape[1], grad_w.shape[3]
     t_out = y.shape[2]
     pad = k // 2
-    for g in prange(groups):
+    for g in numba.prange(groups):
         acc = np.zeros((c_out, c_in, k), np.float32)
         for o in range(c_out):
             total = np.float32(0.0)
@@ -195,7 +194,7 @@ def conv_grad_input(grad, w, stride, grad_x):  # pragma: no cover (compiled)
     c_in, t_in = grad_x.shape[1], grad_x.shape[2]
     k = w.shape[3]
     pad = k // 2
-    for task in prange(groups * c_in):
+    for task in numba.prange(groups * c_in):
         g, i = task // c_in, task % c_in
         chans = np.empty(c_out * k, np.int64)
         times = np.empty(c_out * k, np.int64)
@@ -217,7 +216,7 @@ def head_forward(h, w, b, out):  # pragma: no cover (compiled)
     """out[m] = b + sum_r w[r] h[r, m]: the linear classification layer on conv3's rows, read
     in the layout (no transpose back to instance-major), one task per block of columns."""
     rows, n = h.shape
-    for block in prange((n + CHUNK - 1) // CHUNK):
+    for block in numba.prange((n + CHUNK - 1) // CHUNK):
         lo, hi = block * CHUNK, min(n, block * CHUNK + CHUNK)
         block = out[lo:hi]
         for m in range(hi - lo):
@@ -233,7 +232,7 @@ def head_backward(h, w, grad_scores, grad, grad_w):  # pragma: no cover (compile
     """The classification layer's backward in the layout: grad_w[r] = sum_m h[r, m] gs[m] and
     conv3's gradient grad[r, m] = w[r] gs[m], already masked by conv3's ReLU (h > 0)."""
     rows, n = h.shape
-    for r in prange(rows):
+    for r in numba.prange(rows):
         wr, src, dst = w[r], h[r], grad[r]
         total = np.float32(0.0)
         for m in range(n):
@@ -244,25 +243,25 @@ def head_backward(h, w, grad_scores, grad, grad_w):  # pragma: no cover (compile
 
 
 @numba.njit(parallel=True, **_JIT)
-def to_layout(x, groups, out):  # pragma: no cover (compiled)
-    """(n, c_in * groups, T) with channel c in group c % groups -> (groups, c_in, T, n_pad)."""
-    n, channels, steps = x.shape
-    c_in = channels // groups
-    n_pad = out.shape[3]
-    for task in prange(groups * c_in):
+def to_layout(x, rows, groups, out):  # pragma: no cover (compiled)
+    """Rows ``rows`` of (N, c_in * groups, T), channel c in group c % groups -> (groups, c_in,
+    T, n_pad): the batch is read in place from the whole input, never copied out first."""
+    channels, steps = x.shape[1], x.shape[2]
+    n, c_in, n_pad = rows.shape[0], channels // groups, out.shape[3]
+    for task in numba.prange(groups * c_in):
         g, i = task // c_in, task % c_in
         c = i * groups + g
         for m0 in range(0, n_pad, LANES):
             for t in range(steps):
                 for m in range(m0, m0 + LANES):
-                    out[g, i, t, m] = x[m, c, t] if m < n else np.float32(0.0)
+                    out[g, i, t, m] = x[rows[m], c, t] if m < n else np.float32(0.0)
 
 
 @numba.njit(parallel=True, **_JIT)
 def from_layout(h, n, out):  # pragma: no cover (compiled)
     """(rows, n_pad) -> (n, rows): the exit transpose (and its adjoint with the roles swapped)."""
     rows = h.shape[0]
-    for r0 in prange((rows + LANES - 1) // LANES):
+    for r0 in numba.prange((rows + LANES - 1) // LANES):
         for m in range(n):
             for r in range(r0 * LANES, min(rows, r0 * LANES + LANES)):
                 out[m, r] = h[r, m]
@@ -273,7 +272,7 @@ def into_layout(grad, out):  # pragma: no cover (compiled)
     """(n, rows) -> (rows, n_pad) with zeros in the padding: the gradient's entry transpose."""
     n, rows = grad.shape
     n_pad = out.shape[1]
-    for r0 in prange((rows + LANES - 1) // LANES):
+    for r0 in numba.prange((rows + LANES - 1) // LANES):
         for m in range(n_pad):
             for r in range(r0 * LANES, min(rows, r0 * LANES + LANES)):
                 out[r, m] = grad[m, r] if m < n else np.float32(0.0)
@@ -284,15 +283,20 @@ def _padded(n: int) -> int:
 
 
 def _forward_acts(
-    x: torch.Tensor, params: Sequence[torch.Tensor], groups: int, strides: Sequence[int]
+    x: torch.Tensor,
+    rows: torch.Tensor,
+    params: Sequence[torch.Tensor],
+    groups: int,
+    strides: Sequence[int],
 ) -> list[np.ndarray]:
-    """The input and each layer's ReLU output in the layout (groups, channels, time, n_pad)."""
+    """The input rows ``rows`` and each layer's ReLU output in the layout (groups, channels,
+    time, n_pad)."""
     if x.requires_grad:
         raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
-    n, channels, steps = x.shape
-    n_pad = _padded(n)
+    _, channels, steps = x.shape
+    n_pad = _padded(len(rows))
     h = scratch(groups, channels // groups, steps, n_pad)
-    to_layout(np.ascontiguousarray(x.detach().numpy()), groups, h)
+    to_layout(np.ascontiguousarray(x.detach().numpy()), rows.numpy(), groups, h)
     acts = [h]
     for weight, bias, stride in zip(params[0::2], params[1::2], strides, strict=True):
         c_out, _, k = weight.shape
@@ -339,7 +343,7 @@ class GroupedConvStack(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, x, groups: int, strides: Sequence[int], *params: torch.Tensor):
-        acts = _forward_acts(x, params, groups, strides)
+        acts = _forward_acts(x, torch.arange(len(x)), params, groups, strides)
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         result = np.empty((len(x), h.shape[0]), np.float32)
         from_layout(h, len(x), result)
@@ -359,19 +363,21 @@ class GroupedConvStack(torch.autograd.Function):
 
 
 class GroupedConvHead(torch.autograd.Function):
-    """The conv stack and a linear classification layer (1 output) on its flattened conv3:
-    (n, C, T) -> scores (n,). Training runs through this one, so conv3 never leaves the layout:
-    no transpose of the features out, nor of their gradient back in."""
+    """The conv stack and a linear classification layer (1 output) on its flattened conv3, for
+    the rows ``rows`` of (N, C, T) input -> scores (len(rows),). Training runs through this one:
+    the batch is read in place (``X[index]`` would first copy it: 19 MB per step of the default
+    net), and conv3 never leaves the layout: no transpose of the features out, nor of their
+    gradient in."""
 
     @staticmethod
-    def forward(ctx, x, groups, strides, head_weight, head_bias, *params: torch.Tensor):
-        acts = _forward_acts(x, params, groups, strides)
+    def forward(ctx, x, rows, groups, strides, head_weight, head_bias, *params: torch.Tensor):
+        acts = _forward_acts(x, rows, params, groups, strides)
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         scores = np.empty(h.shape[1], np.float32)
         head_forward(h, head_weight.detach().numpy().reshape(-1), head_bias.item(), scores)
         ctx.acts, ctx.groups, ctx.strides = acts, groups, tuple(strides)
         ctx.save_for_backward(head_weight, *params[0::2])
-        return torch.from_numpy(scores[: len(x)])
+        return torch.from_numpy(scores[: len(rows)])
 
     @staticmethod
     @once_differentiable
@@ -388,7 +394,8 @@ class GroupedConvHead(torch.autograd.Function):
         )
         grads = _backward_params(acts, grad, weights, ctx.groups, ctx.strides)
         grad_head_bias = torch.from_numpy(padded.sum(dtype=np.float32, keepdims=True))
-        return (None, None, None, torch.from_numpy(grad_head).view(1, -1), grad_head_bias, *grads)
+        grad_head_weight = torch.from_numpy(grad_head).view(1, -1)
+        return (None, None, None, None, grad_head_weight, grad_head_bias, *grads)
 
 
 def _interleaved(weights: Sequence[torch.Tensor], biases: Sequence[torch.Tensor]) -> list:
@@ -416,10 +423,13 @@ def grouped_conv_head(
     *,
     groups: int,
     strides: Sequence[int],
+    rows: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """Scores (n,) of ``head`` (one output) on the compiled stack's flattened conv3; same result
-    as ``head(grouped_conv_stack(...)).squeeze(1)``."""
+    """Scores of ``head`` (one output) on the compiled stack's flattened conv3 for the rows
+    ``rows`` of ``x`` (None: all); same result as
+    ``head(grouped_conv_stack(x[rows], ...)).squeeze(1)``."""
     params = _interleaved(weights, biases)
+    rows = torch.arange(len(x)) if rows is None else rows.to(torch.int64)
     return GroupedConvHead.apply(
-        x.contiguous(), groups, tuple(strides), head.weight, head.bias, *params
+        x.contiguous(), rows, groups, tuple(strides), head.weight, head.bias, *params
     )

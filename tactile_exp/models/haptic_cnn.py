@@ -93,15 +93,24 @@ class GroupedTemporalConvNet(nn.Module):
             self.impl == "auto" and x.device.type == "cpu" and not x.requires_grad
         )
 
-    def scores(self, x: torch.Tensor, head: nn.Linear) -> torch.Tensor:
-        """``head(self(x)).squeeze(1)`` for a one-output ``head``: the training step's forward.
-        Compiled, conv3 stays in the kernels' layout (one fused autograd Function)."""
+    def scores(
+        self, x: torch.Tensor, head: nn.Linear, *, rows: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """``head(self(x[rows])).squeeze(1)`` for a one-output ``head`` (``rows`` None: all):
+        the training step's forward. Compiled, one fused autograd Function reads the rows in
+        place (no copied batch) and keeps conv3 inside the kernels' tasks."""
         if head.out_features != 1 or not self._compiled(x):
-            return head(self(x)).squeeze(1)
+            return head(self(x if rows is None else x[rows])).squeeze(1)
         from tactile_exp.models.grouped_conv_numba import grouped_conv_head  # numba: lazy
 
         return grouped_conv_head(
-            x.float(), self.weights, self.biases, head, groups=self.groups, strides=self.strides
+            x.float(),
+            self.weights,
+            self.biases,
+            head,
+            groups=self.groups,
+            strides=self.strides,
+            rows=rows,
         )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -197,5 +206,5 @@ class HapticCNN(SGDModel):
 
     def _train_scores(
         self, body: nn.Module, classifier: nn.Linear
-    ) -> Callable[[torch.Tensor], torch.Tensor]:
-        return lambda x: body.scores(x, classifier)
+    ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+        return lambda X, index: body.scores(X, classifier, rows=index)

@@ -19,8 +19,9 @@ os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
 import numba  # noqa: E402  (after the variables above: numba reads them at import)
 
-if not numba.config.CACHE_DIR:  # numba was imported earlier, before the variable was set
-    numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
-    numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
+# numba may have been imported earlier, before the variables were set (it then ran with its
+# default threading layer even when $NUMBA_CACHE_DIR was given): apply them either way.
+numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
+numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
 __all__ = ["numba"]

@@ -117,9 +117,10 @@ class SGDModel(Model):
 
     def _train_scores(
         self, body: nn.Module, classifier: nn.Linear
-    ) -> Callable[[torch.Tensor], torch.Tensor]:
-        """Stage 1's forward, batch -> scores; a body with a fused path overrides it."""
-        return lambda x: classifier(body(x)).squeeze(1)
+    ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+        """Stage 1's forward, (X, batch's row index) -> scores; a body with a fused path
+        overrides it."""
+        return lambda X, index: classifier(body(X[index])).squeeze(1)
 
     def _tensor(self, X: np.ndarray) -> torch.Tensor:
         if self.body_ is None or self.classifier_ is None:
@@ -182,7 +183,7 @@ class SGDModel(Model):
         }
         if finetune:
             history["finetune_loss"] = sgd_epochs(
-                lambda f: classifier_(f).squeeze(1),
+                lambda F, index: classifier_(F[index]).squeeze(1),
                 list(classifier_.parameters()),
                 self._features(Xt),
                 yt,
