@@ -31,6 +31,7 @@ from threadpoolctl import threadpool_limits
 from tactile_exp.baselines import shortcuts
 from tactile_exp.baselines.static import PHASES, pool_moments, principal_axes
 from tactile_exp.data.layout import Split, TrialData, TrialName
+from tactile_exp.models.numba_setup import numba
 
 SENSORS: tuple[str, ...] = ("electrodes", "pac", "pdc", "tac")
 CHAINS: tuple[tuple[str, str], ...] = tuple((ep, s) for ep in PHASES for s in SENSORS)
@@ -189,36 +190,75 @@ def fit_categorical_hmm(
     start, trans = draws.dirichlet(alpha), draws.dirichlet(alpha, size=n_states)
     emit = np.random.RandomState(seed).rand(n_states, n_symbols)  # hmmlearn draws it afresh
     emit /= emit.sum(axis=1, keepdims=True)
-    onehot = np.zeros((m * T, n_symbols))
-    onehot[np.arange(m * T), symbols.ravel()] = 1.0
     previous = -np.inf
     for _ in range(n_iter):
-        frame = emit.T[symbols]  # (m, T, N): P(symbol at t | state)
-        fwd, scale = np.empty((m, T, n_states)), np.empty((m, T))
-        for t in range(T):
-            a = start * frame[:, 0] if t == 0 else (fwd[:, t - 1] @ trans) * frame[:, t]
-            total = a.sum(axis=1)
-            if not total.all():
-                raise ValueError("HMM forward pass underflowed: a sequence has probability 0")
-            scale[:, t] = 1.0 / total
-            fwd[:, t] = a * scale[:, t, None]
-        bwd, ahead = np.empty_like(fwd), np.empty_like(fwd)  # ahead[t] = frame[t] * bwd[t]
-        bwd[:, T - 1] = scale[:, T - 1, None]
-        for t in range(T - 2, -1, -1):
-            ahead[:, t + 1] = frame[:, t + 1] * bwd[:, t + 1]
-            bwd[:, t] = (ahead[:, t + 1] @ trans.T) * scale[:, t, None]
-        loglik = -np.log(scale).sum()
-        post = fwd * bwd
-        post /= post.sum(axis=2, keepdims=True)
-        pairs = ahead[:, 1:].reshape(-1, n_states)
-        xi = fwd[:, :-1].reshape(-1, n_states).T @ pairs  # expected transitions / trans
-        start = _normalised(np.where(start == 0, 0.0, post[:, 0].sum(axis=0)))
+        loglik, start_counts, xi, emit_counts = _expected_counts(symbols, start, trans, emit)
+        if loglik == -np.inf:
+            raise ValueError("HMM forward pass underflowed: a sequence has probability 0")
+        start = _normalised(np.where(start == 0, 0.0, start_counts))
         trans = _normalised(np.where(trans == 0, 0.0, xi * trans))
-        emit = _normalised(post.reshape(-1, n_states).T @ onehot)
+        emit = _normalised(emit_counts)
         if loglik - previous < tol:
             break
         previous = loglik
     return start, trans, emit
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _expected_counts(symbols, start, trans, emit):  # pragma: no cover (compiled)
+    """The E-step over all sequences, compiled: (log-likelihood, expected start counts (N,),
+    transition sums (N, N) still to be multiplied by ``trans``, emission counts (N, K)).
+
+    Per sequence: hmmlearn's scaled forward-backward, the posteriors normalised per frame.
+    A log-likelihood of -inf means a sequence had probability 0 (the forward pass underflowed).
+    Compiled, one sequence at a time: numpy's version looped over time in Python on (m, N)
+    slices, and that loop was most of a chain's fit.
+    """
+    m, T = symbols.shape
+    N, K = emit.shape
+    fwd, bwd, scale = np.empty((T, N)), np.empty((T, N)), np.empty(T)
+    a, post = np.empty(N), np.empty(N)
+    start_counts, xi, emit_counts = np.zeros(N), np.zeros((N, N)), np.zeros((N, K))
+    loglik = 0.0
+    for s in range(m):
+        seq = symbols[s]
+        for t in range(T):
+            for j in range(N):
+                if t == 0:
+                    a[j] = start[j] * emit[j, seq[0]]
+                else:
+                    acc = 0.0
+                    for i in range(N):
+                        acc += fwd[t - 1, i] * trans[i, j]
+                    a[j] = acc * emit[j, seq[t]]
+            total = a.sum()
+            if total == 0.0:
+                return -np.inf, start_counts, xi, emit_counts
+            scale[t] = 1.0 / total
+            for j in range(N):
+                fwd[t, j] = a[j] * scale[t]
+            loglik -= np.log(scale[t])
+        for j in range(N):
+            bwd[T - 1, j] = scale[T - 1]
+        for t in range(T - 2, -1, -1):
+            for j in range(N):
+                a[j] = emit[j, seq[t + 1]] * bwd[t + 1, j]  # "ahead" at t + 1
+            for i in range(N):
+                acc = 0.0
+                for j in range(N):
+                    acc += a[j] * trans[i, j]
+                    xi[i, j] += fwd[t, i] * a[j]
+                bwd[t, i] = acc * scale[t]
+        for t in range(T):
+            for j in range(N):
+                post[j] = fwd[t, j] * bwd[t, j]
+            total = post.sum()
+            for j in range(N):
+                p = post[j] / total
+                emit_counts[j, seq[t]] += p
+                if t == 0:
+                    start_counts[j] += p
+    return loglik, start_counts, xi, emit_counts
 
 
 def _normalised(p: np.ndarray) -> np.ndarray:
