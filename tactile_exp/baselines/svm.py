@@ -131,7 +131,7 @@ class ObjectCVLinearSVM:
                 return decisions
             # liblinear releases the GIL: draws run on threads (2.1x on 2 cores, measured),
             # their decisions kept in draw order, so the result does not depend on the threads.
-            threads = max(1, min(len(os.sched_getaffinity(0)), len(draws)))
+            threads = max(1, min(os.cpu_count() or 1, len(draws)))  # as data/synthetic.py
             with ThreadPoolExecutor(threads) as pool:
                 per_draw = list(pool.map(lambda d: self._draw_decisions(X, y, *d), draws))
         return [[draw[j] for draw in per_draw] for j in range(len(self.Cs))]
