@@ -6,8 +6,8 @@ on a shared machine. Prints:
 2. training throughput (forward, backward, SGD step; default architecture, batch 1000) of both
    through the same step as ``HapticCNN`` (``net.scores``: compiled, the conv stack and the
    classification layer are one fused Function), in wall and CPU time per step, and the ratio;
-3. each compiled kernel's GFLOP/s at batch 1000 (the classification layer's too) beside
-   torch's dense matmul (sgemm) rate;
+3. each compiled layer kernel's GFLOP/s at batch 1000, the whole fused forward + backward's
+   (one task per signal group runs every layer), beside torch's dense matmul (sgemm) rate;
 4. each implementation's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training
    set for one adjective) and the Table I row I estimate it implies: 24 adjectives x (200 epochs
    + 100 fine-tuning epochs) + setup, measured, not assumed, plus the compile time once;
@@ -103,49 +103,72 @@ def rate(gflop: float, times: tuple[float, float]) -> str:
     return f"{wall * 1e3:.1f} ms = {gflop / wall:.1f} wall, {gflop / cpu:.1f} per core"
 
 
+@kernels.numba.njit(parallel=True)
+def _all_groups_forward(x, w, b, stride, out):
+    for g in kernels.numba.prange(x.shape[0]):
+        kernels._conv_relu(x[g], w[g], b[g], stride, out[g])
+
+
+@kernels.numba.njit(parallel=True)
+def _all_groups_grad_weight(grad, x, stride, grad_w, grad_b):
+    for g in kernels.numba.prange(x.shape[0]):
+        kernels._grad_weight_bias(grad[g], x[g], stride, grad_w[g], grad_b[g])
+
+
+@kernels.numba.njit(parallel=True)
+def _all_groups_grad_input(grad, w, stride, y, work):
+    for g in kernels.numba.prange(grad.shape[0]):
+        kernels._conv_grad_input(grad[g], w[g], stride, y[g], work[kernels.numba.get_thread_id()])
+
+
 def kernel_rates(repeats: int) -> None:
-    """GFLOP/s of each compiled kernel on the default net's layers at batch 1000 (best of
-    ``repeats``) and of a 2000 x 2000 sgemm, in the same run and threads: per wall second and
-    per CPU second (the rate of one core while it runs, less sensitive to other load)."""
+    """GFLOP/s of each layer's compiled kernels at batch 1000 (best of ``repeats``), each run
+    alone over all 32 groups (in training one task per group runs them all in sequence, so
+    these rates are a lower bound), the fused forward and backward of the whole stack with the
+    classification layer, and a 2000 x 2000 sgemm, in the same run and threads: per wall
+    second and per CPU second (the rate of one core while it runs, less sensitive to load)."""
     n, groups = BATCH, 32
     n_pad = -(-n // kernels.LANES) * kernels.LANES
+    threads = kernels.numba.get_num_threads()
     rng = np.random.default_rng(0)
     print(f"\n3. GFLOP/s at batch {BATCH} (best of {repeats}; 2 FLOP per FMA)")
-    c_in, length, net_gflop = 1, STEPS, 0.0
+    c_in, length, layer_gflop = 1, STEPS, []
     for layer in (1, 2, 3):
         t_out = kernels.conv_out_len(length, 5, 2)
-        x = rng.random((groups, c_in, length, n_pad), dtype=np.float32)
+        x = rng.standard_normal((groups, c_in, length, n_pad), dtype=np.float32)
         w = rng.standard_normal((groups, 4, c_in, 5), dtype=np.float32)
         b = np.zeros((groups, 4), np.float32)
         out = np.empty((groups, 4, t_out, n_pad), np.float32)
         grad = rng.standard_normal(out.shape, dtype=np.float32)
-        grad_w, grad_b, grad_x = np.empty_like(w), np.empty_like(b), np.empty_like(x)
+        grad_w, grad_b = np.empty_like(w), np.empty_like(b)
+        work = np.empty((threads, *x.shape[1:]), np.float32)
         gflop = 2 * groups * 4 * c_in * 5 * t_out * n / 1e9
-        net_gflop += gflop
+        layer_gflop.append(gflop)
         rates = {
-            "forward+ReLU": best_time(kernels.conv_relu_forward, (x, w, b, 2, out), repeats),
-            "ReLU mask+weight+bias grad": best_time(
-                kernels.relu_grad_weight_bias, (out, grad, x, 2, grad_w, grad_b), repeats
+            "forward+ReLU": best_time(_all_groups_forward, (x, w, b, 2, out), repeats),
+            "weight+bias grad": best_time(
+                _all_groups_grad_weight, (grad, x, 2, grad_w, grad_b), repeats
             ),
-            "input grad": best_time(kernels.conv_grad_input, (grad, w, 2, grad_x), repeats),
         }
+        if layer > 1:  # conv1's input needs no gradient
+            rates["ReLU-masked input grad"] = best_time(
+                _all_groups_grad_input, (grad, w, 2, x, work), repeats
+            )
         print(f"   conv{layer} ({c_in}->4 per group, {gflop * 1e3:.0f} MFLOP):")
         for name, times in rates.items():
             print(f"     {name:28s} {rate(gflop, times)}")
         c_in, length = 4, t_out
-    rows = groups * 4 * length
-    h = rng.random((rows, n_pad), dtype=np.float32)
-    w_head, scores = rng.standard_normal(rows, dtype=np.float32), np.empty(n_pad, np.float32)
-    grad_h, grad_w_head = np.empty_like(h), np.empty_like(w_head)
-    head_gflop = 2 * rows * n / 1e9
-    print(f"   classification layer on conv3 in the layout ({head_gflop * 1e3:.0f} MFLOP):")
-    for name, times in {
-        "forward": best_time(kernels.head_forward, (h, w_head, 0.0, scores), repeats),
-        "weight grad + conv3 grad": best_time(
-            kernels.head_backward, (h, w_head, scores, grad_h, grad_w_head), repeats
-        ),
-    }.items():
-        print(f"     {name:28s} {rate(head_gflop, times)}")
+    net_gflop = sum(layer_gflop)
+    step_gflop = 3 * net_gflop - layer_gflop[0]  # forward, weight grads, input grads but conv1's
+    x = torch.randn(N_TRAIN, CHANNELS, STEPS)
+    net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
+    head = torch.nn.Linear(net.n_features, 1)
+
+    def fused() -> None:
+        net.scores(x, head, rows=torch.randperm(N_TRAIN)[:BATCH]).sum().backward()
+
+    whole = best_time(fused, (), repeats)
+    print(f"   {'whole stack + head, fwd + bwd':32s} {rate(step_gflop, whole)}")
     x, net = torch.randn(BATCH, CHANNELS, STEPS), GroupedTemporalConvNet(CHANNELS, STEPS)
     net.impl = "torch"
     with torch.no_grad():

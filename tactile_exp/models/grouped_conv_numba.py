@@ -26,8 +26,10 @@ from tactile_exp.models.numba_setup import numba
 from tactile_exp.models.scratch import scratch
 
 LANES = 16  # batch padding: two AVX2 float32 vectors
-CHUNK = 128  # batch columns per task of the classification layer's forward
 # Reassociation lets the weight-gradient reductions vectorise; no nnan/ninf, so NaNs propagate.
+# ReLUs and their masks are written v * (v > 0), not max(v, 0) or a conditional: those compile
+# to a branch per element (NaN semantics), mispredicted on every other one; conv1's forward ran
+# 2.5x slower with them. The product differs from max(v, 0) only at v = -inf (NaN, not 0).
 _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
 _JIT = dict(nogil=True, cache=True, fastmath=_FASTMATH, error_model="numpy")
 
@@ -37,7 +39,7 @@ def conv_out_len(length: int, kernel: int, stride: int) -> int:
     return (length + 2 * (kernel // 2) - kernel) // stride + 1
 
 
-@numba.njit(inline="always", **_JIT)
+@numba.njit(**_JIT)
 def _weighted_sum(row, src, chans, times, weights, count, bias):  # pragma: no cover (compiled)
     """row[:] = bias + sum_q weights[q] * src[chans[q], times[q], :], four taps per pass.
 
@@ -91,155 +93,270 @@ def _weighted_sum(row, src, chans, times, weights, count, bias):  # pragma: no c
             row[m] = bias
 
 
-@numba.njit(parallel=True, **_JIT)
-def conv_relu_forward(x, w, b, stride, out):  # pragma: no cover (compiled)
-    """out[g, o, t, :] = relu(b[g, o] + sum_{i, j} w[g, o, i, j] x[g, i, t * stride - pad + j, :]).
-
-    One task per group, walking time once with every output channel at each step, so the input
-    rows a step reads stay in cache for all channels; each output row is built in place.
-    """
-    groups, c_in, t_in, _ = x.shape
-    c_out, k = w.shape[1], w.shape[3]
-    t_out = out.shape[2]
-    pad = k // 2
-    for g in numba.prange(groups):
-        chans = np.empty(c_in * k, np.int64)
-        times = np.empty(c_in * k, np.int64)
-        weights = np.empty(c_in * k, np.float32)
-        for t in range(t_out):
-            for o in range(c_out):
-                count = 0
-                for i in range(c_in):
-                    for j in range(k):
-                        ti = t * stride - pad + j
-                        if 0 <= ti < t_in:
-                            chans[count], times[count], weights[count] = i, ti, w[g, o, i, j]
-                            count += 1
-                row = out[g, o, t]
-                _weighted_sum(row, x[g], chans, times, weights, count, b[g, o])
-                for m in range(row.shape[0]):
-                    row[m] = max(row[m], np.float32(0.0))
-
-
-@numba.njit(parallel=True, **_JIT)
-def relu_grad_weight_bias(y, grad, x, stride, grad_w, grad_b):  # pragma: no cover (compiled)
-    """Masks ``grad`` by the ReLU in place (grad *= y > 0) and reduces the weight and bias
-    gradients: grad_w[g, o, i, j] = sum_{t, m} grad[g, o, t, m] x[g, i, t * stride - pad + j, m].
-
-    One task per group, walking time once: each input row is read once for all output channels
-    and taps that use it, and dot products with four output channels at a time are reduced in
-    registers.
-    """
-    groups, c_in, t_in, n = x.shape
-    c_out, k = grad_w.shape[1], grad_w.shape[3]
-    t_out = y.shape[2]
-    pad = k // 2
-    for g in numba.prange(groups):
-        acc = np.zeros((c_out, c_in, k), np.float32)
-        for o in range(c_out):
-            total = np.float32(0.0)
-            for t in range(t_out):
-                gr, yr = grad[g, o, t], y[g, o, t]
-                for m in range(n):
-                    v = gr[m] if yr[m] > 0 else np.float32(0.0)
-                    gr[m] = v
-                    total += v
-            grad_b[g, o] = total
-        for t in range(t_out):
-            for i in range(c_in):
-                for j in range(k):
-                    ti = t * stride - pad + j
-                    if ti < 0 or ti >= t_in:
-                        continue
-                    src = x[g, i, ti]
-                    o = 0
-                    while o + 4 <= c_out:
-                        g0, g1, g2, g3 = (
-                            grad[g, o, t],
-                            grad[g, o + 1, t],
-                            grad[g, o + 2, t],
-                            grad[g, o + 3, t],
-                        )
-                        d0 = d1 = d2 = d3 = np.float32(0.0)
-                        for m in range(n):
-                            v = src[m]
-                            d0 += g0[m] * v
-                            d1 += g1[m] * v
-                            d2 += g2[m] * v
-                            d3 += g3[m] * v
-                        acc[o, i, j] += d0
-                        acc[o + 1, i, j] += d1
-                        acc[o + 2, i, j] += d2
-                        acc[o + 3, i, j] += d3
-                        o += 4
-                    while o < c_out:
-                        gr = grad[g, o, t]
-                        dot = np.float32(0.0)
-                        for m in range(n):
-                            dot += gr[m] * src[m]
-                        acc[o, i, j] += dot
-                        o += 1
-        grad_w[g] = acc
-
-
-@numba.njit(parallel=True, **_JIT)
-def conv_grad_input(grad, w, stride, grad_x):  # pragma: no cover (compiled)
-    """grad_x[g, i, s, :] = sum over (o, j) with s = t * stride - pad + j of w[g, o, i, j]
-    grad[g, o, t, :], with ``grad`` already masked by the ReLU.
-
-    Gather form over input time (one task per (group, input channel), each input-gradient row
-    built in place), so no row is zeroed and no two tasks write the same row.
-    """
-    groups, c_out, t_out, _ = grad.shape
-    c_in, t_in = grad_x.shape[1], grad_x.shape[2]
-    k = w.shape[3]
-    pad = k // 2
-    for task in numba.prange(groups * c_in):
-        g, i = task // c_in, task % c_in
-        chans = np.empty(c_out * k, np.int64)
-        times = np.empty(c_out * k, np.int64)
-        weights = np.empty(c_out * k, np.float32)
-        for s in range(t_in):
-            count = 0
-            for j in range(k):
-                shifted = s + pad - j
-                if shifted < 0 or shifted % stride or shifted // stride >= t_out:
-                    continue
-                for o in range(c_out):
-                    chans[count], times[count], weights[count] = o, shifted // stride, w[g, o, i, j]
-                    count += 1
-            _weighted_sum(grad_x[g, i, s], grad[g], chans, times, weights, count, np.float32(0.0))
-
-
-@numba.njit(parallel=True, **_JIT)
-def head_forward(h, w, b, out):  # pragma: no cover (compiled)
-    """out[m] = b + sum_r w[r] h[r, m]: the linear classification layer on conv3's rows, read
-    in the layout (no transpose back to instance-major), one task per block of columns."""
-    rows, n = h.shape
-    for block in numba.prange((n + CHUNK - 1) // CHUNK):
-        lo, hi = block * CHUNK, min(n, block * CHUNK + CHUNK)
-        block = out[lo:hi]
-        for m in range(hi - lo):
-            block[m] = b
-        for r in range(rows):
-            wr, src = w[r], h[r, lo:hi]
-            for m in range(hi - lo):
-                block[m] += wr * src[m]
-
-
-@numba.njit(parallel=True, **_JIT)
-def head_backward(h, w, grad_scores, grad, grad_w):  # pragma: no cover (compiled)
-    """The classification layer's backward in the layout: grad_w[r] = sum_m h[r, m] gs[m] and
-    conv3's gradient grad[r, m] = w[r] gs[m], already masked by conv3's ReLU (h > 0)."""
-    rows, n = h.shape
-    for r in numba.prange(rows):
-        wr, src, dst = w[r], h[r], grad[r]
-        total = np.float32(0.0)
+@numba.njit(**_JIT)
+def _weighted_sum4(r0, r1, r2, r3, src, chans, times, wts, d, count, bias):  # pragma: no cover
+    """r_e[:] = bias[d + e] + sum_q wts[q, d + e] src[chans[q], times[q], :] for four rows
+    r0..r3 at once, two taps per pass: each source vector loaded once feeds eight FMAs."""
+    n = r0.shape[0]
+    b0, b1, b2, b3 = bias[d], bias[d + 1], bias[d + 2], bias[d + 3]
+    if count == 0:  # no tap reaches these rows (kernel < stride at the edge)
         for m in range(n):
-            v = src[m]
-            total += v * grad_scores[m]
-            dst[m] = wr * grad_scores[m] if v > 0 else np.float32(0.0)
-        grad_w[r] = total
+            r0[m], r1[m], r2[m], r3[m] = b0, b1, b2, b3
+    q = 0
+    while q < count:
+        s0 = src[chans[q], times[q]]
+        a0, a1, a2, a3 = wts[q, d], wts[q, d + 1], wts[q, d + 2], wts[q, d + 3]
+        if q + 2 <= count:
+            s1 = src[chans[q + 1], times[q + 1]]
+            c0, c1, c2, c3 = wts[q + 1, d], wts[q + 1, d + 1], wts[q + 1, d + 2], wts[q + 1, d + 3]
+            if q == 0:
+                for m in range(n):
+                    u, v = s0[m], s1[m]
+                    r0[m] = b0 + a0 * u + c0 * v
+                    r1[m] = b1 + a1 * u + c1 * v
+                    r2[m] = b2 + a2 * u + c2 * v
+                    r3[m] = b3 + a3 * u + c3 * v
+            else:
+                for m in range(n):
+                    u, v = s0[m], s1[m]
+                    r0[m] += a0 * u + c0 * v
+                    r1[m] += a1 * u + c1 * v
+                    r2[m] += a2 * u + c2 * v
+                    r3[m] += a3 * u + c3 * v
+            q += 2
+        else:
+            if q == 0:
+                for m in range(n):
+                    u = s0[m]
+                    r0[m], r1[m], r2[m], r3[m] = b0 + a0 * u, b1 + a1 * u, b2 + a2 * u, b3 + a3 * u
+            else:
+                for m in range(n):
+                    u = s0[m]
+                    r0[m] += a0 * u
+                    r1[m] += a1 * u
+                    r2[m] += a2 * u
+                    r3[m] += a3 * u
+            q += 1
+
+
+@numba.njit(**_JIT)
+def _combine(dst, s, src, chans, times, wts, count, bias):  # pragma: no cover (compiled)
+    """dst[e, s, :] = bias[e] + sum_{q < count} wts[q, e] src[chans[q], times[q], :] for every
+    destination channel e: the taps are shared by all of them, so four go per pass."""
+    e = 0
+    while e + 4 <= dst.shape[0]:
+        r0, r1, r2, r3 = dst[e, s], dst[e + 1, s], dst[e + 2, s], dst[e + 3, s]
+        _weighted_sum4(r0, r1, r2, r3, src, chans, times, wts, e, count, bias)
+        e += 4
+    while e < dst.shape[0]:
+        _weighted_sum(dst[e, s], src, chans, times, wts[:, e], count, bias[e])
+        e += 1
+
+
+@numba.njit(**_JIT)
+def _conv_relu(x, w, b, stride, out):  # pragma: no cover (compiled)
+    """One group: out[o, t, :] = relu(b[o] + sum_{i, j} w[o, i, j] x[i, t * stride - pad + j, :]).
+
+    Walks time once with every output channel at each step, so the input rows a step reads
+    stay in cache for all channels; each output row is built in place.
+    """
+    c_in, t_in, _ = x.shape
+    c_out, k = w.shape[0], w.shape[2]
+    pad = k // 2
+    chans = np.empty(c_in * k, np.int64)
+    times = np.empty(c_in * k, np.int64)
+    wts = np.empty((c_in * k, c_out), np.float32)
+    for t in range(out.shape[1]):
+        count = 0
+        for i in range(c_in):
+            for j in range(k):
+                ti = t * stride - pad + j
+                if 0 <= ti < t_in:
+                    chans[count], times[count] = i, ti
+                    for o in range(c_out):
+                        wts[count, o] = w[o, i, j]
+                    count += 1
+        _combine(out, t, x, chans, times, wts, count, b)
+        for o in range(c_out):
+            row = out[o, t]
+            for m in range(row.shape[0]):
+                v = row[m]
+                row[m] = v * np.float32(v > 0)  # ReLU, see _JIT
+
+
+@numba.njit(**_JIT)
+def _dots4x2(g0, g1, g2, g3, s0, s1, acc, o, i, j):  # pragma: no cover (compiled)
+    """acc[o + e, i, j + f] += g_e . s_f for four gradient rows and two source rows: eight
+    dot products reduced in registers, each loaded vector feeding several FMAs."""
+    d00 = d01 = d10 = d11 = d20 = d21 = d30 = d31 = np.float32(0.0)
+    for m in range(s0.shape[0]):
+        u, v = s0[m], s1[m]
+        d00 += g0[m] * u
+        d01 += g0[m] * v
+        d10 += g1[m] * u
+        d11 += g1[m] * v
+        d20 += g2[m] * u
+        d21 += g2[m] * v
+        d30 += g3[m] * u
+        d31 += g3[m] * v
+    acc[o, i, j] += d00
+    acc[o, i, j + 1] += d01
+    acc[o + 1, i, j] += d10
+    acc[o + 1, i, j + 1] += d11
+    acc[o + 2, i, j] += d20
+    acc[o + 2, i, j + 1] += d21
+    acc[o + 3, i, j] += d30
+    acc[o + 3, i, j + 1] += d31
+
+
+@numba.njit(**_JIT)
+def _grad_weight_bias(grad, x, stride, grad_w, grad_b):  # pragma: no cover (compiled)
+    """One group's weight and bias gradients from its output gradient ``grad`` (already masked
+    by the ReLU): grad_w[o, i, j] = sum_{t, m} grad[o, t, m] x[i, t * stride - pad + j, m].
+
+    Walks time once, with the gradient rows of a step in cache for every input row and tap
+    that uses them; taps go in pairs and output channels in fours (``_dots4x2``).
+    """
+    c_in, t_in, n = x.shape
+    c_out, k = grad_w.shape[0], grad_w.shape[2]
+    pad = k // 2
+    acc = np.zeros((c_out, c_in, k + 1), np.float32)  # one spare tap column for odd pairs
+    grad_b[:] = 0.0
+    zeros = np.zeros(n, np.float32)
+    for t in range(grad.shape[1]):
+        for o in range(c_out):
+            row, total = grad[o, t], np.float32(0.0)
+            for m in range(n):
+                total += row[m]
+            grad_b[o] += total
+        j0 = max(0, pad - t * stride)  # the taps inside the input at this step
+        j1 = min(k, t_in + pad - t * stride)
+        for i in range(c_in):
+            for j in range(j0, j1, 2):
+                ti = t * stride - pad + j
+                s0 = x[i, ti]
+                s1 = x[i, ti + 1] if j + 1 < j1 else zeros  # the spare column takes it
+                o = 0
+                while o + 4 <= c_out:
+                    g0, g1, g2, g3 = grad[o, t], grad[o + 1, t], grad[o + 2, t], grad[o + 3, t]
+                    _dots4x2(g0, g1, g2, g3, s0, s1, acc, o, i, j)
+                    o += 4
+                while o < c_out:
+                    gr = grad[o, t]
+                    d0 = d1 = np.float32(0.0)
+                    for m in range(n):
+                        d0 += gr[m] * s0[m]
+                        d1 += gr[m] * s1[m]
+                    acc[o, i, j] += d0
+                    acc[o, i, j + 1] += d1
+                    o += 1
+    grad_w[:] = acc[:, :, :k]
+
+
+@numba.njit(**_JIT)
+def _mask(grad, y):  # pragma: no cover (compiled)
+    """grad *= y > 0 row by row: the ReLU's backward (see _JIT for the product form)."""
+    for c in range(grad.shape[0]):
+        for t in range(grad.shape[1]):
+            gr, yr = grad[c, t], y[c, t]
+            for m in range(gr.shape[0]):
+                gr[m] *= np.float32(yr[m] > 0)
+
+
+@numba.njit(**_JIT)
+def _conv_grad_input(grad, w, stride, y, grad_x):  # pragma: no cover (compiled)
+    """One group: grad_x[i, s, :] = (y[i, s, :] > 0) sum over (o, j) with s = t * stride - pad
+    + j of w[o, i, j] grad[o, t, :]: the input gradient through the layer, masked by the ReLU
+    that produced its input ``y`` while each row is still in cache.
+
+    Gather form over input time: each input-gradient row is built in place (never zeroed),
+    every input channel from the same taps.
+    """
+    c_out, t_out, _ = grad.shape
+    c_in, t_in = grad_x.shape[0], grad_x.shape[1]
+    k = w.shape[2]
+    pad = k // 2
+    chans = np.empty(c_out * k, np.int64)
+    times = np.empty(c_out * k, np.int64)
+    wts = np.empty((c_out * k, c_in), np.float32)
+    zeros = np.zeros(c_in, np.float32)
+    for s in range(t_in):
+        count = 0
+        for j in range(k):
+            shifted = s + pad - j
+            if shifted < 0 or shifted % stride or shifted // stride >= t_out:
+                continue
+            for o in range(c_out):
+                chans[count], times[count] = o, shifted // stride
+                for i in range(c_in):
+                    wts[count, i] = w[o, i, j]
+                count += 1
+        _combine(grad_x, s, grad, chans, times, wts, count, zeros)
+        for i in range(c_in):
+            gr, yr = grad_x[i, s], y[i, s]
+            for m in range(gr.shape[0]):
+                gr[m] *= np.float32(yr[m] > 0)
+
+
+@numba.njit(parallel=True, **_JIT)
+def stack_forward(
+    x, w1, b1, w2, b2, w3, b3, strides, a1, a2, a3, head_w, partial
+):  # pragma: no cover
+    """conv1..conv3 + ReLU of every group (x: (groups, c_in, T, n_pad) -> a1, a2, a3), and,
+    when ``head_w`` has rows, each group's share of the classification layer:
+    partial[g, m] = sum_r head_w[g, r] a3[g].flat[r, m].
+
+    One task per group runs all layers, so a layer's output is read by the next while still in
+    cache (a group's activations are ~3 MB at batch 1000), not fetched back from memory.
+    """
+    for g in numba.prange(x.shape[0]):
+        _conv_relu(x[g], w1[g], b1[g], strides[0], a1[g])
+        _conv_relu(a1[g], w2[g], b2[g], strides[1], a2[g])
+        _conv_relu(a2[g], w3[g], b3[g], strides[2], a3[g])
+        if head_w.shape[0]:
+            h, out = a3[g].reshape(-1, a3.shape[3]), partial[g]
+            out[:] = 0.0
+            for r in range(h.shape[0]):
+                wr, src = head_w[g, r], h[r]
+                for m in range(out.shape[0]):
+                    out[m] += wr * src[m]
+
+
+@numba.njit(parallel=True, **_JIT)
+def stack_backward(
+    x, a1, a2, a3, w1, w2, w3, strides, head_w, grad_scores, grad3, work, grads
+):  # pragma: no cover (compiled)
+    """Every parameter's gradient, one task per group running all layers backwards.
+
+    conv3's gradient comes from the classification layer (``head_w`` has rows: grad3[g].flat[r,
+    m] = head_w[g, r] grad_scores[m], masked by conv3's ReLU, and head_w's gradient goes to
+    grads[6]) or is given in ``grad3``. ``work`` holds one pair of gradient buffers per thread
+    (conv2's and conv1's output gradients), reused from group to group while in cache.
+    ``grads`` = (w1, b1, w2, b2, w3, b3, head_w) gradients, per group.
+    """
+    gw1, gb1, gw2, gb2, gw3, gb3, gwh = grads
+    work2, work1 = work
+    for g in numba.prange(x.shape[0]):
+        tid = numba.get_thread_id()
+        d3 = grad3[g]
+        if head_w.shape[0]:
+            h, d = a3[g].reshape(-1, a3.shape[3]), d3.reshape(-1, a3.shape[3])
+            for r in range(h.shape[0]):
+                wr, src, dst = head_w[g, r], h[r], d[r]
+                total = np.float32(0.0)
+                for m in range(src.shape[0]):
+                    v = src[m]
+                    total += v * grad_scores[m]
+                    dst[m] = wr * grad_scores[m] * np.float32(v > 0)
+                gwh[g, r] = total
+        else:
+            _mask(d3, a3[g])
+        d2, d1 = work2[tid], work1[tid]
+        _grad_weight_bias(d3, a2[g], strides[2], gw3[g], gb3[g])
+        _conv_grad_input(d3, w3[g], strides[2], a2[g], d2)
+        _grad_weight_bias(d2, a1[g], strides[1], gw2[g], gb2[g])
+        _conv_grad_input(d2, w2[g], strides[1], a1[g], d1)
+        _grad_weight_bias(d1, x[g], strides[0], gw1[g], gb1[g])
 
 
 @numba.njit(parallel=True, **_JIT)
@@ -282,15 +399,26 @@ def _padded(n: int) -> int:
     return -(-n // LANES) * LANES
 
 
-def _forward_acts(
+def _group_params(params: Sequence[torch.Tensor], groups: int) -> list[np.ndarray]:
+    """(w1, b1, w2, b2, w3, b3) as numpy views per group: weights (groups, c_out, c_in, k),
+    biases (groups, c_out)."""
+    arrays = []
+    for p in params:
+        a = p.detach().numpy()
+        arrays.append(a.reshape(groups, -1, *a.shape[1:]) if a.ndim == 3 else a.reshape(groups, -1))
+    return arrays
+
+
+def _forward(
     x: torch.Tensor,
     rows: torch.Tensor,
     params: Sequence[torch.Tensor],
     groups: int,
-    strides: Sequence[int],
-) -> list[np.ndarray]:
+    strides: tuple[int, int, int],
+    head_weight: torch.Tensor | None,
+) -> tuple[list[np.ndarray], np.ndarray]:
     """The input rows ``rows`` and each layer's ReLU output in the layout (groups, channels,
-    time, n_pad)."""
+    time, n_pad), and each group's share of the head's scores (groups, n_pad) (none: 0 rows)."""
     if x.requires_grad:
         raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
     _, channels, steps = x.shape
@@ -298,44 +426,53 @@ def _forward_acts(
     h = scratch(groups, channels // groups, steps, n_pad)
     to_layout(np.ascontiguousarray(x.detach().numpy()), rows.numpy(), groups, h)
     acts = [h]
-    for weight, bias, stride in zip(params[0::2], params[1::2], strides, strict=True):
-        c_out, _, k = weight.shape
-        w = weight.detach().numpy().reshape(groups, c_out // groups, -1, k)
-        t_out = conv_out_len(h.shape[2], k, stride)
-        out = scratch(groups, c_out // groups, t_out, n_pad)
-        conv_relu_forward(h, w, bias.detach().numpy().reshape(groups, -1), stride, out)
-        acts.append(out)
-        h = out
-    return acts
+    for weight, stride in zip(params[0::2], strides, strict=True):
+        h = scratch(
+            groups,
+            weight.shape[0] // groups,
+            conv_out_len(h.shape[2], weight.shape[2], stride),
+            n_pad,
+        )
+        acts.append(h)
+    if head_weight is None:
+        head_w, partial = np.empty((0, 0), np.float32), np.empty((0, 0), np.float32)
+    else:
+        head_w, partial = head_weight.detach().numpy().reshape(groups, -1), scratch(groups, n_pad)
+    stack_forward(acts[0], *_group_params(params, groups), strides, *acts[1:], head_w, partial)
+    return acts, partial
 
 
-def _backward_params(
+def _backward(
     acts: list[np.ndarray],
-    grad: np.ndarray,
+    grad3: np.ndarray,
     weights: Sequence[torch.Tensor],
     groups: int,
-    strides: Sequence[int],
+    strides: tuple[int, int, int],
+    head_weight: torch.Tensor | None = None,
+    grad_scores: np.ndarray | None = None,
 ) -> list[torch.Tensor]:
-    """Weight and bias gradients of every layer (in parameter order) from conv3's gradient
-    ``grad`` in the layout; ``grad`` and each layer's input gradient are masked in place."""
-    grads: list[torch.Tensor] = []
-    for layer in range(len(weights) - 1, -1, -1):
-        weight, stride = weights[layer], strides[layer]
-        c_out, c_in, k = weight.shape
-        w = weight.detach().numpy().reshape(groups, c_out // groups, c_in, k)
-        grad_w = np.empty_like(w)
-        grad_b = np.empty((groups, c_out // groups), np.float32)
-        x = acts[layer]
-        relu_grad_weight_bias(acts[layer + 1], grad, x, stride, grad_w, grad_b)
-        grads[:0] = [
-            torch.from_numpy(grad_w).view(c_out, c_in, k),
-            torch.from_numpy(grad_b).view(-1),
-        ]
-        if layer > 0:
-            grad_x = scratch(*x.shape)
-            conv_grad_input(grad, w, stride, grad_x)
-            grad = grad_x
-    return grads
+    """Gradients of (w1, b1, w2, b2, w3, b3) and, with a head, of its weight (last). conv3's
+    gradient is ``grad3`` or, with a head, computed from ``grad_scores`` into ``grad3``."""
+    n_pad = acts[0].shape[3]
+    threads = numba.get_num_threads()
+    work = tuple(scratch(threads, *a.shape[1:]) for a in (acts[2], acts[1]))
+    grads = []
+    for weight in weights:
+        grads += [np.empty(weight.shape, np.float32), np.empty(weight.shape[0], np.float32)]
+    w = [a.reshape(groups, -1, *a.shape[1:]) for a in (g.detach().numpy() for g in weights)]
+    gw = [
+        a.reshape(w[i // 2].shape) if i % 2 == 0 else a.reshape(groups, -1)
+        for i, a in enumerate(grads)
+    ]
+    if head_weight is None:
+        head_w, gwh = np.empty((0, 0), np.float32), np.empty((0, 0), np.float32)
+        grad_scores = np.empty(n_pad, np.float32)
+    else:
+        head_w = head_weight.detach().numpy().reshape(groups, -1)
+        gwh = np.empty_like(head_w)
+        grads.append(gwh)
+    stack_backward(*acts, *w, strides, head_w, grad_scores, grad3, work, (*gw, gwh))
+    return [torch.from_numpy(g) for g in grads]
 
 
 class GroupedConvStack(torch.autograd.Function):
@@ -343,7 +480,7 @@ class GroupedConvStack(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, x, groups: int, strides: Sequence[int], *params: torch.Tensor):
-        acts = _forward_acts(x, torch.arange(len(x)), params, groups, strides)
+        acts, _ = _forward(x, torch.arange(len(x)), params, groups, tuple(strides), None)
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         result = np.empty((len(x), h.shape[0]), np.float32)
         from_layout(h, len(x), result)
@@ -358,7 +495,7 @@ class GroupedConvStack(torch.autograd.Function):
         del ctx.acts  # free the activations as soon as the backward is done with them
         grad = scratch(*acts[-1].shape)
         into_layout(np.ascontiguousarray(grad_out.numpy()), grad.reshape(-1, grad.shape[3]))
-        grads = _backward_params(acts, grad, ctx.saved_tensors, ctx.groups, ctx.strides)
+        grads = _backward(acts, grad, ctx.saved_tensors, ctx.groups, ctx.strides)
         return (None, None, None, *grads)
 
 
@@ -371,13 +508,11 @@ class GroupedConvHead(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, x, rows, groups, strides, head_weight, head_bias, *params: torch.Tensor):
-        acts = _forward_acts(x, rows, params, groups, strides)
-        h = acts[-1].reshape(-1, acts[-1].shape[3])
-        scores = np.empty(h.shape[1], np.float32)
-        head_forward(h, head_weight.detach().numpy().reshape(-1), head_bias.item(), scores)
+        acts, partial = _forward(x, rows, params, groups, tuple(strides), head_weight)
+        scores = partial.sum(axis=0, dtype=np.float32)[: len(rows)] + head_bias.item()
         ctx.acts, ctx.groups, ctx.strides = acts, groups, tuple(strides)
         ctx.save_for_backward(head_weight, *params[0::2])
-        return torch.from_numpy(scores[: len(rows)])
+        return torch.from_numpy(scores)
 
     @staticmethod
     @once_differentiable
@@ -385,17 +520,14 @@ class GroupedConvHead(torch.autograd.Function):
         acts = ctx.acts
         del ctx.acts
         head_weight, *weights = ctx.saved_tensors
-        h = acts[-1].reshape(-1, acts[-1].shape[3])
-        padded = np.zeros(h.shape[1], np.float32)  # zero gradient in the padding columns
+        padded = np.zeros(acts[0].shape[3], np.float32)  # zero gradient in the padding columns
         padded[: len(grad_scores)] = grad_scores.numpy()
-        grad, grad_head = scratch(*acts[-1].shape), np.empty(h.shape[0], np.float32)
-        head_backward(
-            h, head_weight.detach().numpy().reshape(-1), padded, grad.reshape(h.shape), grad_head
+        grad3 = scratch(*acts[-1].shape)
+        *grads, grad_head = _backward(
+            acts, grad3, weights, ctx.groups, ctx.strides, head_weight, padded
         )
-        grads = _backward_params(acts, grad, weights, ctx.groups, ctx.strides)
         grad_head_bias = torch.from_numpy(padded.sum(dtype=np.float32, keepdims=True))
-        grad_head_weight = torch.from_numpy(grad_head).view(1, -1)
-        return (None, None, None, None, grad_head_weight, grad_head_bias, *grads)
+        return (None, None, None, None, grad_head.view(1, -1), grad_head_bias, *grads)
 
 
 def _interleaved(weights: Sequence[torch.Tensor], biases: Sequence[torch.Tensor]) -> list:
