@@ -1,6 +1,6 @@
 """The compiled (numba) grouped conv stack equals ``F.conv1d(groups=...)``; its cache location.
 
-The first compiled call in a run compiles the kernels (~20 s on 2 idle cores) into the session's
+The first compiled call in a run compiles the kernels (~35 s on 2 idle cores) into the session's
 ``NUMBA_CACHE_DIR`` (conftest); every later test reuses them.
 """
 

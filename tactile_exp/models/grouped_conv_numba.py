@@ -8,7 +8,9 @@ kernels never handle a tail. Forward and backward of the whole three-layer stack
 ``torch.autograd.Function``: one transpose into the layout at entry, one out of it at exit. The
 training step (``GroupedConvHead``) also runs the one-output classification layer in the layout,
 so neither conv3's features nor their gradient are transposed (a step's CPU time -19%, measured).
-Layout arrays are reused across steps (``scratch``).
+One parallel task per signal group runs every layer (``stack_forward``, ``stack_backward``), the
+backward's inner gradients in per-thread buffers; taps are shared by four output rows per pass.
+Layout arrays are reused across steps (``scratch``). Rates per kernel: bench/bench_haptic_cnn.py.
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
@@ -29,7 +31,7 @@ LANES = 16  # batch padding: two AVX2 float32 vectors
 # Reassociation lets the weight-gradient reductions vectorise; no nnan/ninf, so NaNs propagate.
 # ReLUs and their masks are written v * (v > 0), not max(v, 0) or a conditional: those compile
 # to a branch per element (NaN semantics), mispredicted on every other one; conv1's forward ran
-# 2.5x slower with them. The product differs from max(v, 0) only at v = -inf (NaN, not 0).
+# 2.5x slower with them (in cache). The product differs from max(v, 0) only at v = -inf (NaN).
 _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
 _JIT = dict(nogil=True, cache=True, fastmath=_FASTMATH, error_model="numpy")
 
