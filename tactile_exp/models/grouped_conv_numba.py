@@ -401,14 +401,10 @@ def _padded(n: int) -> int:
     return -(-n // LANES) * LANES
 
 
-def _group_params(params: Sequence[torch.Tensor], groups: int) -> list[np.ndarray]:
-    """(w1, b1, w2, b2, w3, b3) as numpy views per group: weights (groups, c_out, c_in, k),
-    biases (groups, c_out)."""
-    arrays = []
-    for p in params:
-        a = p.detach().numpy()
-        arrays.append(a.reshape(groups, -1, *a.shape[1:]) if a.ndim == 3 else a.reshape(groups, -1))
-    return arrays
+def _per_group(a: np.ndarray, groups: int) -> np.ndarray:
+    """A view of a weight (C_out, c_in, k) as (groups, c_out, c_in, k), of a bias (C_out,) as
+    (groups, c_out)."""
+    return a.reshape(groups, -1, *a.shape[1:])
 
 
 def _forward(
@@ -440,7 +436,8 @@ def _forward(
         head_w, partial = np.empty((0, 0), np.float32), np.empty((0, 0), np.float32)
     else:
         head_w, partial = head_weight.detach().numpy().reshape(groups, -1), scratch(groups, n_pad)
-    stack_forward(acts[0], *_group_params(params, groups), strides, *acts[1:], head_w, partial)
+    per_group = [_per_group(p.detach().numpy(), groups) for p in params]
+    stack_forward(acts[0], *per_group, strides, *acts[1:], head_w, partial)
     return acts, partial
 
 
@@ -458,14 +455,11 @@ def _backward(
     n_pad = acts[0].shape[3]
     threads = numba.get_num_threads()
     work = tuple(scratch(threads, *a.shape[1:]) for a in (acts[2], acts[1]))
-    grads = []
+    grads = []  # in parameter order and shape; the kernel writes them through per-group views
     for weight in weights:
         grads += [np.empty(weight.shape, np.float32), np.empty(weight.shape[0], np.float32)]
-    w = [a.reshape(groups, -1, *a.shape[1:]) for a in (g.detach().numpy() for g in weights)]
-    gw = [
-        a.reshape(w[i // 2].shape) if i % 2 == 0 else a.reshape(groups, -1)
-        for i, a in enumerate(grads)
-    ]
+    w = [_per_group(weight.detach().numpy(), groups) for weight in weights]
+    gw = [_per_group(g, groups) for g in grads]
     if head_weight is None:
         head_w, gwh = np.empty((0, 0), np.float32), np.empty((0, 0), np.float32)
         grad_scores = np.empty(n_pad, np.float32)
