@@ -5,15 +5,19 @@ Kept apart from ``tracking.py`` so that the MLflow layer imports neither Hydra n
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import signal
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
+
+if TYPE_CHECKING:
+    from tactile_exp.tracking import Tracker
 
 log = logging.getLogger(__name__)
 
@@ -50,10 +54,14 @@ def _zombie(pid: int) -> bool:
         return True
 
 
-def terminate_workers(signum: int, frame: object) -> None:
+def terminate_workers(signum: int, frame: object, *, tracker: Tracker) -> None:
     """SIGTERM to a sweep's launcher: pass it on to the worker processes (each unwinds its job,
     marks its runs FAILED and exits), wait for them, then exit. Without this the launcher died
-    alone and its joblib workers went on with parent PID 1."""
+    alone and its joblib workers went on with parent PID 1.
+
+    A worker can die with its runs still RUNNING: once one worker exits, loky SIGKILLs the others
+    (a "broken" pool), maybe mid-unwind or before the signal reached Python (inside a compile);
+    and workers past the grace period are killed here. Their runs are closed here instead."""
     workers = _children(os.getpid())
     log.warning("terminated: stopping %d worker process(es)", len(workers))
     for pid in workers:
@@ -66,7 +74,13 @@ def terminate_workers(signum: int, frame: object) -> None:
         time.sleep(0.2)
     for pid in workers:
         if not _gone(pid):
-            os.kill(pid, signal.SIGKILL)  # its runs are ended as stale by the next run
+            os.kill(pid, signal.SIGKILL)
+    while time.monotonic() < deadline + 5.0 and not all(_gone(pid) for pid in workers):
+        time.sleep(0.05)  # reaped, so the runs' PIDs no longer count as alive
+    error = f"Terminated: terminated by signal {signum}; killed before it ended this run"
+    closed = tracker.end_runs_of(workers, error=error)
+    if closed:
+        log.warning("marked FAILED %d run(s) that killed worker(s) left RUNNING", len(closed))
     raise SystemExit(128 + signum)
 
 
@@ -81,8 +95,8 @@ class PrepareSweep(Callback):
         from tactile_exp.experiment import load
         from tactile_exp.tracking import Tracker
 
-        signal.signal(signal.SIGTERM, terminate_workers)
         with reported():
             settings = settings_from_config(config)
-            Tracker(settings.tracking.uri, settings.tracking.experiment)
+            tracker = Tracker(settings.tracking.uri, settings.tracking.experiment)
+            signal.signal(signal.SIGTERM, functools.partial(terminate_workers, tracker=tracker))
             load(settings)

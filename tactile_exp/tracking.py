@@ -16,12 +16,13 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import re
 import socket
 import subprocess
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Collection, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -214,27 +215,57 @@ class Tracker:
         """Mark KILLED the RUNNING runs of ``config_hash`` whose process on this host is gone
         (``kill -9``, a crash of the machine's jobs): they would otherwise stay RUNNING forever.
         Runs of other hosts are left alone (their liveness cannot be checked from here)."""
+        ended = self._end_orphans(
+            f"tags.config_hash = '{config_hash}'",
+            status="KILLED",
+            error=lambda pid, host: (
+                f"stale: process {pid} on {host} ended without closing this run"
+            ),
+        )
+        if ended:
+            log.warning("marked %d stale RUNNING run(s) of this config KILLED", len(ended))
+        return ended
+
+    def end_runs_of(self, pids: Collection[int], *, error: str) -> list[str]:
+        """Mark FAILED, with ``error``, the RUNNING runs of processes ``pids`` on this host that
+        have ended: a terminated sweep's workers that were killed before they closed their runs."""
+        wanted = {str(pid) for pid in pids}
+        return self._end_orphans("", status="FAILED", error=lambda _pid, _host: error, pids=wanted)
+
+    def _end_orphans(
+        self,
+        filter_string: str,
+        *,
+        status: str,
+        error: Callable[[str, str], str],
+        pids: Collection[str] | None = None,
+    ) -> list[str]:
+        """End the RUNNING runs matching ``filter_string`` whose process on this host is gone
+        (and is one of ``pids`` when given); ``error(pid, host)`` is their ``error`` tag."""
         from mlflow.entities import RunTag
 
         host = socket.gethostname()
+        running = "attributes.status = 'RUNNING'"
         runs = self.client.search_runs(
             [self.experiment_id],
-            filter_string=f"tags.config_hash = '{config_hash}' and attributes.status = 'RUNNING'",
+            filter_string=f"{filter_string} and {running}" if filter_string else running,
             max_results=1000,
         )
         ended = []
         for r in runs:
             tags = r.data.tags
-            if tags.get("host") != host or not tags.get("pid", "").isdigit():
+            pid = tags.get("pid", "")
+            if (
+                tags.get("host") != host
+                or not pid.isdigit()
+                or (pids is not None and pid not in pids)
+            ):
                 continue
-            if _alive(int(tags["pid"]), tags.get("pid_start", "")):
+            if _alive(int(pid), tags.get("pid_start", "")):
                 continue
-            message = f"stale: process {tags['pid']} on {host} ended without closing this run"
-            self.client.log_batch(r.info.run_id, tags=[RunTag("error", message)])
-            self.client.set_terminated(r.info.run_id, status="KILLED")
+            self.client.log_batch(r.info.run_id, tags=[RunTag("error", error(pid, host))])
+            self.client.set_terminated(r.info.run_id, status=status)
             ended.append(r.info.run_id)
-        if ended:
-            log.warning("marked %d stale RUNNING run(s) of this config KILLED", len(ended))
         return ended
 
     @contextmanager
@@ -279,12 +310,23 @@ class Tracker:
             self.client.log_batch(run_id, tags=[RunTag(k, v) for k, v in tags.items()])
 
     def log_dataset(self, run_id: str, *, name: str, digest: str, source: str) -> None:
-        """A data file as the run's dataset input: the UI's Dataset column (name + digest)."""
+        """A data file as the run's dataset input: the UI's Dataset column (name + digest).
+
+        Parallel jobs race to insert the experiment's one row for the file; the loser gets a
+        unique-constraint error (it failed a sweep's job), and on retry finds the winner's row."""
         from mlflow.entities import Dataset, DatasetInput
+        from mlflow.exceptions import MlflowException
 
         dataset = Dataset(name=name, digest=digest, source_type="local", source=source)
-        with shielded():
-            self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)])
+        for attempt in range(3):
+            try:
+                with shielded():
+                    self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)])
+                return
+            except MlflowException as err:
+                if attempt == 2 or not re.search("unique constraint|duplicate", str(err), re.I):
+                    raise
+                time.sleep(0.2)
 
     def log_metrics(self, run_id: str, values: Mapping[str, float], step: int = 0) -> None:
         self.log_curves(run_id, {k: [v] for k, v in values.items()}, start=step)

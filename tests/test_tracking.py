@@ -167,6 +167,89 @@ def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_u
     assert tracker.finished_run("h1", data_identity="any") is None  # RUNNING or KILLED: rerun
 
 
+def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
+    mlflow_uri, monkeypatch
+):
+    """Once one loky worker exits, loky SIGKILLs the others, some before they closed their runs
+    (seen in CI); workers that ignore SIGTERM are killed after the grace period. Either way the
+    launcher marks their runs FAILED, and only theirs."""
+    import os
+    import signal
+    import socket
+    import sys
+
+    from tactile_exp import sweep
+
+    stubborn = "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print(); "
+    workers = [
+        subprocess.Popen(
+            [sys.executable, "-c", stubborn + "time.sleep(60)"], stdout=subprocess.PIPE
+        )
+        for _ in range(2)
+    ]
+    for w in workers:
+        w.stdout.readline()  # SIGTERM ignored from here on
+    monkeypatch.setattr(sweep, "_children", lambda pid: [w.pid for w in workers])
+    monkeypatch.setattr(sweep, "WORKER_GRACE_S", 0.5)
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    host = socket.gethostname()
+
+    def make(name, pid):
+        tags = {"host": host, "pid": str(pid), "pid_start": ""}
+        return tracker.client.create_run(tracker.experiment_id, run_name=name, tags=tags)
+
+    orphans = [make("job", workers[0].pid), make("adj=hard", workers[0].pid)]
+    orphans.append(make("job", workers[1].pid))
+    live = make("elsewhere", os.getpid())  # another job of this experiment, still running
+    done = make("done", workers[1].pid)
+    tracker.client.set_terminated(done.info.run_id, status="FINISHED")
+
+    with pytest.raises(SystemExit) as exit_:
+        sweep.terminate_workers(signal.SIGTERM, None, tracker=tracker)
+    assert exit_.value.code == 128 + signal.SIGTERM
+    assert all(sweep._gone(w.pid) for w in workers)
+    client = MlflowClient(mlflow_uri)
+    for r in orphans:
+        closed = client.get_run(r.info.run_id)
+        assert closed.info.status == "FAILED" and closed.info.end_time is not None
+        assert "terminated by signal 15" in closed.data.tags["error"]
+    assert client.get_run(live.info.run_id).info.status == "RUNNING"
+    assert client.get_run(done.info.run_id).info.status == "FINISHED"
+
+
+def test_a_dataset_row_inserted_by_a_parallel_job_is_reused_not_an_error(mlflow_uri, monkeypatch):
+    """Seen in a sweep: two jobs insert the data file's dataset row at once; the loser's
+    UNIQUE-constraint error failed its job. It retries and links the row the winner made."""
+    from mlflow.exceptions import MlflowException
+
+    tracker, winner = Tracker(mlflow_uri, "tactile_exp"), Tracker(mlflow_uri, "tactile_exp")
+    data = {"name": "phac2", "digest": "abc", "source": "file:///data/phac2.h5"}
+    log_inputs = tracker.client.log_inputs
+    calls = []
+
+    def loses_the_race(run_id, datasets):
+        calls.append(run_id)
+        if len(calls) == 1:
+            with winner.run("winner", {}, {}) as other:
+                winner.log_dataset(other, **data)
+            raise MlflowException("(sqlite3.IntegrityError) UNIQUE constraint failed: datasets")
+        return log_inputs(run_id, datasets=datasets)
+
+    monkeypatch.setattr(tracker.client, "log_inputs", loses_the_race)
+    with tracker.run("loser", {}, {}) as run_id:
+        tracker.log_dataset(run_id, **data)
+    assert len(calls) == 2
+    inputs = MlflowClient(mlflow_uri).get_run(run_id).inputs.dataset_inputs
+    assert [(i.dataset.name, i.dataset.digest) for i in inputs] == [("phac2", "abc")]
+
+    def broken(run_id, datasets):
+        raise MlflowException("database is locked")
+
+    monkeypatch.setattr(tracker.client, "log_inputs", broken)
+    with pytest.raises(MlflowException, match="locked"), tracker.run("other", {}, {}) as run_id:
+        tracker.log_dataset(run_id, **data)
+
+
 def test_reading_a_missing_experiment_names_the_ones_there(mlflow_uri):
     import pytest
 
