@@ -20,12 +20,15 @@ leak (choose on the test positives, refit on train + test positives); never the 
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 from sklearn.cluster import KMeans
+from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
 from tactile_exp.baselines import shortcuts
@@ -286,7 +289,7 @@ class HMMChain:
         self.axes_ = pca_axes(pooled)
         points = self._project(seqs).reshape(-1, self.axes_.shape[1])
         with warnings.catch_warnings(), threadpool_limits(1):  # threads only add overhead here
-            warnings.simplefilter("ignore")  # too few distinct points for K: KMeans still labels
+            _quiet_kmeans()
             kmeans = KMeans(self.n_symbols, n_init=self.n_init, random_state=self.seed)
             labels = kmeans.fit_predict(points)
         self.centers_ = kmeans.cluster_centers_
@@ -322,6 +325,11 @@ class HMMChain:
         return forward_loglik(
             self.startprob_, self.transmat_, self.emissionprob_, self.symbols(seqs)
         )
+
+
+def _quiet_kmeans() -> None:
+    """Too few distinct points for K symbols: k-means still labels them, so no warning."""
+    warnings.filterwarnings("ignore", "Number of distinct clusters", ConvergenceWarning)
 
 
 def _candidates(grid: dict[str, tuple[int, ...]]) -> list[tuple[int, int, int]]:
@@ -427,10 +435,9 @@ class DynamicFeatures:
                 2,
             )
         self.fit_trials_ = final
-        self.params_: list[tuple[int, int, int]] = []
-        self.chains_: list[HMMChain] = []
         fit_idx, score_idx, final_idx = map(table.index, (fit_set, score_set, final))
-        for c in range(len(CHAINS)):
+
+        def fit_chain(c: int) -> tuple[tuple[int, int, int], HMMChain]:
             best = candidates[0]
             if len(score_idx) and len(candidates) > 1:
                 scores = []
@@ -438,8 +445,24 @@ class DynamicFeatures:
                     chain = self._chain(table, c, fit_idx, cand)
                     scores.append(chain.score(table.seqs[cand[1]][c][score_idx]).mean())
                 best = candidates[int(np.argmax(scores))]
-            self.params_.append(best)
-            self.chains_.append(self._chain(table, c, final_idx, best))
+            return best, self._chain(table, c, final_idx, best)
+
+        if shortcuts.enabled():
+            # Each chain's fit is single-threaded (k-means under a 1-thread limit, the E-step
+            # compiled without the GIL): the 16 chains run on threads, one per core. The outer
+            # limit holds the BLAS and OpenMP pools at 1 thread however the chains' own limits
+            # interleave, so every chain computes what it computes alone.
+            # Likewise the outer filter: warnings filters are process-wide in Python 3.11, and
+            # each chain's own catch_warnings restores what it saw when it entered.
+            threads = max(1, min(os.cpu_count() or 1, len(CHAINS)))  # as data/synthetic.py
+            with warnings.catch_warnings(), threadpool_limits(1):
+                _quiet_kmeans()
+                with ThreadPoolExecutor(threads) as pool:
+                    fitted = list(pool.map(fit_chain, range(len(CHAINS))))
+        else:
+            fitted = [fit_chain(c) for c in range(len(CHAINS))]
+        self.params_ = [best for best, _ in fitted]
+        self.chains_ = [chain for _, chain in fitted]
         return self
 
     def transform(self, table: SequenceTable, trials: Sequence[str]) -> np.ndarray:
