@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import threading
+from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -316,33 +318,42 @@ def test_hmm_settings_are_chosen_by_held_out_likelihood(small_grid, monkeypatch)
     trials, split = _hmm_data()
     lengths = dynamic.GRIDS[small_grid]["length"]
     table = dynamic.SequenceTable.from_trials(trials, lengths)
-    fitted, scored = [], []
-    fit, score = dynamic.HMMChain.fit, dynamic.HMMChain.score
+    # Chains are fitted on threads: each call is filed under the chain its thread is fitting.
+    current = threading.local()
+    fitted: dict[int, list] = defaultdict(list)
+    scored: dict[int, list] = defaultdict(list)
+    chain, fit, score = dynamic.DynamicFeatures._chain, dynamic.HMMChain.fit, dynamic.HMMChain.score
+
+    def chain_spy(self, table, c, idx, cand):
+        current.c = c
+        return chain(self, table, c, idx, cand)
 
     def fit_spy(self, count, mean, scatter, seqs):
-        fitted.append(seqs)
+        fitted[current.c].append(seqs)
         return fit(self, count, mean, scatter, seqs)
 
     def score_spy(self, seqs):
         out = score(self, seqs)
-        scored.append(((self.n_states, seqs.shape[1], self.n_symbols), seqs, out.mean()))
+        scored[current.c].append(((self.n_states, seqs.shape[1], self.n_symbols), seqs, out.mean()))
         return out
 
+    monkeypatch.setattr(dynamic.DynamicFeatures, "_chain", chain_spy)
     monkeypatch.setattr(dynamic.HMMChain, "fit", fit_spy)
     monkeypatch.setattr(dynamic.HMMChain, "score", score_spy)
     model = dynamic.DynamicFeatures(small_grid, seed=0).fit(table, split)
 
     n_cand = 4
-    assert len(scored) == n_cand * len(dynamic.CHAINS)
+    assert sorted(scored) == list(range(len(dynamic.CHAINS)))
     chosen = []
     for c in range(len(dynamic.CHAINS)):
-        calls = scored[c * n_cand : (c + 1) * n_cand]
+        calls = scored[c]
+        assert len(calls) == n_cand and len(fitted[c]) == n_cand + 1
         best = max(calls, key=lambda call: call[2])[0]
         assert model.params_[c] == best
         chosen.append(best)
         for j, ((_, T, _), seqs, _) in enumerate(calls):
             held = {table.trials[i] for i in _rows(table.seqs[T][c], seqs)}
-            fit_rows = fitted[c * (n_cand + 1) + j]  # each candidate's fit, then the final refit
+            fit_rows = fitted[c][j]  # each candidate's fit, then the final refit
             fit_set = {table.trials[i] for i in _rows(table.seqs[T][c], fit_rows)}
             assert held and not held & fit_set
             assert held <= {t for t in split.train if split.labels[t] == 1}
