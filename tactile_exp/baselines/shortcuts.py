@@ -3,9 +3,10 @@
 On (the default), work that gives the same numbers is done once: the authors' per-trial static
 features of every trial in one batched eigendecomposition per table (split-independent, so shared
 by rows A, B, E, F and all adjectives), one standardisation per CV draw for every C of the SVM
-grid (the draws on threads, one per core), and every trial's HMM log-likelihoods once per fitted
-chains (shared by rows C-F). Off: the original per-trial and per-(C, draw) code, the reference
-that tests and ``bench/bench_baselines.py --rows`` compare the shortcuts with.
+grid (the draws on threads, one per core), every trial's HMM log-likelihoods once per fitted
+chains (shared by rows C-F), and an adjective's 16 chains fitted on threads (each as it would be
+alone). Off: the original per-trial and per-(C, draw) code, one chain after the other, the
+reference that tests and ``bench/bench_baselines.py --rows`` compare the shortcuts with.
 """
 
 from __future__ import annotations
