@@ -20,7 +20,6 @@ leak (choose on the test positives, refit on train + test positives); never the 
 
 from __future__ import annotations
 
-import os
 import warnings
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -454,10 +453,9 @@ class DynamicFeatures:
             # interleave, so every chain computes what it computes alone.
             # Likewise the outer filter: warnings filters are process-wide in Python 3.11, and
             # each chain's own catch_warnings restores what it saw when it entered.
-            threads = max(1, min(os.cpu_count() or 1, len(CHAINS)))  # as data/synthetic.py
             with warnings.catch_warnings(), threadpool_limits(1):
                 _quiet_kmeans()
-                with ThreadPoolExecutor(threads) as pool:
+                with ThreadPoolExecutor(shortcuts.threads(len(CHAINS))) as pool:
                     fitted = list(pool.map(fit_chain, range(len(CHAINS))))
         else:
             fitted = [fit_chain(c) for c in range(len(CHAINS))]

@@ -11,6 +11,7 @@ reference that tests and ``bench/bench_baselines.py --rows`` compare the shortcu
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -30,3 +31,8 @@ def disabled() -> Iterator[None]:
         yield
     finally:
         _STATE["on"] = before
+
+
+def threads(tasks: int) -> int:
+    """Threads for ``tasks`` independent single-threaded tasks: one per core, at most one each."""
+    return max(1, min(os.cpu_count() or 1, tasks))

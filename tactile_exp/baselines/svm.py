@@ -20,7 +20,6 @@ separable features: at C=10 its held-out AUCs were off by up to 0.03 and changed
 
 from __future__ import annotations
 
-import os
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -34,6 +33,7 @@ from sklearn.metrics import roc_auc_score
 from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import LinearSVC
+from sklearn.utils.class_weight import compute_sample_weight
 from threadpoolctl import threadpool_limits
 
 from tactile_exp.baselines import shortcuts
@@ -71,8 +71,7 @@ class SquaredHingeSVM(BaseEstimator):
         if len(self.classes_) != 2:
             raise ValueError(f"SquaredHingeSVM: needs two classes, got {self.classes_.tolist()}")
         positive = np.asarray(y) == self.classes_[1]
-        counts = np.array([np.sum(~positive), np.sum(positive)])
-        c = self.C * (len(X) / (2.0 * counts))[positive.astype(int)]
+        c = self.C * compute_sample_weight("balanced", positive)  # LinearSVC's class weights
         signed = np.hstack([X, np.ones((len(X), 1))]) * np.where(positive, 1.0, -1.0)[:, None]
         w, self.n_iter_ = _finite_newton(signed, c, tol=self.tol, max_iter=self.max_iter)
         self.coef_, self.intercept_ = w[None, :-1], w[-1:]
@@ -234,8 +233,7 @@ class ObjectCVLinearSVM:
                 return decisions
             # liblinear releases the GIL: draws run on threads (2.1x on 2 cores, measured),
             # their decisions kept in draw order, so the result does not depend on the threads.
-            threads = max(1, min(os.cpu_count() or 1, len(draws)))  # as data/synthetic.py
-            with ThreadPoolExecutor(threads) as pool:
+            with ThreadPoolExecutor(shortcuts.threads(len(draws))) as pool:
                 per_draw = list(pool.map(lambda d: self._draw_decisions(X, y, *d), draws))
         return [[draw[j] for draw in per_draw] for j in range(len(self.Cs))]
 
