@@ -10,7 +10,9 @@ on a shared machine. Prints:
    (one task per signal group runs every layer), beside torch's dense matmul (sgemm) rate;
 4. each implementation's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training
    set for one adjective) and the Table I row I estimate it implies: 24 adjectives x (200 epochs
-   + 100 fine-tuning epochs) + setup, measured, not assumed, plus the compile time once;
+   + 100 fine-tuning epochs + the T4 head on combined units) + setup, measured, not assumed, plus
+   the compile time once (the job adds data loading, transforms, scoring and logging: time it
+   with ``python -m tactile_exp experiment=table1_i_haptic_cnn_1trial``);
 5. the AUC of the two implementations after a few epochs from the same init on one case.
 
 Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 7] [--threads 2]``
@@ -38,6 +40,7 @@ from tactile_exp.models.losses import LOSSES
 
 N_TRAIN, CHANNELS, STEPS, BATCH = 5300, 32, 150, 1000
 ADJECTIVES, EPOCHS, FINETUNE_EPOCHS = 24, 200, 100
+HEAD_SCHEDULE = dict(epochs=200, finetune_epochs=100, batch_size=32, lr=0.001)  # schedule.head
 IMPLS = ("torch", "compiled")
 
 
@@ -221,14 +224,28 @@ def row_estimate(rng: np.random.Generator, impl: str, compile_s: float) -> None:
     epoch = (timings[(6, 0)] - timings[(1, 0)]) / 5
     setup = timings[(1, 0)] - epoch
     finetune_epoch = (timings[(1, 50)] - timings[(1, 0)]) / 50
-    per_adj = setup + EPOCHS * epoch + FINETUNE_EPOCHS * finetune_epoch
+    head = head_fit(rng, impl)
+    per_adj = setup + EPOCHS * epoch + FINETUNE_EPOCHS * finetune_epoch + head
     total = ADJECTIVES * per_adj + (compile_s if impl == "compiled" else 0.0)
     print(
         f"   {impl:9s} {epoch:.2f} s per epoch ({N_TRAIN / epoch:.0f} inst/s), setup "
-        f"{setup:.2f} s, fine-tune {finetune_epoch * 1e3:.1f} ms per epoch -> row I "
-        f"{total / 60:.1f} min ({per_adj:.0f} s per adjective"
+        f"{setup:.2f} s, fine-tune {finetune_epoch * 1e3:.1f} ms per epoch, T4 head {head:.1f} s"
+        f" -> row I {total / 60:.1f} min ({per_adj:.0f} s per adjective"
         f"{', + compile once' if impl == 'compiled' else ''})"
     )
+
+
+def head_fit(rng: np.random.Generator, impl: str) -> float:
+    """Seconds to train row I's T4 head (``model.head()``: the classification layer retrained on
+    the 530 training units of 2 fingers x 5 offsets x conv3, 24,320 columns; conf/schedule's
+    ``head``: 200 + 100 epochs, batch 32) through ``impl``'s layer-only SGD."""
+    units = N_TRAIN // 10
+    X = np.maximum(rng.standard_normal((units, 10 * 2432), dtype=np.float32), 0)  # ReLU'd
+    train = Instances(X, (rng.random(units) > 0.8).astype(int), np.zeros(units), np.zeros(units))
+    head = HapticCNN(impl=impl, device="cpu", head_schedule=HEAD_SCHEDULE).head()
+    start = time.perf_counter()
+    head.fit(train)
+    return time.perf_counter() - start
 
 
 def auc_equivalence(rng: np.random.Generator) -> None:
@@ -263,6 +280,7 @@ def main() -> None:
     kernel_rates(args.repeats)
     rng = np.random.default_rng(0)
     print(f"\n4. full-size fit, {N_TRAIN} instances, paper settings extrapolated (not run)")
+    print("   (impl also picks the layer-only SGD of the fine-tuning and the head: linear_sgd)")
     for impl in IMPLS:
         row_estimate(rng, impl, compile_s)
     auc_equivalence(rng)

@@ -28,6 +28,7 @@ from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
 from tactile_exp.tracking import Tracker, flatten
+from tactile_exp.train import device_name
 from tactile_exp.validation import take_trials, validation_split
 
 log = logging.getLogger(__name__)
@@ -182,9 +183,16 @@ def run(settings: Settings) -> JobResult:
         "run_level": "parent",
         "sweep_id": settings.sweep_id,
         "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
+        "device": device_name(settings.resolved["device"]),  # what device=auto picked here
     }
     with tracker.run(settings.run_name, params, tags) as parent_id:
-        log.info("MLflow run %s (%s) in %s", settings.run_name, parent_id, tracker.uri)
+        log.info(
+            "MLflow run %s (%s) in %s, on %s",
+            settings.run_name,
+            parent_id,
+            tracker.uri,
+            tags["device"],
+        )
         _log_config(tracker, parent_id, settings)
         modality.prepare()
         tracker.set_tags(parent_id, {"data.identity": dataset.identity()})

@@ -30,6 +30,9 @@ from typing import Any
 from tactile_exp.termination import shielded
 
 os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")  # no calls home; the network is closed
+# Where tqdm is installed, MLflow draws a progress bar for every artifact download: one per stored
+# model a job reuses or ``predict`` loads, in the job's log and ahead of predict's errors.
+os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
 
 log = logging.getLogger(__name__)
 

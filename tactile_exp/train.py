@@ -35,6 +35,16 @@ def resolve_device(device: str) -> torch.device:
     return resolved
 
 
+def device_name(device: str) -> str:
+    """What ``device`` resolves to on this machine, for the run's ``device`` tag: ``cpu``, or the
+    CUDA device and its GPU (``cuda:0 (NVIDIA H100 80GB HBM3)``)."""
+    resolved = resolve_device(device)
+    if resolved.type != "cuda":
+        return str(resolved)
+    index = torch.cuda.current_device() if resolved.index is None else resolved.index
+    return f"cuda:{index} ({torch.cuda.get_device_name(index)})"
+
+
 def ieee_fp32_on_cuda() -> None:
     """Full float32 in cuDNN convolutions/RNNs and CUDA matmuls (no TF32), for this process.
 

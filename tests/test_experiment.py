@@ -16,6 +16,7 @@ from sklearn.metrics import roc_auc_score
 from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.experiment import load, run
 from tactile_exp.models import MODELS
+from tactile_exp.train import device_name
 
 
 def _runs(uri: str, config_hash: str | None = None):
@@ -38,6 +39,7 @@ def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri):
     assert parent.info.status == "FINISHED" and parent.info.run_name == "haptic_cnn-concat-c1-s11"
     assert parent.data.params["model.epochs"] == "2"
     assert parent.data.params["choice.model"] == "haptic_cnn"
+    assert parent.data.tags["device"] == device_name("auto")  # "cpu" here, the GPU on one
     assert {c.data.tags["mlflow.parentRunId"] for c in children} == {parent.info.run_id}
     assert {c.info.run_name for c in children} == {"adj=hard", "adj=soft", "adj=smooth"}
     for child in children:

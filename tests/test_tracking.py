@@ -347,6 +347,33 @@ def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_
     assert (root / "plots" / "f.png").read_bytes().startswith(b"\x89PNG")
 
 
+def test_artifact_downloads_draw_no_progress_bars(mlflow_uri, tmp_path, monkeypatch):
+    """With tqdm installed (a GPU image had it), MLflow drew a bar per download into predict's
+    error output; the tracker turns them off. A stand-in tqdm counts the bars drawn."""
+    import sys
+    import types
+
+    from tactile_exp.store import download
+
+    bars = []
+    fake = types.ModuleType("tqdm.auto")
+    fake.tqdm = lambda *args, **kwargs: (
+        bars.append(kwargs)
+        or types.SimpleNamespace(update=lambda n: None, refresh=lambda: None, close=lambda: None)
+    )
+    monkeypatch.setitem(sys.modules, "tqdm", types.ModuleType("tqdm"))
+    monkeypatch.setitem(sys.modules, "tqdm.auto", fake)
+    tracker = Tracker(mlflow_uri, "bars")
+    (tmp_path / "model").mkdir()
+    for name in ("a.json", "b.npz"):
+        (tmp_path / "model" / name).write_text(name)
+    with tracker.run("r", {}, {}) as run_id:
+        tracker.log_dir(run_id, tmp_path / "model", "model")
+    folder = download(tracker, run_id, "model", ("a.json", "b.npz"))
+    assert (folder / "b.npz").read_text() == "b.npz"
+    assert bars == []
+
+
 def test_tracking_uri_and_artifact_root(monkeypatch, tmp_path):
     from tactile_exp import tracking
 

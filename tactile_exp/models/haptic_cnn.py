@@ -21,10 +21,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from tactile_exp.models.registry import MODELS
-from tactile_exp.models.sgd import SGDModel
+from tactile_exp.models.sgd import IMPLS, SGDModel
 from tactile_exp.train import caffe_xavier_
-
-IMPLS = ("auto", "compiled", "torch")
 
 
 def _conv_out_len(length: int, kernel: int, stride: int) -> int:
@@ -172,11 +170,12 @@ class HapticCNN(SGDModel):
             loss=loss,
             pretrain_loss=pretrain_loss,
             head_schedule=head_schedule,
+            impl=impl,
             seed=seed,
             device=device,
         )
         self.kernel_sizes, self.widths, self.strides = kernel_sizes, widths, strides
-        self.groups, self.impl = groups, impl
+        self.groups = groups
         self.net_args = dict(
             groups=groups,
             kernel_sizes=tuple(kernel_sizes),

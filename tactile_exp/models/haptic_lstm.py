@@ -19,8 +19,6 @@ from tactile_exp.models.registry import MODELS
 from tactile_exp.models.sgd import SGDModel
 from tactile_exp.train import caffe_xavier_
 
-IMPLS = ("auto", "compiled", "torch")
-
 
 class LSTMBody(nn.Module):
     """LSTM over the time axis of (n, C, T) input; the last hidden state -> FC(hidden) + ReLU.
@@ -90,18 +88,14 @@ class HapticLSTM(SGDModel):
             loss=loss,
             pretrain_loss=pretrain_loss,
             head_schedule=head_schedule,
+            impl=impl,
             seed=seed,
             device=device,
         )
         for name, value in (("hidden", hidden), ("fc_width", fc_width)):
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name} must be an int >= 1, got {value!r}")
-        if impl not in IMPLS:
-            raise ValueError(f"impl must be one of {', '.join(IMPLS)}, got {impl!r}")
-        if impl == "compiled" and self.device_.type != "cpu":
-            raise ValueError(f"impl='compiled' runs on CPU only; device is {self.device_}")
         self.hidden, self.fc_width = hidden, fc_width
-        self.impl = impl
 
     def _check_input(self, X: np.ndarray) -> None:
         if X.ndim != 3:

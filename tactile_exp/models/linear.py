@@ -40,6 +40,7 @@ class LinearModel(SGDModel):
         loss: str = "hinge",
         pretrain_loss: str | None = "logistic",
         head_schedule: Mapping[str, Any] | None = None,
+        impl: str = "auto",
         seed: int = 0,
         device: str = "auto",
     ) -> None:
@@ -55,6 +56,7 @@ class LinearModel(SGDModel):
             loss=loss,
             pretrain_loss=pretrain_loss,
             head_schedule=head_schedule,
+            impl=impl,
             seed=seed,
             device=device,
         )

@@ -14,6 +14,11 @@ in two stages:
 ``head()`` gives the ``linear`` model (``models/linear.py``) for combined instances, trained by
 its own schedule (``head_schedule``, the ``schedule.head`` config node): combined units are ~10x
 fewer than instances.
+
+``impl`` picks the kernels: ``compiled`` trains the classification layer alone (stage 2, and
+stage 1 of a model without a body) by ``linear_sgd`` and a subclass's body by its own compiled
+kernels, CPU only; ``torch`` runs everything through autograd; ``auto`` is compiled on CPU and
+torch on a GPU. Both give the same numbers to float rounding.
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from tactile_exp.train import (
 )
 
 INFERENCE_BATCH = 4096
+IMPLS = ("auto", "compiled", "torch")
 HEAD_KEYS = ("epochs", "finetune_epochs", "batch_size", "lr", "momentum")  # its own schedule
 
 
@@ -60,6 +66,7 @@ class SGDModel(Model):
         loss: str = "hinge",
         pretrain_loss: str | None = "logistic",
         head_schedule: Mapping[str, Any] | None = None,
+        impl: str = "auto",
         seed: int = 0,
         device: str = "auto",
     ) -> None:
@@ -77,6 +84,11 @@ class SGDModel(Model):
         )
         self.device_ = resolve_device(device)
         self.device = device
+        if impl not in IMPLS:
+            raise ValueError(f"impl must be one of {', '.join(IMPLS)}, got {impl!r}")
+        if impl == "compiled" and self.device_.type != "cpu":
+            raise ValueError(f"impl='compiled' runs on CPU only; device is {self.device_}")
+        self.impl = impl
         self.head_schedule = None if head_schedule is None else dict(head_schedule)
         unknown = sorted(set(self.head_schedule or {}) - set(HEAD_KEYS))
         if unknown:
@@ -169,30 +181,51 @@ class SGDModel(Model):
             batch_size=self.batch_size, lr=self.lr, momentum=self.momentum, generator=generator
         )
         body_.train()
-        history: History = {
-            "train_loss": sgd_epochs(
+        stage1_loss, report = self.pretrain_loss or self.loss, reporter("train_loss")
+        if isinstance(body_, nn.Identity):  # no body: stage 1 trains the layer alone too
+            train_loss = self._layer_epochs(
+                Xt, yt, loss=stage1_loss, epochs=self.epochs, report=report, **common
+            )
+        else:
+            train_loss = sgd_epochs(
                 self._train_scores(body_, classifier_),
                 [*body_.parameters(), *classifier_.parameters()],
                 Xt,
                 yt,
-                loss=LOSSES[self.pretrain_loss or self.loss],
+                loss=LOSSES[stage1_loss],
                 epochs=self.epochs,
-                report=reporter("train_loss"),
+                report=report,
                 **common,
             )
-        }
+        history: History = {"train_loss": train_loss}
         if finetune:
-            history["finetune_loss"] = sgd_epochs(
-                lambda F, index: classifier_(F[index]).squeeze(1),
-                list(classifier_.parameters()),
+            history["finetune_loss"] = self._layer_epochs(
                 self._features(Xt),
                 yt,
-                loss=LOSSES[self.loss],
+                loss=self.loss,
                 epochs=self.finetune_epochs,
                 report=reporter("finetune_loss"),
                 **common,
             )
         return history
+
+    def _layer_epochs(
+        self, F: torch.Tensor, y: torch.Tensor, *, loss: str, **schedule: Any
+    ) -> list[float]:
+        """SGD epochs of the classification layer alone on fixed features ``F``: compiled
+        (``linear_sgd``) unless ``impl`` or the device says torch."""
+        if self.impl == "compiled" or (self.impl == "auto" and self.device_.type == "cpu"):
+            from tactile_exp.models.linear_sgd import linear_sgd_epochs  # numba: lazy
+
+            return linear_sgd_epochs(self.classifier_, F, y, loss=loss, **schedule)
+        return sgd_epochs(
+            lambda F, index: self.classifier_(F[index]).squeeze(1),
+            list(self.classifier_.parameters()),
+            F,
+            y,
+            loss=LOSSES[loss],
+            **schedule,
+        )
 
     @torch.no_grad()
     def _features(self, X: torch.Tensor) -> torch.Tensor:
@@ -262,6 +295,7 @@ class SGDModel(Model):
             **self._head_settings(),
             loss=self.loss,
             pretrain_loss=self.pretrain_loss,
+            impl=self.impl,
             seed=self.seed,
             device=self.device,
         )

@@ -1,0 +1,98 @@
+"""The compiled SGD of the classification layer on fixed features against torch's autograd loop."""
+
+import numpy as np
+import pytest
+import torch
+from test_models import FAST, easy_case
+from torch import nn
+
+from tactile_exp.models import MODELS, linear_sgd
+from tactile_exp.models.linear_sgd import linear_sgd_epochs
+from tactile_exp.models.losses import LOSSES
+from tactile_exp.train import caffe_xavier_, sgd_epochs
+
+
+def _train(impl: str, X, y, *, loss: str, **schedule):
+    torch.manual_seed(0)
+    layer = nn.Linear(X.shape[1], 1)
+    caffe_xavier_(layer.weight, X.shape[1])
+    nn.init.uniform_(layer.bias, -0.1, 0.1)
+    generator = torch.Generator().manual_seed(5)
+    if impl == "torch":
+        curve = sgd_epochs(
+            lambda F, index: layer(F[index]).squeeze(1),
+            list(layer.parameters()),
+            X,
+            y,
+            loss=LOSSES[loss],
+            generator=generator,
+            **schedule,
+        )
+    else:
+        curve = linear_sgd_epochs(layer, X, y, loss=loss, generator=generator, **schedule)
+    after = torch.randperm(50, generator=generator)  # where the shuffles left the generator
+    return layer.weight.detach().clone(), layer.bias.detach().clone(), curve, after
+
+
+@pytest.mark.parametrize("loss", ["logistic", "hinge"])
+@pytest.mark.parametrize(
+    ("n", "d", "batch_size", "momentum", "scale", "lr"),
+    [
+        (101, 40, 7, 0.9, 1.0, 0.05),  # a short last batch
+        (60, 300, 1000, 0.9, 1.0, 0.05),  # one batch larger than the data (d > n)
+        (33, 5, 1, 0.0, 1.0, 0.05),  # batch 1, no momentum
+        (80, 20, 16, 0.5, 30.0, 1e-4),  # large margins: softplus's linear branch, hinge's flat part
+    ],
+)
+def test_compiled_layer_sgd_equals_torchs(loss, n, d, batch_size, momentum, scale, lr):
+    rng = np.random.default_rng(n + d)
+    X = torch.from_numpy(scale * rng.standard_normal((n, d), dtype=np.float32))
+    y = torch.from_numpy((rng.random(n) > 0.6).astype(np.float32))
+    X[y == 1, :3] += 0.5 * scale
+    schedule = dict(epochs=12, batch_size=batch_size, lr=lr, momentum=momentum)
+    w, b, curve, after = _train("torch", X, y, loss=loss, **schedule)
+    w2, b2, curve2, after2 = _train("compiled", X, y, loss=loss, **schedule)
+    assert not torch.equal(w, _train("torch", X, y, loss=loss, **{**schedule, "epochs": 0})[0])
+    torch.testing.assert_close(w2, w, rtol=1e-4, atol=1e-6)
+    torch.testing.assert_close(b2, b, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(curve2, curve, rtol=1e-4, atol=1e-7)
+    assert torch.equal(after2, after)  # the same shuffles, so later stages see the same orders
+    assert curve[-1] < curve[0]  # a run that learns (a diverging one amplifies any rounding)
+
+
+def test_compiled_layer_sgd_trains_only_a_one_output_cpu_layer():
+    X, y = torch.zeros(4, 3), torch.ones(4)
+    with pytest.raises(ValueError, match="one-output layer on CPU"):
+        linear_sgd_epochs(
+            nn.Linear(3, 2),
+            X,
+            y,
+            loss="hinge",
+            epochs=1,
+            batch_size=2,
+            lr=0.1,
+            momentum=0.9,
+            generator=torch.Generator(),
+        )
+
+
+@pytest.mark.parametrize(("name", "stages"), [("linear", 2), ("haptic_cnn", 1)])
+def test_auto_on_cpu_trains_the_layer_compiled_and_torch_stays_selectable(
+    name, stages, monkeypatch
+):
+    """``impl=auto`` on CPU runs the layer-only stages (both for ``linear``, the fine-tuning for
+    the ConvNet) through the compiled loop; ``impl=torch`` never does; both score alike."""
+    calls = []
+    compiled = linear_sgd.linear_sgd_epochs
+    monkeypatch.setattr(
+        linear_sgd, "linear_sgd_epochs", lambda *a, **k: calls.append(1) or compiled(*a, **k)
+    )
+    train = easy_case(60, steps=40)
+    scores = {}
+    for impl in ("auto", "torch"):
+        model = MODELS.build(name, impl=impl, seed=2, **FAST)
+        model.fit(train)
+        scores[impl] = model.decision_function(train.X)
+        assert len(calls) == stages
+        assert model.head().impl == impl  # the T4 head follows the model's choice
+    np.testing.assert_allclose(scores["auto"], scores["torch"], rtol=1e-3, atol=1e-4)
