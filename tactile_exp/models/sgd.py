@@ -219,7 +219,7 @@ class SGDModel(Model):
 
             return linear_sgd_epochs(self.classifier_, F, y, loss=loss, **schedule)
         return sgd_epochs(
-            lambda F, index: self.classifier_(F[index]).squeeze(1),
+            lambda features, index: self.classifier_(features[index]).squeeze(1),
             list(self.classifier_.parameters()),
             F,
             y,
