@@ -22,7 +22,7 @@ from torch import nn
 
 from tactile_exp.models.numba_setup import numba
 
-LOSS_KINDS = {"logistic": 0, "hinge": 1}
+LOSSES = ("logistic", "hinge")  # the registered losses this loop computes (others: impl=torch)
 SOFTPLUS_THRESHOLD = 20.0  # torch's F.softplus: the identity above it
 
 
@@ -95,10 +95,15 @@ def linear_sgd_epochs(
     the same shuffles from ``generator``, updates and per-epoch mean losses."""
     if layer.out_features != 1 or layer.weight.device.type != "cpu":
         raise ValueError("the compiled linear SGD trains a one-output layer on CPU")
+    if loss not in LOSSES:
+        raise ValueError(
+            f"the compiled linear SGD computes the losses {', '.join(LOSSES)}, not {loss!r}: "
+            "use impl=torch"
+        )
     features = np.ascontiguousarray(X.detach().numpy().reshape(len(X), -1), dtype=np.float32)
     sign = (2.0 * y.detach().numpy() - 1.0).astype(np.float32)
     with torch.no_grad():  # updated in place through numpy views of the parameters
-        w, b = layer.weight.numpy().reshape(-1), layer.bias.numpy()
+        w, b = layer.weight.detach().numpy().reshape(-1), layer.bias.detach().numpy()
         vel_w, vel_b = np.zeros_like(w), np.zeros_like(b)
         grad = np.empty_like(w)
         curve = []
@@ -115,7 +120,7 @@ def linear_sgd_epochs(
                 np.float32(lr),
                 np.float32(momentum),
                 batch_size,
-                LOSS_KINDS[loss] == 1,
+                loss == "hinge",
                 grad,
             )
             curve.append(total / len(features))

@@ -213,11 +213,13 @@ class SGDModel(Model):
         self, F: torch.Tensor, y: torch.Tensor, *, loss: str, **schedule: Any
     ) -> list[float]:
         """SGD epochs of the classification layer alone on fixed features ``F``: compiled
-        (``linear_sgd``) unless ``impl`` or the device says torch."""
+        (``linear_sgd``) unless ``impl`` or the device says torch; ``auto`` also takes torch's
+        path for a registered loss the compiled loop does not compute."""
         if self.impl == "compiled" or (self.impl == "auto" and self.device_.type == "cpu"):
-            from tactile_exp.models.linear_sgd import linear_sgd_epochs  # numba: lazy
+            from tactile_exp.models import linear_sgd  # numba: lazy
 
-            return linear_sgd_epochs(self.classifier_, F, y, loss=loss, **schedule)
+            if self.impl == "compiled" or loss in linear_sgd.LOSSES:
+                return linear_sgd.linear_sgd_epochs(self.classifier_, F, y, loss=loss, **schedule)
         return sgd_epochs(
             lambda features, index: self.classifier_(features[index]).squeeze(1),
             list(self.classifier_.parameters()),
