@@ -25,8 +25,10 @@ TINY_DATA = [
 
 @pytest.fixture(scope="session", autouse=True)
 def numba_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One compiled-kernel cache per test run, shared by every test (set before numba loads)."""
-    path = tmp_path_factory.mktemp("numba")
+    """One compiled-kernel cache per test run, shared by every test (set before numba loads);
+    ``$TACTILE_EXP_TEST_NUMBA_CACHE`` keeps it across runs (CI's fast then slow suite)."""
+    kept = os.environ.get("TACTILE_EXP_TEST_NUMBA_CACHE")
+    path = Path(kept) if kept else tmp_path_factory.mktemp("numba")
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     return path
 
