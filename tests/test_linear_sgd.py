@@ -100,7 +100,8 @@ def test_auto_on_cpu_trains_the_layer_compiled_and_torch_stays_selectable(
 
 def test_a_loss_the_loop_does_not_compute_takes_torchs_path_or_is_refused(monkeypatch):
     """A newly registered loss: ``impl=auto`` trains the layer through autograd with it,
-    ``impl=compiled`` refuses it by name instead of computing another loss."""
+    ``impl=compiled`` refuses it by name when the model is built instead of computing another
+    loss."""
     monkeypatch.setattr(LOSSES, "_entries", dict(LOSSES._load()))  # forget the loss afterwards
     LOSSES.register("squared_hinge")(lambda s, y: LOSSES["hinge"](s, y) ** 2)
     settings = {**FAST, "loss": "squared_hinge", "pretrain_loss": None}
@@ -109,5 +110,6 @@ def test_a_loss_the_loop_does_not_compute_takes_torchs_path_or_is_refused(monkey
         patch.setattr(linear_sgd, "linear_sgd_epochs", lambda *a, **k: calls.append(1))
         model = MODELS.build("linear", impl="auto", **settings)
         assert list(model.fit(easy_case(40, steps=10))) == ["train_loss"] and calls == []
-    with pytest.raises(ValueError, match="not 'squared_hinge': use impl=torch"):
-        MODELS.build("linear", impl="compiled", **settings).fit(easy_case(40, steps=10))
+    for name in ("linear", "haptic_cnn"):  # refused when built, before any training
+        with pytest.raises(ValueError, match="not 'squared_hinge': use impl=torch"):
+            MODELS.build(name, impl="compiled", **settings)

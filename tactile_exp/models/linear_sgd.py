@@ -78,6 +78,15 @@ def _epoch(X, sign, order, w, b, vel_w, vel_b, lr, momentum, batch, hinge, grad)
     return total
 
 
+def check_loss(loss: str) -> None:
+    """Raise ValueError unless this loop computes ``loss``."""
+    if loss not in LOSSES:
+        raise ValueError(
+            f"the compiled linear SGD computes the losses {', '.join(LOSSES)}, not {loss!r}: "
+            "use impl=torch"
+        )
+
+
 def linear_sgd_epochs(
     layer: nn.Linear,
     X: torch.Tensor,
@@ -95,11 +104,7 @@ def linear_sgd_epochs(
     the same shuffles from ``generator``, updates and per-epoch mean losses."""
     if layer.out_features != 1 or layer.weight.device.type != "cpu":
         raise ValueError("the compiled linear SGD trains a one-output layer on CPU")
-    if loss not in LOSSES:
-        raise ValueError(
-            f"the compiled linear SGD computes the losses {', '.join(LOSSES)}, not {loss!r}: "
-            "use impl=torch"
-        )
+    check_loss(loss)
     features = np.ascontiguousarray(X.detach().numpy().reshape(len(X), -1), dtype=np.float32)
     sign = (2.0 * y.detach().numpy() - 1.0).astype(np.float32)
     with torch.no_grad():  # updated in place through numpy views of the parameters

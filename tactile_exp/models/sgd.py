@@ -88,6 +88,11 @@ class SGDModel(Model):
             raise ValueError(f"impl must be one of {', '.join(IMPLS)}, got {impl!r}")
         if impl == "compiled" and self.device_.type != "cpu":
             raise ValueError(f"impl='compiled' runs on CPU only; device is {self.device_}")
+        if impl == "compiled":  # refused now, not when a layer-only stage or the head starts
+            from tactile_exp.models.linear_sgd import check_loss  # numba: lazy
+
+            for name in {loss, pretrain_loss or loss}:
+                check_loss(name)
         self.impl = impl
         self.head_schedule = None if head_schedule is None else dict(head_schedule)
         unknown = sorted(set(self.head_schedule or {}) - set(HEAD_KEYS))
