@@ -21,8 +21,9 @@ from tactile_exp.data.layout import ADJECTIVES
 DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
 # Keys that change where results go or what they are compared with, not what they are: left out
 # of the config hash. ``trunk`` only feeds the visual modalities' nodes, hashed there: a haptic
-# row is the same job whatever trunk weights the grid was given.
-UNHASHED = ("tracking", "hydra", "paper", "trunk")
+# row is the same job whatever trunk weights the grid was given. ``workers`` changes how fast a
+# job runs, not its results (beyond float rounding): a finished job is not rerun for it.
+UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers")
 
 
 class ConfigError(ValueError):
@@ -68,6 +69,7 @@ class Settings:
         0.0  # training objects held out for val_auc (tactile_exp.validation)
     )
     overrides: tuple[str, ...] = ()  # the job's command-line overrides (Hydra's task overrides)
+    workers: int = 1  # processes that train adjectives side by side (tactile_exp.workers)
 
 
 def config_hash(resolved: dict[str, Any]) -> str:
@@ -88,6 +90,13 @@ def _component(node: Any, group: str) -> Component:
             raise ConfigError(f"{group}._module_: cannot import {module!r} ({err})") from err
     params = {k: v for k, v in node.items() if k not in ("name", "_module_")}
     return Component(str(node["name"]), params)
+
+
+def component_modules(resolved: dict[str, Any]) -> list[str]:
+    """The ``_module_`` of each component (what registers it): a spawned worker process
+    (``tactile_exp.workers``) imports them again, as ``_component`` did here."""
+    nodes = (resolved.get(group) for group in ("data", "modality", "model"))
+    return [str(n["_module_"]) for n in nodes if isinstance(n, dict) and n.get("_module_")]
 
 
 def _check_missing(node: Any, prefix: str = "") -> None:
@@ -164,6 +173,9 @@ def settings_from_config(
     seed = resolved.get("seed")
     if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2**32:
         raise ConfigError(f"seed: must be a whole number in 0..2**32-1, got {seed!r}")
+    workers = resolved.get("workers", 1)
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise ConfigError(f"workers: must be a whole number of processes >= 1, got {workers!r}")
     _check_missing(resolved)
     _check_data(resolved["data"])
 
@@ -204,6 +216,7 @@ def settings_from_config(
         output_dir=output_dir,
         validation_fraction=float(fraction),
         overrides=overrides,
+        workers=workers,
     )
     check_components(settings)
     return settings

@@ -7,18 +7,21 @@ Runs without Hydra: it takes the plain ``Settings`` built by ``tactile_exp.confi
 from __future__ import annotations
 
 import functools
+import importlib
 import io
 import logging
+import os
 import time
-from collections.abc import Callable, Mapping
+import warnings
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, store
+from tactile_exp import evaluate, store, termination, workers
 from tactile_exp.combine import COMBINERS
-from tactile_exp.config import ConfigError, Settings, param_error
+from tactile_exp.config import ConfigError, Settings, component_modules, param_error
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
@@ -120,9 +123,10 @@ def classify(
 
 
 def _epoch_logger(adjective: str) -> EpochCallback:
-    """A compact line at ~5 points per run instead of one per epoch."""
+    """A compact line at ~5 points per run instead of one per epoch; and a SIGTERM check."""
 
     def on_epoch(epoch: int, n_epochs: int, metrics: dict[str, float]) -> None:
+        termination.check()
         if epoch == 1 or epoch % max(1, n_epochs // 5) == 0 or epoch == n_epochs:
             shown = " ".join(f"{k}={v:.4f}" for k, v in metrics.items())
             log.info("  %s epoch %d/%d %s", adjective, epoch, n_epochs, shown)
@@ -203,18 +207,15 @@ def run(settings: Settings) -> JobResult:
             source=dataset.path.resolve().as_uri(),
         )
         results: dict[str, AdjectiveResult] = {}
-        for i, adjective in enumerate(settings.adjectives, start=1):
-            log.info("[%d/%d] %s", i, len(settings.adjectives), adjective)
-            results[adjective] = _run_adjective(
-                settings, tracker, parent_id, modality, splits[adjective]
-            )
+        for i, result in enumerate(_adjectives(settings, tracker, parent_id, modality, splits), 1):
+            results[result.adjective] = result
             log.info(
                 "[%d/%d] %s AUC %.3f (%.1f s)",
                 i,
                 len(settings.adjectives),
-                adjective,
-                results[adjective].auc,
-                results[adjective].sizes["seconds"],
+                result.adjective,
+                result.auc,
+                result.sizes["seconds"],
             )
         aucs = {a: r.auc for a, r in results.items()}
         mean = evaluate.mean_auc(aucs)
@@ -227,9 +228,64 @@ def run(settings: Settings) -> JobResult:
     return JobResult(parent_id, mean, results)
 
 
+def _adjectives(
+    settings: Settings,
+    tracker: Tracker,
+    parent_id: str,
+    modality: Modality,
+    splits: Mapping[str, Split],
+) -> Iterator[AdjectiveResult]:
+    """Each adjective's result, in order: here, or ``settings.workers`` at a time in worker
+    processes (``tactile_exp.workers``) that open the data and the tracking store once each."""
+    n = len(settings.adjectives)
+    processes = min(settings.workers, n)
+    if processes == 1:
+        for i, adjective in enumerate(settings.adjectives, start=1):
+            log.info("[%d/%d] %s", i, n, adjective)
+            yield _run_adjective(settings, tracker, parent_id, modality, splits[adjective])
+        return
+    pool = workers.Pool(processes, init=_open_in_worker, initargs=(settings, parent_id))
+    log.info("%d adjectives in %d worker processes", n, processes)
+    try:
+        with pool:
+            calls = [(i, n, a) for i, a in enumerate(settings.adjectives, start=1)]
+            yield from pool.map(_adjective_in_worker, calls)
+    except BaseException:
+        error = "a worker was stopped before it ended this run (the job failed or was terminated)"
+        tracker.end_runs_of(pool.pids, error=error)
+        raise
+
+
+_WORKER: dict[str, Any] = {}  # what a worker process opened once: see _open_in_worker
+
+
+def _open_in_worker(settings: Settings, parent_id: str) -> None:
+    for module in component_modules(settings.resolved):
+        importlib.import_module(module)
+    with warnings.catch_warnings():  # the job's own load() has already shown them
+        warnings.simplefilter("ignore")
+        _, modality, splits = load(settings)
+    _WORKER.update(
+        settings=settings,
+        tracker=Tracker(settings.tracking.uri, settings.tracking.experiment),
+        parent_id=parent_id,
+        modality=modality,
+        splits=splits,
+    )
+
+
+def _adjective_in_worker(i: int, n: int, adjective: str) -> AdjectiveResult:
+    log.info("[%d/%d] %s (worker %d)", i, n, adjective, os.getpid())
+    w = _WORKER
+    return _run_adjective(
+        w["settings"], w["tracker"], w["parent_id"], w["modality"], w["splits"][adjective]
+    )
+
+
 def _run_adjective(
     settings: Settings, tracker: Tracker, parent_id: str, modality: Modality, split: Split
 ) -> AdjectiveResult:
+    termination.check()
     adjective = split.adjective
     reuse = store.reuse_enabled(settings.resolved)
     model = MODELS.build(settings.model.name, **settings.model.params)

@@ -5,6 +5,7 @@ Kept apart from ``tracking.py`` so that the MLflow layer imports neither Hydra n
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import os
@@ -15,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
+
+from tactile_exp.tracking import process_alive
 
 if TYPE_CHECKING:
     from tactile_exp.tracking import Tracker
@@ -37,21 +40,24 @@ def _children(pid: int) -> list[int]:
     return found
 
 
+def _resource_tracker(pid: int) -> bool:
+    """multiprocessing's or loky's resource tracker: it ignores SIGTERM and exits by itself once
+    the launcher is gone, so it is neither signalled nor waited for."""
+    try:
+        return b"resource_tracker import main" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return False
+
+
 def _gone(pid: int) -> bool:
+    """Whether worker ``pid`` has ended; reaps it when it is our child."""
     try:
         waited, _ = os.waitpid(pid, os.WNOHANG)
         if waited == pid:
             return True
     except ChildProcessError:
         pass
-    return not Path(f"/proc/{pid}").exists() or _zombie(pid)
-
-
-def _zombie(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
-    except OSError:
-        return True
+    return not process_alive(pid)
 
 
 def terminate_workers(signum: int, frame: object, *, tracker: Tracker) -> None:
@@ -60,9 +66,9 @@ def terminate_workers(signum: int, frame: object, *, tracker: Tracker) -> None:
     alone and its joblib workers went on with parent PID 1.
 
     A worker can die with its runs still RUNNING: once one worker exits, loky SIGKILLs the others
-    (a "broken" pool), maybe mid-unwind or before the signal reached Python (inside a compile);
+    (a "broken" pool), maybe mid-unwind or before its next SIGTERM check (``termination.check``);
     and workers past the grace period are killed here. Their runs are closed here instead."""
-    workers = _children(os.getpid())
+    workers = [pid for pid in _children(os.getpid()) if not _resource_tracker(pid)]
     log.warning("terminated: stopping %d worker process(es)", len(workers))
     for pid in workers:
         try:
@@ -74,9 +80,10 @@ def terminate_workers(signum: int, frame: object, *, tracker: Tracker) -> None:
         time.sleep(0.2)
     for pid in workers:
         if not _gone(pid):
-            os.kill(pid, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):  # ended since _gone looked
+                os.kill(pid, signal.SIGKILL)
     while time.monotonic() < deadline + 5.0 and not all(_gone(pid) for pid in workers):
-        time.sleep(0.05)  # reaped, so the runs' PIDs no longer count as alive
+        time.sleep(0.05)  # ended (a zombie counts), so their runs can be closed
     error = f"Terminated: terminated by signal {signum}; killed before it ended this run"
     closed = tracker.end_runs_of(workers, error=error)
     if closed:

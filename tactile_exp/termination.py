@@ -5,6 +5,10 @@ it like an error, so its runs end FAILED rather than RUNNING. Raised in the midd
 transaction, though, it left the connection unusable, so marking the run FAILED failed as well and
 the run stayed RUNNING. Inside ``shielded()`` the signal is therefore held back and raised as
 soon as the write is done.
+
+A SIGTERM that lands in a ctypes callback (llvmlite's, while numba compiles) raises there, and
+ctypes prints the exception and drops it: the job trained on as if never signalled. The signal is
+therefore also remembered, and ``check()`` (each adjective, each epoch) raises it again.
 """
 
 from __future__ import annotations
@@ -12,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-_state = {"depth": 0, "pending": 0}
+_state = {"depth": 0, "pending": 0, "received": 0}
 
 
 class Terminated(SystemExit):
@@ -21,6 +25,7 @@ class Terminated(SystemExit):
 
 def handle(signum: int, frame: object) -> None:
     """The SIGTERM handler: raise now, or at the end of the write in progress."""
+    _state["received"] = signum
     if _state["depth"]:
         _state["pending"] = signum
         return
@@ -38,3 +43,9 @@ def shielded() -> Iterator[None]:
     if not _state["depth"] and _state["pending"]:
         signum, _state["pending"] = _state["pending"], 0
         raise Terminated(f"terminated by signal {signum}")
+
+
+def check() -> None:
+    """Raise a SIGTERM this process received, in case the handler's exception was dropped."""
+    if _state["received"] and not _state["depth"]:
+        raise Terminated(f"terminated by signal {_state['received']}")

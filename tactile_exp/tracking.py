@@ -109,24 +109,34 @@ def check_server(uri: str, timeout: float = 5.0) -> None:
         ) from err
 
 
+def _stat(pid: int) -> list[str]:
+    """The fields of ``/proc/<pid>/stat`` after the command name; [] where unreadable."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return []
+
+
 def _process_start(pid: int) -> str:
     """The process's start time in clock ticks since boot (/proc), "" where unknown: a PID
     reused by a later process has a different start time."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return ""
-    return stat.rsplit(")", 1)[1].split()[19]
+    fields = _stat(pid)
+    return fields[19] if fields else ""
 
 
-def _alive(pid: int, started: str) -> bool:
+def process_alive(pid: int, started: str = "") -> bool:
+    """Whether process ``pid`` (started at ``started``, when given) still runs. A zombie has
+    ended: a killed worker that its parent has not reaped yet must not keep its runs RUNNING."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return not started or _process_start(pid) in ("", started)
+    fields = _stat(pid)
+    if fields and fields[0] == "Z":
+        return False
+    return not started or not fields or fields[19] == started
 
 
 def process_tags() -> dict[str, str]:
@@ -264,7 +274,7 @@ class Tracker:
                 or (pids is not None and pid not in pids)
             ):
                 continue
-            if _alive(int(pid), tags.get("pid_start", "")):
+            if process_alive(int(pid), tags.get("pid_start", "")):
                 continue
             self.client.log_batch(r.info.run_id, tags=[RunTag("error", error(pid, host))])
             self.client.set_terminated(r.info.run_id, status=status)

@@ -7,6 +7,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -73,10 +74,21 @@ def test_sigkill_mid_adjective_then_rerun(cache_dir, mlflow_uri, mlflow_template
     left = {r.info.run_name: r for r in _runs(mlflow_uri)}
     assert left["adj=hard"].info.status == "FINISHED" and left["adj=soft"].info.status == "RUNNING"
 
+    reference = tmp_path / "reference" / "mlflow.db"
+    reference.parent.mkdir()
+    shutil.copy(mlflow_template, reference)
+    uninterrupted = subprocess.Popen(  # side by side with the rerun: CI time
+        _job(cache_dir, f"sqlite:///{reference}", tmp_path / "reference-run"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     rerun = subprocess.run(
         _job(cache_dir, mlflow_uri, tmp_path / "rerun"), capture_output=True, text=True
     )
     assert rerun.returncode == 0, rerun.stderr[-2000:]
+    _, errors = uninterrupted.communicate(timeout=300)
+    assert uninterrupted.returncode == 0, errors[-2000:]
     runs = _runs(mlflow_uri)
     assert not [r.info.run_name for r in runs if r.info.status == "RUNNING"]
     killed = [r for r in runs if r.info.status == "KILLED"]
@@ -89,16 +101,6 @@ def test_sigkill_mid_adjective_then_rerun(cache_dir, mlflow_uri, mlflow_template
     }
     assert rerun_children["adj=hard"].data.tags["reused_from"] == left["adj=hard"].info.run_id
     assert "reused_from" not in rerun_children["adj=soft"].data.tags
-
-    reference = tmp_path / "reference" / "mlflow.db"
-    reference.parent.mkdir()
-    shutil.copy(mlflow_template, reference)
-    uninterrupted = subprocess.run(
-        _job(cache_dir, f"sqlite:///{reference}", tmp_path / "reference-run"),
-        capture_output=True,
-        text=True,
-    )
-    assert uninterrupted.returncode == 0, uninterrupted.stderr[-2000:]
     aucs = _parent_aucs(mlflow_uri)
     assert set(aucs) == {"auc.hard", "auc.soft", "auc.smooth"}
     assert aucs == _parent_aucs(f"sqlite:///{reference}")
@@ -112,25 +114,25 @@ def test_sigterm_to_a_parallel_sweep_stops_its_workers(cache_dir, mlflow_uri, tm
         "adjectives=[hard]",
         "schedule=tiny",
         "model.epochs=100000",
-        "seed=51,52,53,54",
+        "seed=51,52,53",
         "hydra/launcher=joblib",
-        "hydra.launcher.n_jobs=3",
+        "hydra.launcher.n_jobs=2",
         f"hydra.sweep.dir={tmp_path}/multirun",
     ]
     sweep = subprocess.Popen([sys.executable, "-m", "tactile_exp", "-m", *args])
     try:
         deadline = time.monotonic() + 300
-        while time.monotonic() < deadline:  # three jobs training at once
+        while time.monotonic() < deadline:  # two jobs training at once
             training = [
                 r
                 for r in _runs(mlflow_uri)
                 if r.info.run_name == "adj=hard" and r.info.status == "RUNNING"
             ]
-            if len(training) == 3:
+            if len(training) == 2:
                 break
             time.sleep(0.5)
         else:
-            pytest.fail("the sweep never had three jobs training")
+            pytest.fail("the sweep never had two jobs training")
         workers = _children(sweep.pid)
         sweep.send_signal(signal.SIGTERM)
         assert sweep.wait(timeout=120) != 0
@@ -141,6 +143,42 @@ def test_sigterm_to_a_parallel_sweep_stops_its_workers(cache_dir, mlflow_uri, tm
     runs = _runs(mlflow_uri)
     assert not [r.info.run_name for r in runs if r.info.status == "RUNNING"]
     parents = [r for r in runs if r.data.tags.get("run_level") == "parent"]
-    assert len(parents) == 3 and all(r.info.status == "FAILED" for r in parents)
+    assert len(parents) == 2 and all(r.info.status == "FAILED" for r in parents)
     assert all("signal 15" in r.data.tags["error"] for r in parents)
-    assert "haptic_cnn-concat-c1-s54" not in {r.info.run_name for r in runs}  # never started
+    assert "haptic_cnn-concat-c1-s53" not in {r.info.run_name for r in runs}  # never started
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_a_stopped_job_stops_its_adjective_workers(sig, cache_dir, mlflow_uri, tmp_path):
+    """workers=2, both training: SIGTERM to the job passes it on (the workers' runs end FAILED);
+    SIGKILL takes the workers with it (the parent-death signal: their runs end FAILED too)."""
+    args = _job(cache_dir, mlflow_uri, tmp_path / "job", "workers=2", "model.epochs=100000")
+    job = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    started = set()
+    try:
+        for line in job.stdout:  # type: ignore[union-attr]
+            if " epoch 1/" in line:
+                started.add(line.split(" epoch 1/")[0].split()[-1])
+            if len(started) == 2:  # two adjectives training at once
+                break
+        else:
+            pytest.fail("the job ended before two adjectives were training")
+        # Keep reading: a job whose stdout pipe fills up blocks, its workers' log relay with it.
+        threading.Thread(target=job.stdout.read, daemon=True).start()  # type: ignore[union-attr]
+        workers = _children(job.pid)
+        assert len(workers) >= 2
+        job.send_signal(sig)
+        assert job.wait(timeout=120) != 0
+    finally:
+        job.kill()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not all(_gone(pid) for pid in workers):
+        time.sleep(0.2)
+    assert [pid for pid in workers if not _gone(pid)] == []  # no orphaned worker
+    runs = {r.info.run_name: r for r in _runs(mlflow_uri)}
+    children = [runs[f"adj={a}"] for a in sorted(started)]
+    assert all(r.info.status == "FAILED" for r in children)
+    assert all("signal 15" in r.data.tags["error"] for r in children)
+    assert "adj=smooth" not in runs  # never started
+    if sig == signal.SIGTERM:
+        assert runs["haptic_cnn-concat-c1-s41"].info.status == "FAILED"

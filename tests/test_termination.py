@@ -1,7 +1,9 @@
 """SIGTERM never lands inside an MLflow write (a half-done sqlite transaction left runs RUNNING)."""
 
+import ctypes
 import os
 import signal
+import sys
 
 import pytest
 
@@ -10,7 +12,8 @@ from tactile_exp.tracking import Tracker
 
 
 @pytest.fixture
-def sigterm_raises():
+def sigterm_raises(monkeypatch):
+    monkeypatch.setitem(termination._state, "received", 0)  # forgotten again after the test
     before = signal.signal(signal.SIGTERM, termination.handle)
     yield
     signal.signal(signal.SIGTERM, before)
@@ -51,3 +54,53 @@ def test_sigterm_while_a_run_is_created_still_ends_it_failed(
     (run,) = MlflowClient(mlflow_uri).search_runs([tracker.experiment_id])
     assert run.info.status == "FAILED" and run.data.params == {"a": "1"}
     assert run.data.tags["error"].startswith("Terminated: terminated by signal 15")
+
+
+def test_a_sigterm_dropped_by_a_ctypes_callback_is_raised_at_the_next_check(
+    sigterm_raises, monkeypatch
+):
+    """numba compiles through llvmlite's ctypes callbacks: the handler's exception raised inside
+    one is printed and dropped, and the job trained on (seen in CI). ``check`` raises it again."""
+    termination.check()  # nothing received: no-op
+    dropped = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: dropped.append(u.exc_type))
+    callback = ctypes.CFUNCTYPE(None)(lambda: os.kill(os.getpid(), signal.SIGTERM))
+    callback()  # "Exception ignored on calling ctypes callback function"
+    assert dropped == [termination.Terminated]
+    with pytest.raises(termination.Terminated, match="signal 15"):
+        termination.check()
+
+
+@pytest.mark.job
+def test_a_job_that_received_sigterm_stops_at_its_next_epoch(
+    sigterm_raises, tiny_config, mlflow_uri, monkeypatch
+):
+    """The epoch loop calls ``check``: a dropped SIGTERM ends the training, its runs FAILED."""
+    from mlflow.tracking import MlflowClient
+
+    from tactile_exp import experiment
+    from tactile_exp.config import settings_from_config
+
+    logger = experiment._epoch_logger
+    epochs: list[int] = []
+
+    def signalled_in_epoch_2(adjective):
+        on_epoch = logger(adjective)
+
+        def wrapped(epoch, n_epochs, metrics):
+            epochs.append(epoch)
+            if epoch == 2:
+                termination._state["received"] = signal.SIGTERM  # as a dropped raise leaves it
+            on_epoch(epoch, n_epochs, metrics)
+
+        return wrapped
+
+    monkeypatch.setattr(experiment, "_epoch_logger", signalled_in_epoch_2)
+    overrides = ["model=haptic_cnn", "model.impl=torch"]
+    settings = settings_from_config(tiny_config(overrides, adjectives="[hard]"))
+    with pytest.raises(termination.Terminated, match="signal 15"):
+        experiment.run(settings)
+    assert epochs == [1, 2]
+    client = MlflowClient(mlflow_uri)
+    runs = client.search_runs([client.get_experiment_by_name("tactile_exp").experiment_id])
+    assert sorted(r.info.status for r in runs) == ["FAILED", "FAILED"]

@@ -1,5 +1,6 @@
 """What `mlflow ui` shows of a job: experiment kind, source tags, dataset input, row grouping."""
 
+import socket
 import subprocess
 import time
 from pathlib import Path
@@ -134,7 +135,6 @@ def test_curves_longer_than_a_batch_are_logged_whole(mlflow_uri, monkeypatch):
 
 def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_uri, caplog):
     import os
-    import socket
 
     tracker = Tracker(mlflow_uri, "stale")
     host = socket.gethostname()
@@ -175,7 +175,6 @@ def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
     launcher marks their runs FAILED, and only theirs."""
     import os
     import signal
-    import socket
     import sys
 
     from tactile_exp import sweep
@@ -306,7 +305,6 @@ def test_finished_run_is_the_finished_parent_of_that_config_and_data_only(mlflow
 
 def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_path):
     import os
-    import socket
 
     import matplotlib
 
@@ -488,11 +486,11 @@ def test_alive_only_probes_and_trusts_what_it_cannot_check(monkeypatch):
     child = subprocess.Popen(["sleep", "30"])
     try:
         start = tracking._process_start(child.pid)
-        assert tracking._alive(child.pid, start) and tracking._alive(child.pid, "")
-        assert not tracking._alive(child.pid, str(int(start) + 1))  # a reused pid
+        assert tracking.process_alive(child.pid, start) and tracking.process_alive(child.pid)
+        assert not tracking.process_alive(child.pid, str(int(start) + 1))  # a reused pid
         assert child.poll() is None  # probing sent no signal that ends it
-        monkeypatch.setattr(tracking, "_process_start", lambda pid: "")
-        assert tracking._alive(child.pid, "123")  # start time unreadable: assume alive
+        monkeypatch.setattr(tracking, "_stat", lambda pid: [])
+        assert tracking.process_alive(child.pid, "123")  # /proc unreadable: assume alive
     finally:
         child.kill()
         child.wait()
@@ -501,7 +499,31 @@ def test_alive_only_probes_and_trusts_what_it_cannot_check(monkeypatch):
         raise PermissionError(pid)
 
     monkeypatch.setattr(tracking.os, "kill", not_ours)
-    assert tracking._alive(child.pid, "")  # another user's live process
+    assert tracking.process_alive(child.pid)  # another user's live process
+
+
+def test_a_killed_worker_not_yet_reaped_has_its_runs_closed(mlflow_uri):
+    """A zombie (ended, its parent has not waited for it) counts as ended: a terminated sweep
+    closes the runs of a worker that loky killed and nobody reaped yet (a CI failure)."""
+    from tactile_exp import tracking
+
+    child = subprocess.Popen(["sleep", "30"])
+    tracker = tracking.Tracker(mlflow_uri, "tactile_exp")
+    tags = {"host": socket.gethostname(), "pid": str(child.pid)}
+    tags["pid_start"] = tracking._process_start(child.pid)
+    run = tracker.client.create_run(tracker.experiment_id, run_name="adj=hard", tags=tags)
+    child.kill()
+    deadline = time.monotonic() + 10
+    while tracking._stat(child.pid)[:1] != ["Z"] and time.monotonic() < deadline:
+        time.sleep(0.01)
+    try:
+        assert tracking._stat(child.pid)[0] == "Z"  # not reaped: the PID still exists
+        assert not tracking.process_alive(child.pid, tags["pid_start"])
+        assert tracker.end_runs_of([child.pid], error="killed") == [run.info.run_id]
+    finally:
+        child.wait()
+    closed = tracker.client.get_run(run.info.run_id)
+    assert closed.info.status == "FAILED" and closed.data.tags["error"] == "killed"
 
 
 def test_source_tags_name_the_commit_of_the_checkout_when_there_is_one(monkeypatch):

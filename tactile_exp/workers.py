@@ -1,0 +1,154 @@
+"""A job's adjectives side by side in worker processes (``workers`` > 1; ours, not the paper's).
+
+The compiled ConvNet kernels are memory-bound and gain little from a second thread: on 2 cores,
+a ConvNet job with two single-threaded workers takes ~0.78 of the time it takes in one process
+on two threads (``bench/bench_workers.py``). Each worker runs whole adjectives, its own MLflow
+runs included; the job's process only hands out adjectives and collects their results.
+
+Workers are spawned (never forked: torch and numba hold threads), take ``cores // workers``
+threads each, send their log records through the job's handlers, and end with the job: an error
+or SIGTERM in the job sends SIGTERM to the workers (their runs end FAILED), and a job killed
+outright takes its workers with it (Linux: the parent-death signal).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import ctypes
+import logging
+import logging.handlers
+import multiprocessing
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator
+from types import TracebackType
+from typing import Any
+
+from tactile_exp import termination
+
+log = logging.getLogger(__name__)
+
+GRACE_S = 30.0  # how long stopped workers get to end their runs before SIGKILL
+_PR_SET_PDEATHSIG = 1  # prctl(2)
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+class Pool:
+    """``workers`` spawned processes, each set up once by ``init(*initargs)``; ``map`` yields
+    results in order. Leaving the block on an error stops the workers (``pids`` lists them, so
+    the caller can close any run a killed worker left RUNNING)."""
+
+    def __init__(
+        self, workers: int, *, init: Callable[..., None], initargs: tuple[Any, ...]
+    ) -> None:
+        context = multiprocessing.get_context("spawn")
+        records = context.Queue()
+        self._listener = logging.handlers.QueueListener(records, _Relay())
+        threads = max(1, cores() // workers)
+        self._executor = concurrent.futures.ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=context,
+            initializer=_start,
+            initargs=(records, logging.getLogger().getEffectiveLevel(), threads, init, initargs),
+        )
+        self.pids: set[int] = set()
+
+    def __enter__(self) -> Pool:
+        self._listener.start()
+        return self
+
+    def map(self, fn: Callable[..., Any], calls: Iterable[tuple[Any, ...]]) -> Iterator[Any]:
+        futures = [self._executor.submit(_call, fn, *args) for args in calls]
+        self.pids.update(p.pid for p in multiprocessing.active_children() if p.pid is not None)
+        for future in futures:
+            yield future.result()
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        err: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        try:
+            if err is None:
+                self._executor.shutdown(wait=True)
+                return
+            self._stop()
+        finally:
+            self._listener.stop()
+
+    def _stop(self) -> None:
+        """SIGTERM to every worker, SIGKILL to those still there after ``GRACE_S``."""
+        self._executor.shutdown(wait=False, cancel_futures=True)
+        for pid in self.pids:
+            try:
+                os.kill(pid, signal.SIGTERM)
+            except ProcessLookupError:
+                continue
+        deadline = time.monotonic() + GRACE_S
+        with termination.shielded():  # a second SIGTERM must not cut the wait short
+            while time.monotonic() < deadline and self._alive():
+                time.sleep(0.1)
+            for process in self._alive():
+                process.kill()
+                process.join(5.0)
+
+    def _alive(self) -> list[multiprocessing.process.BaseProcess]:
+        return [p for p in multiprocessing.active_children() if p.pid in self.pids]
+
+
+class _Relay(logging.Handler):
+    """A worker's record, handled by the job's logger of the same name (level, handlers)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        logging.getLogger(record.name).handle(record)
+
+
+_stopping = {"signal": 0, "parent": 0}  # in a worker: the SIGTERM that stopped it; the job's PID
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    _stopping["signal"] = signum
+    termination.handle(signum, frame)
+
+
+def _call(fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)``, unless this worker was stopped: an adjective already queued to it must not
+    start once its job is ending."""
+    if _stopping["signal"]:
+        raise termination.Terminated(f"terminated by signal {_stopping['signal']}")
+    try:
+        return fn(*args)
+    finally:
+        if _stopping["signal"] and os.getppid() != _stopping["parent"]:
+            os._exit(128 + _stopping["signal"])  # the job is gone (killed): its runs are ended
+
+
+def _start(
+    records: Any,
+    level: int,
+    threads: int,
+    init: Callable[..., None],
+    initargs: tuple[Any, ...],
+) -> None:
+    """A worker's setup: signals, logging through the job, threads, then ``init``."""
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    _stopping["parent"] = os.getppid()
+    if sys.platform == "linux":  # SIGTERM when the job dies, even by SIGKILL
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    root = logging.getLogger()
+    root.handlers[:] = [logging.handlers.QueueHandler(records)]
+    root.setLevel(level)
+    import torch
+
+    from tactile_exp.models.numba_setup import numba
+
+    torch.set_num_threads(threads)
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    init(*initargs)
