@@ -23,12 +23,21 @@ TINY_DATA = [
 ]
 
 
+def _shared_tmp(factory: pytest.TempPathFactory, name: str) -> Path:
+    """A folder of this test run, shared by its xdist worker processes (each has its own basetemp
+    under one parent), so kernels compile and tiny data is generated once, not once per worker."""
+    base = factory.getbasetemp()
+    path = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / name
+    path.mkdir(exist_ok=True)
+    return path
+
+
 @pytest.fixture(scope="session", autouse=True)
 def numba_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One compiled-kernel cache per test run, shared by every test (set before numba loads);
     ``$TACTILE_EXP_TEST_NUMBA_CACHE`` keeps it across runs (CI's fast then slow suite)."""
     kept = os.environ.get("TACTILE_EXP_TEST_NUMBA_CACHE")
-    path = Path(kept) if kept else tmp_path_factory.mktemp("numba")
+    path = Path(kept) if kept else _shared_tmp(tmp_path_factory, "numba")
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     return path
 
@@ -38,7 +47,7 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Generated data and preprocessed arrays; ``$TACTILE_EXP_TEST_CACHE`` keeps them across
     sessions (mutation testing runs pytest once per mutant; entries are keyed by content)."""
     kept = os.environ.get("TACTILE_EXP_TEST_CACHE")
-    return Path(kept) if kept else tmp_path_factory.mktemp("cache")
+    return Path(kept) if kept else _shared_tmp(tmp_path_factory, "cache")
 
 
 @pytest.fixture(scope="session")
