@@ -49,3 +49,8 @@ def check() -> None:
     """Raise a SIGTERM this process received, in case the handler's exception was dropped."""
     if _state["received"] and not _state["depth"]:
         raise Terminated(f"terminated by signal {_state['received']}")
+
+
+def received() -> int:
+    """The SIGTERM this process received, 0 if none."""
+    return _state["received"]

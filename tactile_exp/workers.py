@@ -110,24 +110,19 @@ class _Relay(logging.Handler):
         logging.getLogger(record.name).handle(record)
 
 
-_stopping = {"signal": 0, "parent": 0}  # in a worker: the SIGTERM that stopped it; the job's PID
-
-
-def _on_sigterm(signum: int, frame: object) -> None:
-    _stopping["signal"] = signum
-    termination.handle(signum, frame)
+_job = {"pid": 0}  # in a worker: the job's PID
 
 
 def _call(fn: Callable[..., Any], *args: Any) -> Any:
     """``fn(*args)``, unless this worker was stopped: an adjective already queued to it must not
     start once its job is ending."""
-    if _stopping["signal"]:
-        raise termination.Terminated(f"terminated by signal {_stopping['signal']}")
+    termination.check()
     try:
         return fn(*args)
     finally:
-        if _stopping["signal"] and os.getppid() != _stopping["parent"]:
-            os._exit(128 + _stopping["signal"])  # the job is gone (killed): its runs are ended
+        signum = termination.received()
+        if signum and os.getppid() != _job["pid"]:
+            os._exit(128 + signum)  # the job is gone (killed): its runs are ended
 
 
 def _start(
@@ -138,8 +133,8 @@ def _start(
     initargs: tuple[Any, ...],
 ) -> None:
     """A worker's setup: signals, logging through the job, threads, then ``init``."""
-    signal.signal(signal.SIGTERM, _on_sigterm)
-    _stopping["parent"] = os.getppid()
+    signal.signal(signal.SIGTERM, termination.handle)
+    _job["pid"] = os.getppid()
     if sys.platform == "linux":  # SIGTERM when the job dies, even by SIGKILL
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     root = logging.getLogger()
