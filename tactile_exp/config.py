@@ -22,8 +22,9 @@ DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accept
 # Keys that change where results go or what they are compared with, not what they are: left out
 # of the config hash. ``trunk`` only feeds the visual modalities' nodes, hashed there: a haptic
 # row is the same job whatever trunk weights the grid was given. ``workers`` changes how fast a
-# job runs, not its results (beyond float rounding): a finished job is not rerun for it.
-UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers")
+# job runs, not its results (beyond float rounding): a finished job is not rerun for it. ``sweep``
+# (sweep.on_invalid) says what a sweep does with other jobs.
+UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "sweep")
 
 
 class ConfigError(ValueError):
