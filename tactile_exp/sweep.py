@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import yaml
+from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig
@@ -148,17 +149,16 @@ def cell(overrides: Sequence[str], where: Sequence[int]) -> str:
     return " ".join(overrides[i] for i in where if i < len(overrides)) or "(no overrides)"
 
 
-def job_settings(config: DictConfig, overrides: Sequence[str]) -> Settings:
-    """One job's settings, composed as its launcher composes them and checked as a single run
-    checks them before it creates a run (``experiment.open_data``: no data is preprocessed)."""
-    from hydra.core.global_hydra import GlobalHydra
-
+def job_settings(job: DictConfig) -> Settings:
+    """One job's settings, checked as a single run checks them before it creates a run
+    (``experiment.open_data``: no data is preprocessed)."""
     from tactile_exp.config import settings_from_config
     from tactile_exp.experiment import open_data
 
-    job = GlobalHydra.instance().config_loader().load_sweep_config(config, list(overrides))
-    sweep_id = str(Path(config.hydra.sweep.dir))  # as the job tags its runs
-    settings = settings_from_config(job, sweep_id=sweep_id, overrides=tuple(overrides))
+    sweep_id = str(Path(job.hydra.sweep.dir))  # as the job tags its runs
+    settings = settings_from_config(
+        job, sweep_id=sweep_id, overrides=tuple(job.hydra.overrides.task)
+    )
     open_data(settings)
     return settings
 
@@ -209,7 +209,10 @@ class SweepJob:
 
     def record(self, status: str, reason: str = "") -> None:
         content = {"num": self.num, "status": status, "overrides": list(self.overrides)}
-        _write(self.folder / OUTCOMES / f"{self.num}.yaml", content | {"reason": reason})
+        _write(
+            self.folder / OUTCOMES / f"{self.num}.yaml",
+            content | ({"reason": reason} if reason else {}),
+        )
 
     @contextmanager
     def recorded(self) -> Iterator[None]:
@@ -257,8 +260,11 @@ class PrepareSweep(Callback):
             if jobs is None:
                 valid, invalid = [settings_from_config(config)], []
             else:
+                try:
+                    valid, invalid = check_jobs(config, jobs)
+                except HydraException:  # a cell with no config file (model=nope): the sweeper
+                    return  # says so in its own words before it launches anything
                 self.jobs = jobs
-                valid, invalid = check_jobs(config, jobs)
                 listing = {"on_invalid": on_invalid, "jobs": len(jobs), "invalid": invalid}
                 _write(folder / INVALID_FILE, listing)
             if invalid:
@@ -300,11 +306,15 @@ def check_jobs(
     config: DictConfig, jobs: Sequence[Sequence[str]]
 ) -> tuple[list[Settings], list[dict[str, Any]]]:
     """The valid jobs' settings, and the invalid ones (``num``, ``overrides``, ``reason``)."""
+    from hydra.core.global_hydra import GlobalHydra
+
+    loader = GlobalHydra.instance().config_loader()
     valid, invalid = [], []
     where = axes(jobs)
     for num, overrides in enumerate(jobs):
+        job = loader.load_sweep_config(config, list(overrides))  # as its launcher composes it
         try:
-            valid.append(job_settings(config, overrides))
+            valid.append(job_settings(job))
         except Exception as err:  # whatever would stop the job before its first run
             invalid.append(
                 {

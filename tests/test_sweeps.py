@@ -221,6 +221,12 @@ def test_on_invalid_fail_runs_nothing(multirun, mlflow_uri, tmp_path, capsys):
     assert [e.name for e in MlflowClient(mlflow_uri).search_experiments()] == ["Default"]
 
 
+def test_a_cell_without_a_config_file_is_left_to_hydra_s_own_error(multirun, tmp_path):
+    """`model=nope`: the sweeper names the missing file before it launches anything."""
+    sweep.PrepareSweep().on_multirun_start(multirun("model=linear,nope", "adjectives=[hard]"))
+    assert not (tmp_path / "multirun" / "invalid.yaml").exists()
+
+
 def test_skipped_cells_are_listed_for_the_report_before_any_job(
     multirun, mlflow_uri, tmp_path, caplog
 ):
