@@ -278,7 +278,7 @@ class PrepareSweep(Callback):
                 raise ConfigError(f"all {len(self.jobs)} jobs have an invalid config; none run")
             tracker = Tracker(valid[0].tracking.uri, valid[0].tracking.experiment)
             if invalid:
-                _track_invalid(tracker, valid[0].sweep_id, listing)
+                track_invalid(tracker, valid[0].sweep_id, listing)
             signal.signal(signal.SIGTERM, functools.partial(terminate_workers, tracker=tracker))
             load(valid[0])
 
@@ -336,7 +336,7 @@ def _show_invalid(listing: dict[str, Any], path: Path) -> None:
     log.warning("\n".join(lines))
 
 
-def _track_invalid(tracker: Tracker, sweep_id: str, content: dict[str, Any]) -> None:
+def track_invalid(tracker: Tracker, sweep_id: str, content: dict[str, Any]) -> None:
     """The skipped cells as a small sweep-level run (``run_level=sweep``, tagged with the
     sweep's ``sweep_id``): ``invalid.yaml`` as its artifact, one line per cell as its
     ``invalid`` tag, for the report."""
