@@ -21,6 +21,7 @@ import os
 import signal
 import sys
 import time
+import traceback
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -244,43 +245,54 @@ class PrepareSweep(Callback):
         self.jobs: list[tuple[str, ...]] = []  # as the basic sweeper launches them
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from tactile_exp.errors import EXIT_USER_ERROR, USER_ERRORS, reported
+
+        # Hydra turns an exception raised here into a warning and launches the jobs all the
+        # same, so a user error must exit: one line, or with HYDRA_FULL_ERROR=1 its traceback.
+        try:
+            with reported():
+                self._prepare(config)
+        except USER_ERRORS:
+            traceback.print_exc()
+            sys.exit(EXIT_USER_ERROR)
+
+    def _prepare(self, config: DictConfig) -> None:
+        """What ``on_multirun_start`` does; a user error raised here stops the sweep."""
         from tactile_exp.config import ConfigError, settings_from_config
-        from tactile_exp.errors import reported
         from tactile_exp.experiment import load
         from tactile_exp.tracking import Tracker
 
         folder = sweep_folder(config.hydra)
-        with reported():
-            on_invalid = config.get("sweep", {}).get("on_invalid", "skip")
-            if on_invalid not in ON_INVALID:
-                raise ConfigError(f"sweep.on_invalid: must be skip or fail, got {on_invalid!r}")
-            for old in [folder / INVALID_FILE, *(folder / OUTCOMES).glob("*.yaml")]:
-                old.unlink(missing_ok=True)  # an earlier sweep's, in the same folder
-            jobs = sweep_jobs(config)
-            if jobs is None:
-                valid, invalid = [settings_from_config(config)], []
-            else:
-                try:
-                    valid, invalid = check_jobs(config, jobs)
-                except HydraException:  # a cell with no config file (model=nope): the sweeper
-                    return  # says so in its own words before it launches anything
-                self.jobs = jobs
-                listing = {"on_invalid": on_invalid, "jobs": len(jobs), "invalid": invalid}
-                _write(folder / INVALID_FILE, listing)
-            if invalid:
-                _show_invalid(listing, folder / INVALID_FILE)
-                if on_invalid == "fail":
-                    raise ConfigError(
-                        f"sweep.on_invalid=fail: {len(invalid)} of {len(self.jobs)} jobs have "
-                        "an invalid config (listed above); none run"
-                    )
-            if not valid:
-                raise ConfigError(f"all {len(self.jobs)} jobs have an invalid config; none run")
-            tracker = Tracker(valid[0].tracking.uri, valid[0].tracking.experiment)
-            if invalid:
-                track_invalid(tracker, valid[0].sweep_id, listing)
-            signal.signal(signal.SIGTERM, functools.partial(terminate_workers, tracker=tracker))
-            load(valid[0])
+        on_invalid = config.get("sweep", {}).get("on_invalid", "skip")
+        if on_invalid not in ON_INVALID:
+            raise ConfigError(f"sweep.on_invalid: must be skip or fail, got {on_invalid!r}")
+        for old in [folder / INVALID_FILE, *(folder / OUTCOMES).glob("*.yaml")]:
+            old.unlink(missing_ok=True)  # an earlier sweep's, in the same folder
+        jobs = sweep_jobs(config)
+        if jobs is None:
+            valid, invalid = [settings_from_config(config)], []
+        else:
+            try:
+                valid, invalid = check_jobs(config, jobs)
+            except HydraException:  # a cell with no config file (model=nope): the sweeper
+                return  # says so in its own words before it launches anything
+            self.jobs = jobs
+            listing = {"on_invalid": on_invalid, "jobs": len(jobs), "invalid": invalid}
+            _write(folder / INVALID_FILE, listing)
+        if invalid:
+            _show_invalid(listing, folder / INVALID_FILE)
+            if on_invalid == "fail":
+                raise ConfigError(
+                    f"sweep.on_invalid=fail: {len(invalid)} of {len(self.jobs)} jobs have "
+                    "an invalid config (listed above); none run"
+                )
+        if not valid:
+            raise ConfigError(f"all {len(self.jobs)} jobs have an invalid config; none run")
+        tracker = Tracker(valid[0].tracking.uri, valid[0].tracking.experiment)
+        if invalid:
+            track_invalid(tracker, valid[0].sweep_id, listing)
+        signal.signal(signal.SIGTERM, functools.partial(terminate_workers, tracker=tracker))
+        load(valid[0])
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         ended = {}

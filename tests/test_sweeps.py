@@ -205,14 +205,21 @@ def _restore_sigterm():
     return lambda: signal.signal(signal.SIGTERM, handler)
 
 
-def test_on_invalid_fail_runs_nothing(multirun, mlflow_uri, tmp_path, capsys):
+@pytest.mark.parametrize("full_error", ["0", "1"])
+def test_on_invalid_fail_runs_nothing(
+    full_error, multirun, mlflow_uri, tmp_path, capsys, monkeypatch
+):
+    """Also with HYDRA_FULL_ERROR=1 (a traceback): Hydra only warns about a callback's exception
+    and launches the jobs all the same, so the callback exits itself."""
+    monkeypatch.setenv("HYDRA_FULL_ERROR", full_error)
     config = multirun(*GRID, "sweep.on_invalid=fail")
     with pytest.raises(SystemExit) as stop:
         sweep.PrepareSweep().on_multirun_start(config)
     assert stop.value.code == 2
-    errors = capsys.readouterr().err.splitlines()
-    assert errors[-1] == (
-        "error: sweep.on_invalid=fail: 1 of 4 jobs have an invalid config (listed above); none run"
+    error = "sweep.on_invalid=fail: 1 of 4 jobs have an invalid config (listed above); none run"
+    last = capsys.readouterr().err.splitlines()[-1]
+    assert last == (
+        f"error: {error}" if full_error == "0" else f"tactile_exp.config.ConfigError: {error}"
     )
     listed = yaml.safe_load((tmp_path / "multirun" / "invalid.yaml").read_text())
     assert listed["on_invalid"] == "fail" and listed["jobs"] == 4
