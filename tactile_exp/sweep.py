@@ -272,11 +272,19 @@ class PrepareSweep(Callback):
         if jobs is None:
             valid, invalid = [settings_from_config(config)], []
         else:
+            start = time.perf_counter()
+            log.info("checking the configs of %d jobs before the first starts", len(jobs))
             try:
                 valid, invalid = check_jobs(config, jobs)
             except HydraException:  # a cell with no config file (model=nope): the sweeper
                 return  # says so in its own words before it launches anything
             self.jobs = jobs
+            log.info(
+                "%d valid, %d invalid (checked in %.1f s)",
+                len(valid),
+                len(invalid),
+                time.perf_counter() - start,
+            )
             listing = {"on_invalid": on_invalid, "jobs": len(jobs), "invalid": invalid}
             _write(folder / INVALID_FILE, listing)
         if invalid:
