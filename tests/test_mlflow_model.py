@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -112,7 +113,9 @@ def test_served_model_answers_with_predicts_scores(registered, mlflow_uri, tmp_p
     command = [sys.executable, "-m", "mlflow", "models", "serve", "-m", "models:/touch/1"]
     command += ["--env-manager", "local", "--host", "127.0.0.1", "--port", str(port)]
     log = (tmp_path / "serve.log").open("w")
-    server = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+    server = subprocess.Popen(
+        command, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+    )
     try:
         body = {"dataframe_split": _request(data, trials).to_dict(orient="split")}
         request = urllib.request.Request(
@@ -131,7 +134,7 @@ def test_served_model_answers_with_predicts_scores(registered, mlflow_uri, tmp_p
                     raise AssertionError((tmp_path / "serve.log").read_text()[-2000:]) from None
                 time.sleep(0.5)
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)  # mlflow and the uvicorn it starts
         server.wait(timeout=30)
         log.close()
     expected = predict(run_id=job, tracking_uri=mlflow_uri, data=data, trials=trials)

@@ -15,6 +15,7 @@ import pytest
 from tactile_exp.combine import unit_members
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.sources import DATA_SOURCES
+from tactile_exp.deploy.__main__ import main
 from tactile_exp.deploy.onnx_export import channel_names, export_job
 from tactile_exp.experiment import run
 from tactile_exp.modalities.multimodal import visual_units
@@ -28,6 +29,7 @@ from tactile_exp.predict import (
     predict,
     read_photographs,
 )
+from tactile_exp.preprocess.haptic import trial_signals
 
 SMALL_VISUAL = ["modality.size=32", "modality.batch_size=64"]
 SMALL_MULTIMODAL = ["modality.visual.size=32", "modality.visual.batch_size=128"]
@@ -49,6 +51,15 @@ def _held_out(uri: str, job: str, dataset) -> tuple[int, list[str]]:
     first = units[0].split("#")[0]
     obj = by_name.get(first, by_stem.get(first.rsplit("_v", 1)[0]))
     return obj, sorted(t.name for t in dataset.trials if t.object_id == obj)
+
+
+def _docs_reference() -> dict[str, object]:
+    """The numpy reference of the haptic preprocessing in docs/deployment.md, executed."""
+    text = (Path(__file__).parents[1] / "docs" / "deployment.md").read_text()
+    block = text.split("<!-- reference: haptic preprocessing -->\n```python\n")[1].split("```")[0]
+    namespace: dict[str, object] = {}
+    exec(compile(block, "docs/deployment.md", "exec"), namespace)
+    return namespace
 
 
 def _photos(dataset, obj: int, folder: Path) -> Path:
@@ -78,16 +89,18 @@ def _photos(dataset, obj: int, folder: Path) -> Path:
 def test_onnxruntime_equals_predict_on_a_held_out_object(
     tiny_config, mlflow_uri, tmp_path, row, overrides
 ):
-    pytest.importorskip("onnx")
+    onnx = pytest.importorskip("onnx")
     settings = settings_from_config(tiny_config(overrides, "[hard]"))
     job = run(settings).run_id
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
     obj, trials = _held_out(mlflow_uri, job, dataset)
     out = tmp_path / "onnx"
-    manifest = export_job(job, out, tracking_uri=mlflow_uri)
-    assert json.loads((out / "manifest.json").read_text()) == manifest
+    assert main(["--tracking-uri", mlflow_uri, "onnx", job, str(out)]) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["row"] == row and list(manifest["adjectives"]) == ["hard"]
     entry = manifest["adjectives"]["hard"]
+    for path in out.glob("*.onnx"):
+        onnx.checker.check_model(str(path), full_check=True)
     state = np.load(out / "preprocess.npz", allow_pickle=False)
 
     feeds: dict[str, np.ndarray] = {}
@@ -105,6 +118,13 @@ def test_onnxruntime_equals_predict_on_a_held_out_object(
             instances = haptic_instances(
                 tracker, data=dataset.path, trials=trials, child=entry["run_id"]
             )
+        reference = _docs_reference()
+        trial = next(dataset.iter_trials([trials[0]]))
+        x = trial_signals(trial, haptic["pac_downsample"])
+        rows = trial.ep_segments()
+        segments = [[x[f, rows[ep]] for ep in haptic["eps"]] for f in range(2)]
+        ours = reference["trial_instances"](segments, state, "hard", haptic)
+        np.testing.assert_allclose(ours, instances.X[: len(ours)], rtol=1e-4, atol=1e-4)
         per_unit = haptic["instances_per_unit"]
         if manifest["combine_instances"] == "separate" and manifest["modality"] == "haptic":
             feeds["instances"] = instances.X
@@ -135,11 +155,14 @@ def test_onnxruntime_equals_predict_on_a_held_out_object(
     assert (got > 0).tolist() == [p == ["hard"] for p in expected.predicted()]
 
 
-def test_rows_without_a_network_are_refused(tiny_config, mlflow_uri, tmp_path):
+def test_rows_without_a_network_are_refused(tiny_config, mlflow_uri, tmp_path, capsys):
     settings = settings_from_config(
         tiny_config(["experiment=table1_a_haptic_static_1trial"], "[hard]")
     )
     job = run(settings).run_id
     with pytest.raises(PredictError, match="keeps no network.*linear SVM"):
         export_job(job, tmp_path / "out", tracking_uri=mlflow_uri)
+    assert main(["--tracking-uri", mlflow_uri, "onnx", job, str(tmp_path / "out")]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"error: run {job} is a linear_svm job on modality haptic_features")
     assert not (tmp_path / "out").exists()

@@ -108,6 +108,9 @@ def _haptic_layout(settings: dict[str, Any], trials: int) -> dict[str, Any]:
         "raw_signals": list(SIGNALS),
         "eps": list(EPS),
         "channels": channel_names(int(settings["pca_components"])),
+        "instance": "(channels, steps): one finger's sub-sampled copy of a trial",
+        "unit_order": "trials by name (an object's first ones repeated in order when fewer), "
+        "then finger_0, finger_1, then offset",
     }
 
 
@@ -120,6 +123,8 @@ def _visual_layout(settings: dict[str, Any], views: int) -> dict[str, Any]:
         "seed": settings["seed"],
         "views_per_unit": views,
         "features": 832,
+        "unit_order": "the object's photographs by file name: the first views_per_unit (all of "
+        "them repeated in order when fewer)",
     }
 
 
