@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -22,6 +23,7 @@ from tactile_exp import store
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.deploy.__main__ import main
+from tactile_exp.deploy.mlflow_model import log_job
 from tactile_exp.experiment import run
 from tactile_exp.predict import predict
 
@@ -64,6 +66,7 @@ def test_logged_model_scores_as_predict_and_its_version_is_tagged(registered, ml
     client = MlflowClient(mlflow_uri)
     version = client.get_model_version("touch", "1")
     parent = client.get_run(job)
+    assert parent.info.status == "FINISHED"  # the job's run, which holds the model, as it was
     assert version.tags["row"] == "I" and version.tags["experiment"] == "tactile_exp"
     assert version.tags["data.identity"] == parent.data.tags["data.identity"]
     assert float(version.tags["mean_auc"]) == pytest.approx(parent.data.metrics["mean_auc"], 1e-4)
@@ -141,3 +144,30 @@ def test_served_model_answers_with_predicts_scores(registered, mlflow_uri, tmp_p
     rows = answer["predictions"]
     assert [r["unit"] for r in rows] == expected.units
     np.testing.assert_allclose([r["hard"] for r in rows], expected.scores[:, 0], atol=1e-6)
+
+
+@pytest.mark.slow  # a multimodal job: trains the ConvNet part and prepares photographs
+@pytest.mark.job
+def test_multimodal_model_takes_trials_and_photographs(tiny_config, mlflow_uri, tmp_path):
+    import mlflow
+
+    small = ["modality.visual.size=32", "modality.visual.batch_size=128"]
+    overrides = ["experiment=table1_m_multimodal_i_l", *small]
+    settings = settings_from_config(tiny_config(overrides, "[hard]"))
+    job = run(settings).run_id
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+    info, version = log_job(job, tracking_uri=mlflow_uri)
+    assert version is None
+    obj, paths = next(iter(dataset.photographs().items()))
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for path in paths:
+        shutil.copy(path, folder / path.name)
+    trials = sorted(t.name for t in dataset.trials if t.object_id == obj)
+    request = _request(dataset.path, trials).assign(photos=str(folder))
+    got = mlflow.pyfunc.load_model(info.model_uri).predict(request)
+    expected = predict(
+        run_id=job, tracking_uri=mlflow_uri, data=dataset.path, trials=trials, photos=folder
+    )
+    assert got["unit"].tolist() == expected.units
+    np.testing.assert_allclose(got["hard"], expected.scores[:, 0], atol=1e-6)

@@ -95,7 +95,8 @@ def log_job(
             "job": job_id,
         }
         example = _example(tracker, config, next(iter(children.values())))
-        with mlflow.start_run(run_id=job_id):
+        mlflow.start_run(run_id=job_id)
+        try:
             info = mlflow.pyfunc.log_model(
                 name=ARTIFACT_PATH,
                 python_model=str(MODEL_FILE),
@@ -105,6 +106,8 @@ def log_job(
                 pip_requirements=_requirements(),
                 tags=tags,
             )
+        finally:  # FINISHED, as the job was: a failed log must not mark the job FAILED
+            mlflow.end_run()
     if not register:
         return info, None
     return info, mlflow.register_model(info.model_uri, register, tags=tags).version
