@@ -171,3 +171,7 @@ def test_multimodal_model_takes_trials_and_photographs(tiny_config, mlflow_uri, 
     )
     assert got["unit"].tolist() == expected.units
     np.testing.assert_allclose(got["hard"], expected.scores[:, 0], atol=1e-6)
+    local = Path(mlflow.artifacts.download_artifacts(info.model_uri))
+    example = json.loads((local / "input_example.json").read_text())
+    assert example["columns"] == ["data", "trial", "photos"]
+    assert example["data"][0][2].startswith("photos/")

@@ -39,19 +39,25 @@ def _signature(adjectives: list[str]) -> Any:
 
 
 def _example(tracker: Any, config: dict[str, Any], child: str) -> Any:
-    """A held-out object's trials of the job's data file (haptic rows; None for rows that also
-    take photographs: an example folder of one object's photographs does not exist)."""
+    """A held-out unit of the job as a request: its trial in the job's data file; for rows that
+    take photographs, ``photos/<object stem>``, the folder of that object's photographs a user
+    makes (the data file keeps them all in one folder), so that example shows the shape only."""
     import pandas as pd
 
     from tactile_exp.data.sources import DATA_SOURCES
 
-    if INPUTS[str(config["modality"]["name"])][1]:
-        return None
-    data = {k: v for k, v in config["data"].items() if k != "name"}
-    path = DATA_SOURCES.build(str(config["data"]["name"]), **data).path
+    takes_trials, takes_photos = INPUTS[str(config["modality"]["name"])]
     scores = Path(tracker.client.download_artifacts(child, "scores.csv")).read_text()
-    trial = next(csv.DictReader(io.StringIO(scores)))["unit"].split("#")[0]
-    return pd.DataFrame({"data": [str(path)], "trial": [trial]})
+    unit = next(csv.DictReader(io.StringIO(scores)))["unit"].split("#")[0]
+    example: dict[str, list[str]] = {}
+    if takes_trials:
+        data = {k: v for k, v in config["data"].items() if k != "name"}
+        path = DATA_SOURCES.build(str(config["data"]["name"]), **data).path
+        example = {"data": [str(path)], "trial": [unit]}
+    if takes_photos:
+        stem = unit.rsplit("_", 1)[0]  # <stem>_<trial> or <stem>_v<view>
+        example["photos"] = [f"photos/{stem}"]
+    return pd.DataFrame(example)
 
 
 def log_job(
