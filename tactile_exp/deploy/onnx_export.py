@@ -27,6 +27,7 @@ from torch import nn
 from tactile_exp import store
 from tactile_exp.combine import COMBINERS
 from tactile_exp.data.layout import EPS
+from tactile_exp.models.googlenet import INCEPTION5A_CHANNELS as FEATURES
 from tactile_exp.predict import PredictError, _children, _config, _Inputs, _job, _tracker
 from tactile_exp.preprocess.haptic import N_SCALAR, SIGNALS
 
@@ -122,7 +123,7 @@ def _visual_layout(settings: dict[str, Any], views: int) -> dict[str, Any]:
         "weights": settings["weights"],
         "seed": settings["seed"],
         "views_per_unit": views,
-        "features": 832,
+        "features": FEATURES,
         "unit_order": "the object's photographs by file name: the first views_per_unit (all of "
         "them repeated in order when fewer)",
     }
@@ -143,6 +144,36 @@ def _export(
             dynamic_axes=axes, opset_version=OPSET, dynamo=False,
         )  # fmt: skip
     onnx.checker.check_model(str(path), full_check=True)
+
+
+def _network(
+    tracker: Any, child: str, modality: str, settings: dict[str, Any], keeps: bool, combine: int
+) -> tuple[DecisionNet, dict[str, list[int | None]], int, int]:
+    """Child run ``child``'s network as plain torch, its inputs' shapes (None: any number of
+    rows), and the trials and views one row holds. ``keeps``: the combiner scores instances
+    (``separate``), else ``combine`` instances' features are concatenated for the head."""
+    if modality == "multimodal":  # the ConvNet part, the object's views, one linear layer
+        part = store.load_model(tracker, child, "parts/haptic", TORCH)
+        model = store.load_model(tracker, child, "model", TORCH)
+        trials, views = int(settings["trials"]), int(settings["views"])
+        count = trials * FINGERS * int(settings["haptic"]["offsets"])
+        inputs = {"instances": [None, count, *part.input_shape_], "views": [None, views, FEATURES]}
+        return DecisionNet(part.body_, *_layer(model), per_unit=True), inputs, trials, views
+    if modality == "haptic":
+        model = store.load_model(tracker, child, "model", TORCH)
+        shape = list(model.input_shape_)
+        if keeps:
+            return DecisionNet(model.body_, *_layer(model)), {"instances": [None, *shape]}, 1, 0
+        head = store.load_model(tracker, child, "head", TORCH)
+        count = combine * FINGERS * int(settings["offsets"])
+        inputs = {"instances": [None, count, *shape]}
+        return DecisionNet(model.body_, *_layer(head), per_unit=True), inputs, combine, 0
+    if keeps:  # visual, one view per row
+        model = store.load_model(tracker, child, "model", TORCH)
+        return DecisionNet(nn.Identity(), *_layer(model)), {"features": [None, FEATURES]}, 0, 1
+    head = store.load_model(tracker, child, "head", TORCH)
+    inputs = {"views": [None, combine, FEATURES]}
+    return DecisionNet(nn.Identity(), *_layer(head), per_unit=True), inputs, 0, combine
 
 
 def export_job(
@@ -189,49 +220,27 @@ def export_job(
         settings, state, where = reader.state(child)
         haptic = settings.get("haptic") if modality == "multimodal" else settings
         visual = settings.get("visual") if modality == "multimodal" else settings
-        inputs: dict[str, list[int | None]] = {}
-        if modality == "haptic":
-            model = store.load_model(tracker, child, "model", TORCH)
-            shape = list(model.input_shape_)
-            if keeps:
-                net = DecisionNet(model.body_, *_layer(model))
-                inputs["instances"] = [None, *shape]
-                trials = 1
-            else:
-                head = store.load_model(tracker, child, "head", TORCH)
-                net = DecisionNet(model.body_, *_layer(head), per_unit=True)
-                trials = combine
-                inputs["instances"] = [None, trials * FINGERS * int(haptic["offsets"]), *shape]
-            manifest["haptic"] = _haptic_layout(haptic, trials)
-        elif modality == "visual":
-            if keeps:
-                model = store.load_model(tracker, child, "model", TORCH)
-                net, views = DecisionNet(nn.Identity(), *_layer(model)), 1
-                inputs["features"] = [None, 832]
-            else:
-                head = store.load_model(tracker, child, "head", TORCH)
-                net, views = DecisionNet(nn.Identity(), *_layer(head), per_unit=True), combine
-                inputs["views"] = [None, views, 832]
-            manifest["visual"] = _visual_layout(visual, views)
-        else:  # multimodal: the ConvNet's part, the object's views, one linear layer
-            part = store.load_model(tracker, child, "parts/haptic", TORCH)
-            model = store.load_model(tracker, child, "model", TORCH)
-            trials, views = int(settings["trials"]), int(settings["views"])
-            net = DecisionNet(part.body_, *_layer(model), per_unit=True)
-            count = trials * FINGERS * int(haptic["offsets"])
-            inputs["instances"] = [None, count, *part.input_shape_]
-            inputs["views"] = [None, views, 832]
-            manifest["haptic"] = _haptic_layout(haptic, trials)
-            manifest["visual"] = _visual_layout(visual, views)
+        try:
+            net, inputs, trials, views = _network(
+                tracker, child, modality, settings, keeps, combine
+            )
+            if modality != "visual":
+                manifest["haptic"] = _haptic_layout(haptic, trials)
+            if modality != "haptic":
+                manifest["visual"] = _visual_layout(visual, views)
+                key = (visual["size"], visual["layout"], visual["seed"], visual["weights"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise store.ArtifactError(
+                f"{where}/settings.json: missing or bad entry {err}"
+            ) from None
         prefix = "" if modality == "multimodal" else f"{modality}."  # multimodal's are prefixed
         arrays.update({f"{adjective}.{prefix}{k}": np.asarray(v) for k, v in state.items()})
         if modality != "haptic":
-            key = (visual["size"], visual["layout"], visual["seed"], visual["weights"])
             if trunk_key is not None and key != trunk_key:
                 raise PredictError(f"run {job_id}: adjectives use different GoogLeNet trunks")
             trunk_key = key
         path = folder / f"{adjective}.onnx"
-        dummy = tuple(torch.zeros([2, *shape[1:]]) for shape in inputs.values())
+        dummy = tuple(torch.zeros([2, *dims[1:]]) for dims in inputs.values())
         _export(net, dummy, list(inputs), path, "decision")
         entries[adjective] = {"file": path.name, "run_id": child, "inputs": inputs}
         print(f"{adjective}: {path.name} ({path.stat().st_size / 1e3:.1f} kB)", flush=True)
