@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from mlflow.exceptions import MlflowException
+
 from tactile_exp import store
 from tactile_exp.predict import PredictError
 
@@ -44,6 +46,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except (PredictError, store.ArtifactError) as err:
         print(f"error: {err}", file=sys.stderr)
+        return 2
+    except MlflowException as err:  # e.g. --register on a store without a Model Registry
+        print(f"error: {err.message}", file=sys.stderr)
         return 2
     return 0
 
