@@ -19,6 +19,7 @@ import os
 import shlex
 import socket
 import sys
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -258,7 +259,9 @@ def log_summary(study: optuna.Study, tracker: Tracker) -> str:
             figures["param_importances.png"] = plots.plot_param_importances
         for path, plot in figures.items():
             try:
-                axes = plot(study)
+                with warnings.catch_warnings():  # "experimental" since Optuna 2.2
+                    warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                    axes = plot(study)
             except (ValueError, RuntimeError) as err:  # e.g. every trial had the same values
                 log.warning("study %s: no %s (%s)", study.study_name, path, err)
                 continue
