@@ -278,3 +278,31 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     sentinel = experiment.run(settings)
     assert math.isnan(sentinel.mean_auc)  # the test scores were NaN
     assert math.isfinite(clean) and value(settings.objective, sentinel.val_aucs) == clean
+
+
+SEARCHES = {  # each search file, and the Table I row it is meant for
+    "haptic_cnn": "table1_i_haptic_cnn_1trial",
+    "haptic_lstm": "table1_g_haptic_lstm",
+    "head": "table1_j_haptic_cnn_10trials",
+}
+
+
+@pytest.mark.parametrize("name", sorted(SEARCHES))
+def test_search_files_sample_keys_that_exist(name, compose_config):
+    """Each conf/search file is a study of its own name whose sampled keys exist in its row."""
+    assert {p.stem for p in (CONF / "search").glob("*.yaml")} == set(SEARCHES)
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", [f"search={name}"], return_hydra_config=True)
+    assert cfg.hydra.sweeper.study_name == name and cfg.study.role == "trial"
+    assert 0 < cfg.validation.fraction < 1
+    space = search.search_space(dict(cfg.hydra.sweeper.params))
+    values = {k: d.choices[0] if hasattr(d, "choices") else d.low for k, d in space.items()}
+    sampled = [f"{k}={search.as_override(v)}" for k, v in values.items()]
+    row = compose_config([f"search={name}", f"experiment={SEARCHES[name]}", *sampled])
+    for key, v in values.items():
+        node = row
+        for part in key.split("."):
+            node = node[int(part)] if part.isdigit() else node[part]
+        assert str(node) == str(v)
