@@ -265,6 +265,8 @@ def log_summary(study: optuna.Study, tracker: Tracker) -> str:
             except (ValueError, RuntimeError) as err:  # e.g. every trial had the same values
                 log.warning("study %s: no %s (%s)", study.study_name, path, err)
                 continue
+            if axes.get_legend() is not None:  # Optuna puts it outside the axes, cut off
+                axes.legend(loc="lower right", fontsize=8)
             figure = axes.figure
             figure.set_size_inches(7, 4.5)
             figure.tight_layout()
