@@ -23,6 +23,7 @@ def main(cfg: DictConfig) -> float:
     from tactile_exp.config import settings_from_config
     from tactile_exp.errors import reported
     from tactile_exp.experiment import run
+    from tactile_exp.objective import value
 
     hc = HydraConfig.get()
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
@@ -33,7 +34,8 @@ def main(cfg: DictConfig) -> float:
             settings = settings_from_config(
                 cfg, choices, sweep_id, Path(hc.runtime.output_dir), tuple(hc.overrides.task)
             )
-            return run(settings).mean_auc
+            # The configured validation objective, never the test AUC: any sweeper may select on it.
+            return value(settings.objective, run(settings).val_aucs)
     except termination.Terminated:
         if hc.mode != RunMode.MULTIRUN:
             raise
