@@ -38,7 +38,7 @@ def train(
     head = torch.nn.Linear(10, 1)
     start = time.perf_counter()
     curve = sgd_epochs(
-        lambda x: head(body(x)).squeeze(1),
+        lambda X_, index: head(body(X_[index])).squeeze(1),
         [*body.parameters(), *head.parameters()],
         X,
         y,
