@@ -55,10 +55,12 @@ def page(results: Path = RESULTS, bench: Path = BENCH) -> str:
     out.append("")
     for r in records:
         m = r["machine"]
+        shared = m["load_average_1min"] > m["cores"]
+        load = "a shared machine: " if shared else ""
         out += [
             f"## {r['bench']}",
             "",
-            f"Measured {r['date']} on {m['cpu']}, {m['cores']} cores (load average "
+            f"Measured {r['date']} on {m['cpu']}, {m['cores']} cores ({load}load average "
             f"{m['load_average_1min']} at the end), Python {m['python']}, torch {m['torch']}, "
             f"numba {m['numba']}. {r['notes']}".rstrip(),
             "",
