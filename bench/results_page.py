@@ -62,7 +62,7 @@ def page(results: Path = RESULTS, bench: Path = BENCH) -> str:
             "",
             f"Measured {r['date']} on {m['cpu']}, {m['cores']} cores ({load}load average "
             f"{m['load_average_1min']} at the end), Python {m['python']}, torch {m['torch']}, "
-            f"numba {m['numba']}. {r['notes']}".rstrip(),
+            f"numba {m['numba']}." + (f" {r['notes']}." if r["notes"] else ""),
             "",
             f"Regenerate: `{r['command']}`",
             "",
