@@ -23,6 +23,11 @@ def _summary(script: Path) -> str:
     return doc.split("\n\n")[0].replace("\n", " ")
 
 
+def _cell(text: str) -> str:
+    """Text for a Markdown table cell: a ``|`` of its own would end the cell."""
+    return text.replace("|", "\\|")
+
+
 def _value(v: object) -> str:
     if isinstance(v, float) and (abs(v) < 1e-2 and v != 0):
         return f"{v:.1e}"
@@ -69,7 +74,7 @@ def page(results: Path = RESULTS, bench: Path = BENCH) -> str:
             "| figure | value |",
             "|---|---|",
         ]
-        out += [f"| {k} | {_value(v)} |" for k, v in r["figures"].items()]
+        out += [f"| {_cell(k)} | {_cell(_value(v))} |" for k, v in r["figures"].items()]
         out.append("")
     return "\n".join(out)
 
