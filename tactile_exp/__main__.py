@@ -23,6 +23,7 @@ def main(cfg: DictConfig) -> float:
     from tactile_exp.config import settings_from_config
     from tactile_exp.errors import reported
     from tactile_exp.experiment import run
+    from tactile_exp.objective import value
     from tactile_exp.sweep import SweepJob
 
     hc = HydraConfig.get()
@@ -39,7 +40,8 @@ def main(cfg: DictConfig) -> float:
             settings = settings_from_config(
                 cfg, choices, sweep_id, Path(hc.runtime.output_dir), tuple(hc.overrides.task)
             )
-            return run(settings).mean_auc
+            # The configured validation objective, never the test AUC: any sweeper may select on it.
+            return value(settings.objective, run(settings).val_aucs)
     except termination.Terminated:
         if hc.mode != RunMode.MULTIRUN:
             raise

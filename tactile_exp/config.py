@@ -22,9 +22,12 @@ DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accept
 # Keys that change where results go or what they are compared with, not what they are: left out
 # of the config hash. ``trunk`` only feeds the visual modalities' nodes, hashed there: a haptic
 # row is the same job whatever trunk weights the grid was given. ``workers`` changes how fast a
-# job runs, not its results (beyond float rounding): a finished job is not rerun for it. ``sweep``
-# (sweep.on_invalid) says what a sweep does with other jobs.
-UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "sweep")
+# job runs, not its results (beyond float rounding): a finished job is not rerun for it.
+# ``objective`` is what the job returns to Hydra and ``study`` only tags it (issue 28): a search
+# trial is the same job as the plain run of its values, and is skipped once either finished.
+# ``sweep`` (sweep.on_invalid) says what a sweep does with its other jobs.
+UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "objective", "study", "sweep")
+STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best values' test run
 
 
 class ConfigError(ValueError):
@@ -71,6 +74,8 @@ class Settings:
     )
     overrides: tuple[str, ...] = ()  # the job's command-line overrides (Hydra's task overrides)
     workers: int = 1  # processes that train adjectives side by side (tactile_exp.workers)
+    objective: str = "mean_val_auc"  # what the job returns to Hydra (tactile_exp.objective)
+    study_tags: dict[str, str] = field(default_factory=dict)  # search.study, search.role, ...
 
 
 def config_hash(resolved: dict[str, Any]) -> str:
@@ -184,6 +189,9 @@ def settings_from_config(
     if isinstance(fraction, bool) or not isinstance(fraction, int | float) or not 0 <= fraction < 1:
         raise ConfigError(f"validation.fraction: must be a number in [0, 1), got {fraction!r}")
 
+    objective = _check_objective(resolved.get("objective", "mean_val_auc"))
+    study_tags = _check_study(resolved.get("study") or {}, float(fraction))
+
     tracking = resolved["tracking"]
     experiment = choices.get("experiment")
     model = choices["model"]
@@ -218,9 +226,47 @@ def settings_from_config(
         validation_fraction=float(fraction),
         overrides=overrides,
         workers=workers,
+        objective=objective,
+        study_tags=study_tags,
     )
     check_components(settings)
     return settings
+
+
+def _check_objective(name: Any) -> str:
+    """A validation metric: the value Hydra gets never depends on a test object's score."""
+    from tactile_exp.objective import OBJECTIVES, TEST_METRICS
+
+    if name in OBJECTIVES:
+        return str(name)
+    known = ", ".join(OBJECTIVES.names())
+    if isinstance(name, str) and name.split(".")[0] in TEST_METRICS:
+        raise ConfigError(
+            f"objective: {name} is scored on the test objects; what a job returns to Hydra (and "
+            f"a search selects on) must be a validation metric: {known}"
+        )
+    raise ConfigError(f"objective: unknown {name!r}; allowed: {known}")
+
+
+def _check_study(study: dict[str, Any], fraction: float) -> dict[str, str]:
+    """The search tags of a job; a search trial needs validation objects to be scored on."""
+    name, role, trial = study.get("name"), study.get("role"), study.get("trial")
+    if role is not None and role not in STUDY_ROLES:
+        raise ConfigError(f"study.role: must be one of {', '.join(STUDY_ROLES)}, got {role!r}")
+    if role is not None and not name:
+        raise ConfigError(f"study.name: missing; a job with study.role={role} names its study")
+    if role == "trial" and fraction == 0:
+        raise ConfigError(
+            f"validation.fraction: 0 holds out no validation objects, but study {name!r} selects "
+            "on them (its objective is a validation metric, never the test AUC); "
+            "set validation.fraction in (0, 1), e.g. 0.15"
+        )
+    if name is None:
+        return {}
+    tags = {"search.study": str(name), "search.role": str(role or "")}
+    if trial is not None:
+        tags["search.trial"] = str(trial)
+    return tags
 
 
 def check_components(settings: Settings) -> None:

@@ -56,6 +56,9 @@ class JobResult:
     mean_auc: float
     results: dict[str, AdjectiveResult]
     skipped: bool = False
+    # Per adjective, the held-out validation objects' AUC (where they hold both classes): what
+    # the job's objective is computed from (tactile_exp.objective); read back when skipped.
+    val_aucs: dict[str, float] = field(default_factory=dict)
 
 
 def fit_model(
@@ -175,7 +178,9 @@ def run(settings: Settings) -> JobResult:
                 settings.run_name,
                 done,
             )
-            return JobResult(done, float("nan"), {}, skipped=True)
+            return JobResult(
+                done, float("nan"), {}, skipped=True, val_aucs=_val_aucs(tracker, done)
+            )
     tracker.end_stale_runs(settings.config_hash)
     dataset, modality, splits = open_data(settings)
 
@@ -188,6 +193,7 @@ def run(settings: Settings) -> JobResult:
         "sweep_id": settings.sweep_id,
         "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
         "device": device_name(settings.resolved["device"]),  # what device=auto picked here
+        **settings.study_tags,  # search.study, search.role, search.trial (issue 28)
     }
     with tracker.run(settings.run_name, params, tags) as parent_id:
         log.info(
@@ -225,7 +231,24 @@ def run(settings: Settings) -> JobResult:
         )
         _log_summary(tracker, parent_id, settings, dataset, results)
         log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)
-    return JobResult(parent_id, mean, results)
+    val_aucs = {
+        a: r.diagnostics["val_auc"] for a, r in results.items() if "val_auc" in r.diagnostics
+    }
+    return JobResult(parent_id, mean, results, val_aucs=val_aucs)
+
+
+def _val_aucs(tracker: Tracker, parent_id: str) -> dict[str, float]:
+    """A finished job's per-adjective validation AUCs, from its adjectives' runs."""
+    runs = tracker.client.search_runs(
+        [tracker.experiment_id],
+        filter_string=f"tags.mlflow.parentRunId = '{parent_id}' and tags.run_level = 'child'",
+        max_results=1000,
+    )
+    return {
+        r.data.tags["adjective"]: r.data.metrics["val_auc"]
+        for r in runs
+        if "val_auc" in r.data.metrics
+    }
 
 
 def _adjectives(

@@ -129,6 +129,16 @@ def predict(
         )
     children = _children(tracker, job_id, adjectives)
     given = _Inputs(tracker, data=data, trials=trials, object_id=object_id, photos=photos)
+    return apply_job(tracker, job_id, config, children, given)
+
+
+def apply_job(
+    tracker: Any, job_id: str, config: dict[str, Any], children: dict[str, str], given: _Inputs
+) -> Prediction:
+    """Scores of ``given`` by each adjective's child run (adjective -> run id) of job ``job_id``
+    with its ``config``; ``tracker`` is anything whose ``client`` downloads and lists the
+    children's artifacts (an MLflow store, or the folder an MLflow model keeps them in)."""
+    modality, model_name = str(config["modality"]["name"]), str(config["model"]["name"])
     inputs = {
         "haptic": given.haptic,
         "haptic_features": given.features,
