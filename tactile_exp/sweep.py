@@ -128,13 +128,20 @@ def sweep_jobs(config: DictConfig) -> list[tuple[str, ...]] | None:
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     sweeper = config.hydra.sweeper
-    if sweeper.get("_target_") != f"{BasicSweeper.__module__}.{BasicSweeper.__name__}":
+    if not _basic(sweeper):
         return None
     params = [f"{k}={v}" for k, v in (sweeper.get("params") or {}).items()]
     parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
     overrides = parser.parse_overrides([*params, *config.hydra.overrides.task])
     batches = BasicSweeper.split_arguments(overrides, sweeper.get("max_batch_size"))
     return [tuple(job) for batch in batches for job in batch]
+
+
+def _basic(sweeper: DictConfig) -> bool:
+    """Whether ``hydra.sweeper`` is Hydra's basic sweeper (the default)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+
+    return bool(sweeper.get("_target_") == f"{BasicSweeper.__module__}.{BasicSweeper.__name__}")
 
 
 def axes(jobs: Sequence[Sequence[str]]) -> list[int]:
@@ -185,6 +192,9 @@ class SweepJob:
     folder: Path  # the sweep's folder
     num: int  # hydra.job.num: its place in the grid
     overrides: tuple[str, ...]
+    # Whether a failure goes on to Hydra: not to the basic sweeper, which would re-raise it and
+    # stop; to another one, which handles it (the study sweeper marks its trial failed).
+    raises: bool = False
 
     @classmethod
     def of(cls, hydra_cfg: DictConfig) -> SweepJob | None:
@@ -192,7 +202,8 @@ class SweepJob:
         if hydra_cfg.mode != RunMode.MULTIRUN:
             return None
         overrides = tuple(str(o) for o in hydra_cfg.overrides.task)
-        return cls(sweep_folder(hydra_cfg), int(hydra_cfg.job.num), overrides)
+        raises = not _basic(hydra_cfg.sweeper)
+        return cls(sweep_folder(hydra_cfg), int(hydra_cfg.job.num), overrides, raises)
 
     def skipped(self) -> bool:
         """Whether the sweep listed this job invalid before it started: then it is recorded as
@@ -218,8 +229,8 @@ class SweepJob:
     @contextmanager
     def recorded(self) -> Iterator[None]:
         """Record the job FINISHED, or FAILED with its error (its runs are FAILED by then), and
-        keep a failure from Hydra so the sweep goes on: a bad value or file found only now is
-        one ``error:`` line, anything else its traceback in the job's log."""
+        keep a failure from the basic sweeper so the sweep goes on: a bad value or file found
+        only now is one ``error:`` line, anything else its traceback in the job's log."""
         from tactile_exp.errors import USER_ERRORS
 
         try:
@@ -230,6 +241,8 @@ class SweepJob:
             else:
                 log.exception("job #%d FAILED (the sweep goes on)", self.num)
             self.record("FAILED", _reason(err))
+            if self.raises:
+                raise
         else:
             self.record("FINISHED")
 

@@ -287,6 +287,9 @@ def test_a_listed_job_is_skipped_and_a_failed_one_is_kept_from_hydra(tmp_path, c
     with sweep.SweepJob(folder, 3, ("seed=4",)).recorded():
         pass
     assert outcome(3)["status"] == "FINISHED"
+    with pytest.raises(RuntimeError), sweep.SweepJob(folder, 5, (), raises=True).recorded():
+        raise RuntimeError("boom")  # another sweeper (the study's) handles it: it gets it
+    assert outcome(5)["status"] == "FAILED"
     with pytest.raises(Terminated), sweep.SweepJob(folder, 4, ("seed=5",)).recorded():
         raise Terminated("terminated by signal 15")  # the job exits: nothing recorded
     assert not (folder / "outcomes" / "4.yaml").exists()
