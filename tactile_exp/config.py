@@ -25,7 +25,8 @@ DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accept
 # job runs, not its results (beyond float rounding): a finished job is not rerun for it.
 # ``objective`` is what the job returns to Hydra and ``study`` only tags it (issue 28): a search
 # trial is the same job as the plain run of its values, and is skipped once either finished.
-UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "objective", "study")
+# ``sweep`` (sweep.on_invalid) says what a sweep does with its other jobs.
+UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "objective", "study", "sweep")
 STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best values' test run
 
 
