@@ -1,5 +1,7 @@
 """What `mlflow ui` shows of a job: experiment kind, source tags, dataset input, row grouping."""
 
+import json
+import logging
 import socket
 import subprocess
 import time
@@ -11,7 +13,7 @@ from mlflow.tracking import MlflowClient
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.experiment import run
-from tactile_exp.tracking import EXPERIMENT_TAGS, Tracker, git_commit
+from tactile_exp.tracking import EXPERIMENT_TAGS, SHARED_VIEW_TAG, Tracker, git_commit
 
 ROOT = Path(__file__).resolve().parents[1]
 FAST = ["model=random", "combine_instances=separate"]
@@ -577,3 +579,56 @@ def test_a_tracking_server_is_checked_before_mlflow_is_asked(mlflow_uri, monkeyp
         ):
             Tracker(uri, "x")
     assert Tracker(mlflow_uri, "x").source_tags["mlflow.source.name"] == "python -m tactile_exp"
+
+
+@pytest.mark.job
+def test_a_child_found_alone_names_its_job_choices_and_data(tiny_config, mlflow_uri, caplog):
+    overrides = (*FAST, "seed=41")
+    settings = settings_from_config(tiny_config(list(overrides), "[hard]"), overrides=overrides)
+    with caplog.at_level(logging.INFO, logger="tactile_exp.experiment"):
+        run(settings)
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("tactile_exp")
+    runs = client.search_runs([experiment.experiment_id])
+    parent = next(r for r in runs if r.data.tags["run_level"] == "parent")
+    child = next(r for r in runs if r.data.tags["run_level"] == "child")
+    assert parent.info.run_name == "random-separate-c1-s41"  # what it sets is in the pattern
+    assert child.data.tags["job"] == parent.info.run_name
+    assert [(i.dataset.name, i.dataset.digest) for i in child.inputs.dataset_inputs] == [
+        (i.dataset.name, i.dataset.digest) for i in parent.inputs.dataset_inputs
+    ]
+    axes = {"axis.model": "random", "axis.combine_instances": "separate", "axis.seed": "41"}
+    for r in (parent, child):
+        assert r.data.params.items() >= {"choice.model": "random", **axes}.items()
+        assert not [k for k, v in r.data.params.items() if k.startswith("choice.") and v == "None"]
+    assert child.data.params.items() >= {"adjective": "hard", "combine": "1", "seed": "41"}.items()
+    # the log's last lines: the runs table of this job's sweep, and the click without it
+    lines = [r.getMessage() for r in caplog.records]
+    (link,) = [line for line in lines if line.startswith("runs table")]
+    key = link.rsplit("viewStateShareKey=", 1)[1]
+    view = json.loads(client.get_experiment(experiment.experiment_id).tags[SHARED_VIEW_TAG + key])
+    assert view["selectedColumns"] == [
+        "metrics.`mean_auc`",
+        *(f"params.`{k}`" for k in ("axis.model", "axis.combine_instances", "axis.seed")),
+    ]
+    assert "'Model training'" in lines[-1]
+
+
+def test_runs_view_opens_the_runs_table_with_its_columns(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "views")
+    columns = ["metrics.`mean_auc`", "params.`axis.combine`"]
+    where = {"order_by": "metrics.`mean_auc`", "filter_string": "tags.run_level = 'parent'"}
+    url = tracker.runs_view(columns, **where)
+    page, query = url.split("?")
+    assert page == f"http://127.0.0.1:5000/#/experiments/{tracker.experiment_id}/runs"
+    params = dict(item.split("=") for item in query.split("&"))
+    assert params["workflowType"] == "machine_learning"  # not the GenAI Overview
+    tags = MlflowClient(mlflow_uri).get_experiment(tracker.experiment_id).tags
+    assert json.loads(tags[SHARED_VIEW_TAG + params["viewStateShareKey"]]) == {
+        "selectedColumns": columns,
+        "searchFilter": "tags.run_level = 'parent'",
+        "orderByKey": "metrics.`mean_auc`",
+        "orderByAsc": False,
+    }
+    assert tracker.runs_view(columns, **where) == url  # the jobs of a sweep share one view
+    assert tracker.runs_view(columns[:1], **where) != url
