@@ -17,7 +17,7 @@ import json
 import sys
 import urllib.parse
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -187,7 +187,8 @@ def predict(
         )
     children = _children(tracker, job_id, adjectives)
     given = _Inputs(tracker, data=data, trials=trials, object_id=object_id, photos=photos)
-    return apply_job(tracker, job_id, config, children, given)
+    scored = apply_job(tracker, job_id, config, children, given)
+    return _presented(scored, job, config, chosen, data_line, data if takes_trials else None)
 
 
 def apply_job(
@@ -203,7 +204,6 @@ def apply_job(
         "visual": given.visual,
         "multimodal": given.multimodal,
     }[modality]
-    from tactile_exp.combine import COMBINERS
     from tactile_exp.modalities import MODALITIES
 
     pad = MODALITIES[modality].pad_units  # as the job combined its test units
@@ -216,23 +216,38 @@ def apply_job(
             tracker, child, inputs(child), combiner, combine, model_name, model_params, pad=pad
         )
         columns.append(scores)
+    return Prediction(job_id, units, list(children), np.column_stack(columns))
+
+
+def _presented(
+    scored: Prediction,
+    job: Any,
+    config: dict[str, Any],
+    chosen: str,
+    data_line: str,
+    data: str | Path | None,
+) -> Prediction:
+    """``scored`` as predict shows it: which job and data, each unit's object (a unit of
+    several trials named by its object, not its first trial) and the objects' true labels."""
+    from tactile_exp.combine import COMBINERS
+
+    units = scored.units
     objects = [_object_of(u) for u in units]
     names = {
         n.object_id: n.stem for u in units if (n := TrialName.parse(u.split("#", 1)[0])) is not None
     }  # fmt: skip
+    combiner, combine = str(config["combine_instances"]["name"]), int(config["combine"])
     if not COMBINERS.build(combiner).keeps_instances and combine > 1:
-        units = _object_units(units)  # a unit of several trials is its object's, not its first's
-    return Prediction(
-        job_id,
-        units,
-        list(children),
-        np.column_stack(columns),
+        units = _object_units(units)
+    return replace(
+        scored,
+        units=units,
         job=_describe(job, config),
         chosen=chosen,
         data=data_line,
         objects=objects,
         object_names=names,
-        labels=_labels(data, objects) if takes_trials else {},
+        labels=_labels(data, objects),
     )
 
 
