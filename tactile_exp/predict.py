@@ -229,19 +229,14 @@ def _presented(
 ) -> Prediction:
     """``scored`` as predict shows it: which job and data, each unit's object (a unit of
     several trials named by its object, not its first trial) and the objects' true labels."""
-    from tactile_exp.combine import COMBINERS
-
     units = scored.units
     objects = [_object_of(u) for u in units]
     names = {
         n.object_id: n.stem for u in units if (n := TrialName.parse(u.split("#", 1)[0])) is not None
     }  # fmt: skip
-    combiner, combine = str(config["combine_instances"]["name"]), int(config["combine"])
-    if not COMBINERS.build(combiner).keeps_instances and combine > 1:
-        units = _object_units(units)
     return replace(
         scored,
-        units=units,
+        units=unit_labels(units, config),
         job=_describe(job, config),
         chosen=chosen,
         data=data_line,
@@ -296,6 +291,17 @@ def _object_of(unit: str) -> int | None:
     """The object of a unit named by a trial (``<object>_<id>_<trial>[#k]``), else None."""
     name = TrialName.parse(unit.split("#", 1)[0])
     return None if name is None else name.object_id
+
+
+def unit_labels(units: list[str], config: dict[str, Any]) -> list[str]:
+    """The names predict (and the deployed model) show for scored ``units``: a unit of several
+    trials is named by its object, a single trial or instance by itself."""
+    from tactile_exp.combine import COMBINERS
+
+    combiner, combine = str(config["combine_instances"]["name"]), int(config["combine"])
+    if not COMBINERS.build(combiner).keeps_instances and combine > 1:
+        return _object_units(units)
+    return list(units)
 
 
 def _object_units(units: list[str]) -> list[str]:
