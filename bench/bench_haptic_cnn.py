@@ -13,7 +13,11 @@ on a shared machine. Prints:
    + 100 fine-tuning epochs + the T4 head on combined units) + setup, measured, not assumed, plus
    the compile time once (the job adds data loading, transforms, scoring and logging: time it
    with ``python -m tactile_exp experiment=table1_i_haptic_cnn_1trial``);
-5. the AUC of the two implementations after a few epochs from the same init on one case.
+5. the AUC of the two implementations after a few epochs from the same init on one case;
+6. the plainest well-written torch of the same architecture and data size (``plain_torch``:
+   ``F.conv1d(groups=32)`` on inputs already laid out by group, SGD, batch 1000, 5,300 instances,
+   ``torch.set_num_threads``), its epoch timed as the difference of two epoch counts, and the
+   ratio of that epoch to the compiled ``HapticCNN``'s epoch of section 4 (a row H job's epoch).
 
 Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 7] [--threads 2] [--json OUT]``
 (``--json``: the headline figures with the machine and the date, ``bench/record.py``).
@@ -33,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from sklearn.metrics import roc_auc_score
 
 from tactile_exp.data.layout import Instances
@@ -276,6 +281,47 @@ def auc_equivalence(rng: np.random.Generator, figures: dict[str, float]) -> None
     figures["AUC after 5 + 5 epochs, |compiled - torch|"] = float(f"{diff:.2e}")
 
 
+def plain_torch(epochs: int) -> float:
+    """Seconds for ``epochs`` epochs of the default architecture written as plain torch: three
+    ``F.conv1d(groups=32)`` + ReLU layers (kernel 5, stride 2, 4 channels per group), a linear
+    classification layer, logistic loss, SGD with momentum, shuffled batches of 1000. The input
+    is made in the grouped layout ``F.conv1d`` wants; nothing else is arranged for it."""
+    torch.manual_seed(0)
+    X, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
+    shapes, length = [(4 * CHANNELS, 1, 5), (4 * CHANNELS, 4, 5), (4 * CHANNELS, 4, 5)], STEPS
+    weights = [torch.nn.init.xavier_uniform_(torch.empty(s)).requires_grad_() for s in shapes]
+    biases = [torch.zeros(s[0], requires_grad=True) for s in shapes]
+    for _ in shapes:
+        length = (length + 2 * 2 - 5) // 2 + 1
+    head = torch.nn.Linear(4 * CHANNELS * length, 1)
+    optimiser = torch.optim.SGD([*weights, *biases, *head.parameters()], lr=0.01, momentum=0.9)
+    start = time.perf_counter()
+    for _ in range(epochs):
+        for rows in torch.randperm(N_TRAIN).split(BATCH):
+            h = X[rows]
+            for w, b in zip(weights, biases, strict=True):
+                h = F.conv1d(h, w, b, stride=2, padding=2, groups=CHANNELS).relu()
+            logits = head(h.flatten(1)).squeeze(1)
+            loss = F.binary_cross_entropy_with_logits(logits, y[rows])
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+    return time.perf_counter() - start
+
+
+def plain_torch_ratio(figures: dict[str, float]) -> None:
+    """Plain torch's epoch (difference of a 1- and a 6-epoch run, so one-off costs cancel)
+    against the compiled HapticCNN's epoch measured in section 4."""
+    plain_torch(1)  # warm-up: allocator, thread pool
+    epoch = (plain_torch(6) - plain_torch(1)) / 5
+    compiled = figures["full-size epoch, compiled, s"]
+    ratio = epoch / compiled
+    print(f"\n6. plain torch (F.conv1d(groups={CHANNELS}), SGD, batch {BATCH}, {N_TRAIN} inst)")
+    print(f"   {epoch:.2f} s per epoch; the compiled HapticCNN's {compiled:.2f} s: {ratio:.1f}x")
+    figures["full-size epoch, plain torch reference, s"] = round(epoch, 2)
+    figures["full-size epoch, plain torch / compiled"] = round(ratio, 2)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
@@ -299,6 +345,7 @@ def main() -> None:
     for impl in IMPLS:
         row_estimate(rng, impl, compile_s, figures)
     auc_equivalence(rng, figures)
+    plain_torch_ratio(figures)
     print(f"load average at the end {os.getloadavg()[0]:.1f}")
     if args.json:
         from record import write
