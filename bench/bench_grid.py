@@ -101,14 +101,14 @@ def main() -> None:
     table, wall, total = rows(runs)
     print(f"{len(runs)} jobs of sweep {sweep_id or '(none)'} in {tracker.uri}, {args.experiment}")
     print(
-        f"{'row':4s} {'experiment':40s} {'jobs':>4s} {'status':10s} {'start':>8s} {'minutes':>8s}"
+        f"{'row':4s} {'experiment':46s} {'jobs':>4s} {'status':10s} {'start':>8s} {'minutes':>8s}"
     )
     figures: dict[str, float] = {}
     for r in table:
         status = "/".join(sorted(r.statuses))
         print(
-            f"{r.row:4s} {r.experiment:40s} {r.jobs:4d} {status:10s} "
-            f"{r.start / 60:+8.1f} {r.seconds / 60:8.1f}"
+            f"{r.row:4s} {r.experiment:46s} {r.jobs:4d} {status:10s} "
+            f"{r.start / 60:+8.1f} {r.seconds / 60:8.2f}"
         )
         figures[f"row {r.row}, min"] = round(r.seconds / 60, 2)
     print(
