@@ -10,6 +10,7 @@ import hashlib
 import importlib
 import json
 import re
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,8 +26,13 @@ DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accept
 # job runs, not its results (beyond float rounding): a finished job is not rerun for it.
 # ``objective`` is what the job returns to Hydra and ``study`` only tags it (issue 28): a search
 # trial is the same job as the plain run of its values, and is skipped once either finished.
-UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "objective", "study")
+# ``sweep`` (sweep.on_invalid) says what a sweep does with its other jobs.
+UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "objective", "study", "sweep")
 STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best values' test run
+# Overrides that say where results go or how a search tags a job, not which job it is: left out
+# of run names and axes.
+UNNAMED = ("tracking", "hydra", "sweep", "cache_dir", "study", "objective")
+ADJECTIVES_SPELLED_OUT = 3  # a run name lists at most this many adjectives, else counts them
 
 
 class ConfigError(ValueError):
@@ -75,11 +81,56 @@ class Settings:
     workers: int = 1  # processes that train adjectives side by side (tactile_exp.workers)
     objective: str = "mean_val_auc"  # what the job returns to Hydra (tactile_exp.objective)
     study_tags: dict[str, str] = field(default_factory=dict)  # search.study, search.role, ...
+    axes: dict[str, str] = field(default_factory=dict)  # the job's overrides: see ``axes``
 
 
 def config_hash(resolved: dict[str, Any]) -> str:
     kept = {k: v for k, v in resolved.items() if k not in UNHASHED}
     return hashlib.sha256(json.dumps(kept, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def axes(overrides: tuple[str, ...]) -> dict[str, str]:
+    """What this job sets apart from the defaults: ``{"model": "haptic_lstm", "combine": "10",
+    "model.lr": "0.01"}`` from its command-line overrides (a sweep's swept values are among
+    them), without those that only say where results go (``UNNAMED``)."""
+    out = {}
+    for item in overrides:
+        key, _, value = item.partition("=")
+        deleted = key.startswith("~")
+        key = key.lstrip("+~")
+        if re.split(r"[./]", key)[0] not in UNNAMED:
+            out[key] = "(deleted)" if deleted else value
+    return out
+
+
+def _short(key: str, value: str, groups: Collection[str]) -> str:
+    """One axis in a run name: a group's option alone (``logistic``), ``c10`` for combine, the
+    adjectives (or their count), else ``leaf=value`` with a file path as its stem."""
+    if key == "combine":
+        return f"c{value}"
+    if key == "adjectives":
+        names = [a.strip(" '\"") for a in value.strip("[]").split(",") if a.strip()]
+        if len(names) <= ADJECTIVES_SPELLED_OUT:
+            return "+".join(names)
+        return f"{len(names)}adj-{hashlib.sha256(value.encode()).hexdigest()[:4]}"
+    if "/" in value:
+        value = Path(value).stem
+    return value if key in groups else f"{key.rsplit('.', 1)[-1]}={value}"
+
+
+def run_name(
+    choices: dict[str, str], combiner: str, combine: int, seed: int, job_axes: dict[str, str]
+) -> str:
+    """The Table I row (or model, combiner and combine), then every other axis the job sets,
+    then the seed: the jobs of one sweep differ in some axis, so their names differ too."""
+    experiment = choices.get("experiment")
+    if experiment and experiment != "None":
+        parts, named = [experiment], {"experiment", "seed"}
+    else:
+        parts = [choices["model"], combiner, f"c{combine}"]
+        named = {"model", "combine_instances", "combine", "seed"}
+    parts += [_short(k, v, choices) for k, v in job_axes.items() if k not in named]
+    return "-".join([*parts, f"s{seed}"])
 
 
 def _component(node: Any, group: str) -> Component:
@@ -192,13 +243,7 @@ def settings_from_config(
     study_tags = _check_study(resolved.get("study") or {}, float(fraction))
 
     tracking = resolved["tracking"]
-    experiment = choices.get("experiment")
-    model = choices["model"]
-    run_name = (
-        f"{experiment}-s{seed}"
-        if experiment and experiment != "None"
-        else f"{model}-{combiner}-c{combine}-s{seed}"
-    )
+    job_axes = axes(overrides)
     settings = Settings(
         data=_component(resolved["data"], "data"),
         modality=_component(resolved["modality"], "modality"),
@@ -219,7 +264,7 @@ def settings_from_config(
         resolved=resolved,
         config_hash=config_hash(resolved),
         row_hash=config_hash(row_config),
-        run_name=run_name,
+        run_name=run_name(choices, combiner, combine, seed, job_axes),
         sweep_id=sweep_id,
         output_dir=output_dir,
         validation_fraction=float(fraction),
@@ -227,6 +272,7 @@ def settings_from_config(
         workers=workers,
         objective=objective,
         study_tags=study_tags,
+        axes=job_axes,
     )
     check_components(settings)
     return settings

@@ -10,8 +10,8 @@ error, naming the child run and the artifact.
 Input, one row per trial (``INPUT_COLUMNS``): ``data`` (a PHAC-2-layout HDF5 file) and ``trial``
 (a trial group name) for haptic rows; ``photos`` (a folder of one object's photographs) for
 visual rows; all three for multimodal rows. Output, one row per unit predict scores (a trial, a
-trial's instance ``<trial>#<k>`` for rows G/H, an object's views): ``unit``, each adjective's
-decision value (> 0: it applies) and ``predicted``, the applying adjectives joined by spaces.
+trial's instance ``<trial>#<k>`` for rows G/H, an object's views, an object for combine > 1,
+named as predict names it): ``unit``, each adjective's decision value (> 0: it applies) and ``predicted``, the applying adjectives joined by spaces.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import mlflow
 import pandas as pd
 from mlflow.pyfunc import PythonModel
 
-from tactile_exp.predict import PredictError, _Inputs, apply_job
+from tactile_exp.predict import PredictError, _Inputs, apply_job, unit_labels
 
 INPUT_COLUMNS = ("data", "trial", "photos")
 
@@ -85,7 +85,7 @@ class JobModel(PythonModel):
         config, children = self.job["config"], self.job["adjectives"]
         result = apply_job(self.store, self.job["job"], config, children, given)
         out = pd.DataFrame(result.scores, columns=result.adjectives)
-        out.insert(0, "unit", result.units)
+        out.insert(0, "unit", unit_labels(result.units, config))
         out["predicted"] = [" ".join(chosen) for chosen in result.predicted()]
         return out
 
