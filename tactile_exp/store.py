@@ -132,7 +132,7 @@ def await_trained(
             return source
         claim, abandoned = _oldest_live_claim(tracker, key, lease)
         for stale in set(abandoned) - passed:
-            log.info("  training key %s: run %s's claim is abandoned, taking it over", key, stale)
+            log.info("  training key %s: run %s's claim is abandoned, passed over", key, stale)
         passed.update(abandoned)
         if claim is None or claim.info.run_id == run_id:
             return None

@@ -522,7 +522,7 @@ def test_a_dead_claimants_claim_is_taken_over(mlflow_uri, caplog):
     mine = _claim(tracker, **process_tags())
     with caplog.at_level("INFO", logger="tactile_exp.store"):
         assert store.await_trained(tracker, KEY, mine, lease=3600.0, poll=0.05) is None
-    assert any(stale in m and "taking it over" in m for m in caplog.messages)
+    assert any(stale in m and "abandoned" in m for m in caplog.messages)
     younger = _claim(tracker, **process_tags())  # a third job now waits for this one
     thread, found = _await_in_thread(tracker, younger)
     time.sleep(0.3)
