@@ -13,7 +13,11 @@ on a shared machine. Prints:
    + 100 fine-tuning epochs + the T4 head on combined units) + setup, measured, not assumed, plus
    the compile time once (the job adds data loading, transforms, scoring and logging: time it
    with ``python -m tactile_exp experiment=table1_i_haptic_cnn_1trial``);
-5. the AUC of the two implementations after a few epochs from the same init on one case.
+5. the AUC of the two implementations after a few epochs from the same init on one case;
+6. the plainest well-written torch of the same architecture and data size (``plain_torch``:
+   ``F.conv1d(groups=32)`` on inputs already laid out by group, SGD, batch 1000, 5,300 instances,
+   ``torch.set_num_threads``), its epoch timed as the difference of two epoch counts, and the
+   ratio to the compiled ``HapticCNN``'s epoch (a row H job's), the two timed interleaved.
 
 Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 7] [--threads 2] [--json OUT]``
 (``--json``: the headline figures with the machine and the date, ``bench/record.py``).
@@ -33,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from sklearn.metrics import roc_auc_score
 
 from tactile_exp.data.layout import Instances
@@ -276,6 +281,70 @@ def auc_equivalence(rng: np.random.Generator, figures: dict[str, float]) -> None
     figures["AUC after 5 + 5 epochs, |compiled - torch|"] = float(f"{diff:.2e}")
 
 
+def plain_torch(epochs: int) -> float:
+    """Seconds for ``epochs`` epochs of the default architecture written as plain torch: three
+    ``F.conv1d(groups=32)`` + ReLU layers (kernel 5, stride 2, 4 channels per group), a linear
+    classification layer, logistic loss, SGD with momentum, shuffled batches of 1000. The input
+    is made in the grouped layout ``F.conv1d`` wants; nothing else is arranged for it."""
+    torch.manual_seed(0)
+    X, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
+    shapes, length = [(4 * CHANNELS, 1, 5), (4 * CHANNELS, 4, 5), (4 * CHANNELS, 4, 5)], STEPS
+    weights = [torch.nn.init.xavier_uniform_(torch.empty(s)).requires_grad_() for s in shapes]
+    biases = [torch.zeros(s[0], requires_grad=True) for s in shapes]
+    for _ in shapes:
+        length = (length + 2 * 2 - 5) // 2 + 1
+    head = torch.nn.Linear(4 * CHANNELS * length, 1)
+    optimiser = torch.optim.SGD([*weights, *biases, *head.parameters()], lr=0.01, momentum=0.9)
+    start = time.perf_counter()
+    for _ in range(epochs):
+        for rows in torch.randperm(N_TRAIN).split(BATCH):
+            h = X[rows]
+            for w, b in zip(weights, biases, strict=True):
+                h = F.conv1d(h, w, b, stride=2, padding=2, groups=CHANNELS).relu()
+            logits = head(h.flatten(1)).squeeze(1)
+            loss = F.binary_cross_entropy_with_logits(logits, y[rows])
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+    return time.perf_counter() - start
+
+
+def compiled_fit(train: Instances, epochs: int) -> float:
+    """Seconds of a compiled ``HapticCNN`` fit of ``epochs`` epochs (no fine-tuning): a row H
+    job's training."""
+    model = HapticCNN(impl="compiled", epochs=epochs, finetune_epochs=0, seed=0, device="cpu")
+    start = time.perf_counter()
+    model.fit(train)
+    return time.perf_counter() - start
+
+
+def plain_torch_ratio(rng: np.random.Generator, figures: dict[str, float]) -> None:
+    """Plain torch's epoch against the compiled HapticCNN's, both as the difference of 6- and
+    1-epoch runs (one-off costs cancel), the two interleaved so load changes hit both."""
+    X = rng.standard_normal((N_TRAIN, CHANNELS, STEPS), dtype=np.float32)
+    y = (rng.random(N_TRAIN) > 0.5).astype(int)
+    train = Instances(X, y, np.zeros(N_TRAIN), np.zeros(N_TRAIN, dtype=int))
+    runs = {"plain torch": plain_torch, "compiled": lambda n: compiled_fit(train, n)}
+    times: dict[str, dict[int, list[float]]] = {name: {1: [], 6: []} for name in runs}
+    for fit in runs.values():
+        fit(1)  # warm-up: allocator, thread pool, kernels
+    for epochs in (1, 6, 1, 6):
+        for name, fit in runs.items():
+            times[name][epochs].append(fit(epochs))
+    epoch = {name: (statistics.mean(t[6]) - statistics.mean(t[1])) / 5 for name, t in times.items()}
+    ratio = epoch["plain torch"] / epoch["compiled"]
+    print(f"\n6. plain torch (F.conv1d(groups={CHANNELS}), SGD, batch {BATCH}, {N_TRAIN} inst)")
+    print(
+        f"   {epoch['plain torch']:.2f} s per epoch; the compiled HapticCNN's "
+        f"{epoch['compiled']:.2f} s (interleaved): {ratio:.1f}x"
+    )
+    figures["full-size epoch, plain torch reference, s"] = round(epoch["plain torch"], 2)
+    figures["full-size epoch, compiled, interleaved with plain torch, s"] = round(
+        epoch["compiled"], 2
+    )
+    figures["full-size epoch, plain torch / compiled"] = round(ratio, 2)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
@@ -299,6 +368,7 @@ def main() -> None:
     for impl in IMPLS:
         row_estimate(rng, impl, compile_s, figures)
     auc_equivalence(rng, figures)
+    plain_torch_ratio(rng, figures)
     print(f"load average at the end {os.getloadavg()[0]:.1f}")
     if args.json:
         from record import write

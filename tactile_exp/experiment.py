@@ -183,6 +183,7 @@ def run(settings: Settings) -> JobResult:
                 done, float("nan"), {}, skipped=True, val_aucs=_val_aucs(tracker, done)
             )
     tracker.end_stale_runs(settings.config_hash)
+    store.claim_lease(settings.resolved)  # a bad value is an error before any run is created
     dataset, modality, splits = open_data(settings)
 
     params = {**flatten(settings.resolved), **key_params(settings)}
@@ -381,7 +382,11 @@ def _run_adjective(
         )
         val, test = take_trials(rest, val_trials)
         sets = {"test": test, "train": train, **({"val": val} if len(val) else {})}
-        source = store.find_trained(tracker, key) if reuse and trains else None
+        # This run, tagged with the key, is its claim: wait while an older live job trains it.
+        lease = store.claim_lease(settings.resolved)
+        source = (
+            store.await_trained(tracker, key, run_id, lease=lease) if reuse and trains else None
+        )
         if source is not None:
             log.info("  %s: reusing the model trained in run %s", adjective, source)
             tracker.set_tags(run_id, {"reused_from": source})
@@ -460,14 +465,8 @@ def _part_provider(
         name = f"{split.adjective}/{part}"
         reuse = store.reuse_enabled(settings.resolved)
         source = store.find_trained(tracker, key) if reuse else None
-        if source is not None:
-            log.info("  %s: reusing the model trained in run %s", name, source)
-            tracker.set_tags(run_id, {f"reused_from.{part}": source})
-            model = store.load_model(
-                tracker, source, "model", overrides=_unkeyed(part_model.params)
-            )
-        else:
-            model = MODELS.build(part_model.name, **part_model.params)
+        model = None
+        if source is None:
             tags = {
                 "config_hash": settings.config_hash,
                 "run_level": "part",
@@ -476,11 +475,27 @@ def _part_provider(
                 "training_key": key,
             }
             with tracker.run(f"adj={name}", {"adjective": split.adjective}, tags, parent_id) as rid:
-                tracker.log_curves(rid, model.fit(train, _epoch_logger(name)))
-                store.log_folder(
-                    tracker, rid, "model", lambda f: store.write_model(f, part_model.name, model)
-                )
-            source = rid
+                # This run is the key's claim: wait while an older live job trains the part.
+                lease = store.claim_lease(settings.resolved)
+                source = store.await_trained(tracker, key, rid, lease=lease) if reuse else None
+                if source is None:
+                    model = MODELS.build(part_model.name, **part_model.params)
+                    tracker.log_curves(rid, model.fit(train, _epoch_logger(name)))
+                    store.log_folder(
+                        tracker,
+                        rid,
+                        "model",
+                        lambda f: store.write_model(f, part_model.name, model),
+                    )
+                    source = rid
+                else:
+                    tracker.set_tags(rid, {"reused_from": source})
+        if model is None:
+            log.info("  %s: reusing the model trained in run %s", name, source)
+            tracker.set_tags(run_id, {f"reused_from.{part}": source})
+            model = store.load_model(
+                tracker, source, "model", overrides=_unkeyed(part_model.params)
+            )
         tracker.set_tags(run_id, {f"part.{part}": source})
         parts[part] = (part_model.name, model)
         return model

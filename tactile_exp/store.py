@@ -10,21 +10,31 @@ The training key hashes exactly what determines a learned representation (data i
 and preprocessing settings, architecture, the network's schedule, loss, split rule, seed,
 adjective), not what only the head, the evaluation or the machine uses, so rows H, I and J share
 one ConvNet per adjective.
+
+Jobs side by side (Hydra's joblib or submitit launcher) train each model once: the RUNNING run
+that trains a key is its claim, and a job that needs the key while an older live run claims it
+waits for that run's model (``await_trained``) instead of training it again.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import logging
+import socket
 import tempfile
+import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from tactile_exp import termination
 from tactile_exp.config import Component, ConfigError
-from tactile_exp.tracking import Tracker
+from tactile_exp.tracking import Tracker, process_alive
+
+log = logging.getLogger(__name__)
 
 FORMAT = 1  # bump when the artifact layout changes: older artifacts then no longer match keys
 # Model settings that change neither the representation nor the instance classifier.
@@ -33,6 +43,8 @@ MODEL_UNKEYED = ("head_schedule", "impl", "device")
 MODALITY_UNKEYED = ("device", "batch_size")
 MODEL_FILES = ("settings.json", "weights.pt", "arrays.npz")
 STATE_FILES = ("settings.json", "arrays.npz")
+CLAIM_LEASE = 3600.0  # seconds: tracking.claim_lease when the config has none
+POLL_SECONDS = 2.0  # how often a job waiting for another job's model looks again
 
 
 class ArtifactError(RuntimeError):
@@ -90,6 +102,75 @@ def find_trained(tracker: Tracker, key: str) -> str | None:
         max_results=1,
     )
     return runs[0].data.tags.get("reused_from", runs[0].info.run_id) if runs else None
+
+
+def claim_lease(resolved: Mapping[str, Any]) -> float:
+    """``tracking.claim_lease``: seconds after its start that another host's claim on a training
+    key counts as abandoned (this host's claims end with their process instead)."""
+    value = resolved.get("tracking", {}).get("claim_lease", CLAIM_LEASE)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+        raise ConfigError(f"tracking.claim_lease: must be a number of seconds > 0, got {value!r}")
+    return float(value)
+
+
+def await_trained(
+    tracker: Tracker, key: str, run_id: str, *, lease: float, poll: float = POLL_SECONDS
+) -> str | None:
+    """The run that trained the model of ``key`` (as ``find_trained``), waiting while another
+    live run claims the key; None when run ``run_id`` (RUNNING, tagged with ``key``) is to train
+    it: no run has finished training it and ``run_id`` is the oldest live claim.
+
+    A claim is a RUNNING run tagged with the key; the oldest live one trains, so two jobs that
+    start together agree on one. A claim whose process on this host has ended, or another
+    host's claim older than ``lease`` seconds, is passed over (taken over by the next oldest)."""
+    holder, passed = None, set()
+    while True:
+        source = find_trained(tracker, key)
+        if source is not None:
+            if holder is not None:
+                log.info("  training key %s: trained in run %s, loading it", key, source)
+            return source
+        claim, abandoned = _oldest_live_claim(tracker, key, lease)
+        for stale in set(abandoned) - passed:
+            log.info("  training key %s: run %s's claim is abandoned, passed over", key, stale)
+        passed.update(abandoned)
+        if claim is None or claim.info.run_id == run_id:
+            return None
+        if holder != claim.info.run_id:
+            holder = claim.info.run_id
+            tags = claim.data.tags
+            log.info(
+                "  training key %s: waiting for run %s (process %s on %s), which trains it",
+                key,
+                holder,
+                tags.get("pid", "?"),
+                tags.get("host", "?"),
+            )
+        termination.check()
+        time.sleep(poll)
+
+
+def _oldest_live_claim(tracker: Tracker, key: str, lease: float) -> tuple[Any, list[str]]:
+    """The oldest RUNNING run tagged ``training_key = key`` whose process may still run it
+    (None when there is none), and the ids of the older abandoned ones passed over."""
+    runs = tracker.client.search_runs(
+        [tracker.experiment_id],
+        filter_string=f"tags.training_key = '{key}' and attributes.status = 'RUNNING'",
+        max_results=1000,
+    )
+    host, now = socket.gethostname(), time.time() * 1000
+    abandoned = []
+    for run in sorted(runs, key=lambda r: (r.info.start_time, r.info.run_id)):
+        tags = run.data.tags
+        pid = tags.get("pid", "")
+        if tags.get("host") == host and pid.isdigit():
+            alive = process_alive(int(pid), tags.get("pid_start", ""))
+        else:
+            alive = now - run.info.start_time < lease * 1000
+        if alive:
+            return run, abandoned
+        abandoned.append(run.info.run_id)
+    return None, abandoned
 
 
 def log_folder(tracker: Tracker, run_id: str, path: str, write: Callable[[Path], None]) -> None:

@@ -7,21 +7,26 @@ import io
 import json
 import os
 import shutil
+import socket
+import subprocess
+import sys
+import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 
 from tactile_exp import store
-from tactile_exp.config import settings_from_config
+from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.data.layout import Instances
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import HapticCNN
-from tactile_exp.tracking import Tracker
+from tactile_exp.tracking import Tracker, process_tags
 
 ONE = "[hard]"
 REPEAT = ["tracking.skip_finished=false"]  # run a config again (the engine would skip it)
@@ -464,3 +469,155 @@ def test_weights_saved_on_a_gpu_load_on_the_cpu(tmp_path, monkeypatch):
     loaded = store.read_model(tmp_path, "w")
     assert all(t.device.type == "cpu" for t in loaded.state()[0].values())
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
+
+
+# --- claims: jobs side by side train each model once -----------------------------------------
+
+KEY = "k" * 20
+
+
+def _claim(tracker: Tracker, **who: str) -> str:
+    """A RUNNING run tagged with KEY, as a job training it makes; ``who``: host, pid, pid_start."""
+    run = tracker.client.create_run(tracker.experiment_id, tags={"training_key": KEY, **who})
+    time.sleep(0.01)  # start times in ms: the next claim is strictly younger
+    return run.info.run_id
+
+
+def _await_in_thread(tracker: Tracker, run_id: str, lease: float = 3600.0):
+    found: list[str | None] = []
+    thread = threading.Thread(
+        target=lambda: found.append(
+            store.await_trained(tracker, KEY, run_id, lease=lease, poll=0.05)
+        )
+    )
+    thread.start()
+    return thread, found
+
+
+def test_a_live_claim_is_waited_for_and_its_model_then_loaded(mlflow_uri, caplog):
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        theirs = _claim(tracker, host=socket.gethostname(), pid=str(live.pid))
+        mine = _claim(tracker, **process_tags())
+        with caplog.at_level("INFO", logger="tactile_exp.store"):
+            thread, found = _await_in_thread(tracker, mine)
+            time.sleep(0.6)  # a dozen polls
+            assert thread.is_alive() and not found  # not taken over: its process runs
+            tracker.client.set_terminated(theirs, "FINISHED")  # it trained the model
+            thread.join(10)
+    finally:
+        live.kill()
+        live.wait()
+    assert found == [theirs]
+    waiting = [r for r in caplog.messages if "waiting for run" in r]
+    assert len(waiting) == 1 and theirs in waiting[0] and str(live.pid) in waiting[0]
+
+
+def test_a_dead_claimants_claim_is_taken_over(mlflow_uri, caplog):
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = _claim(tracker, host=socket.gethostname(), pid=str(dead.pid))
+    mine = _claim(tracker, **process_tags())
+    with caplog.at_level("INFO", logger="tactile_exp.store"):
+        assert store.await_trained(tracker, KEY, mine, lease=3600.0, poll=0.05) is None
+    assert any(stale in m and "abandoned" in m for m in caplog.messages)
+    younger = _claim(tracker, **process_tags())  # a third job now waits for this one
+    thread, found = _await_in_thread(tracker, younger)
+    time.sleep(0.3)
+    assert thread.is_alive()
+    tracker.client.set_terminated(mine, "FAILED")  # training failed: the next live claim trains
+    thread.join(10)
+    assert found == [None]
+
+
+@pytest.mark.parametrize(("lease", "waits"), [(3600.0, True), (0.001, False)])
+def test_another_hosts_claim_holds_for_its_lease(mlflow_uri, lease, waits):
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    theirs = _claim(tracker, host="elsewhere." + socket.gethostname(), pid="1")
+    mine = _claim(tracker, **process_tags())
+    thread, found = _await_in_thread(tracker, mine, lease=lease)
+    time.sleep(0.3)
+    assert thread.is_alive() == waits
+    tracker.client.set_terminated(theirs, "FAILED")
+    thread.join(10)
+    assert found == [None]
+
+
+@pytest.mark.parametrize("value", [0, -5, "long", True])
+def test_claim_lease_must_be_positive_seconds(value):
+    assert store.claim_lease({"tracking": {}}) == store.CLAIM_LEASE
+    assert store.claim_lease({"tracking": {"claim_lease": 60}}) == 60.0
+    with pytest.raises(ConfigError, match="tracking.claim_lease: must be a number of seconds"):
+        store.claim_lease({"tracking": {"claim_lease": value}})
+
+
+def _job(overrides: list[str], log: Path) -> subprocess.Popen:
+    """``python -m tactile_exp`` in a process of its own, its output in ``log``."""
+    with log.open("w") as out:
+        return subprocess.Popen(
+            [sys.executable, "-m", "tactile_exp", *overrides, f"hydra.run.dir={log.parent}/hydra"],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+
+
+@pytest.mark.job
+@pytest.mark.slow  # two tiny jobs in processes of their own, two in this one
+def test_two_jobs_side_by_side_train_a_shared_model_once(
+    tiny_config, cache_dir, mlflow_uri, tmp_path
+):
+    jobs = {"A": [], "B": ["combine=2"]}  # a head-only difference: one ConvNet for both
+    sequential = {}
+    for name, extra in jobs.items():
+        config = tiny_config([*REPEAT, *extra], ONE)
+        sequential[name] = _children(mlflow_uri, run(settings_from_config(config)).run_id)["hard"]
+    key = sequential["A"].data.tags["training_key"]
+    assert sequential["B"].data.tags["reused_from"] == sequential["A"].info.run_id
+
+    # This test holds the key's claim, so both jobs are seen waiting before either trains.
+    tracker = Tracker(mlflow_uri, "side_by_side")
+    held = tracker.client.create_run(
+        tracker.experiment_id, tags={"training_key": key, **process_tags()}
+    ).info.run_id
+    base = [*TINY_DATA, f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}", *REPEAT]
+    base += ["tracking.experiment=side_by_side"]
+    base += [f"adjectives={ONE}", "schedule=tiny"]
+    logs = {name: tmp_path / name / "job.log" for name in jobs}
+    procs = {}
+    for name, extra in jobs.items():
+        logs[name].parent.mkdir()
+        procs[name] = _job([*base, *extra], logs[name])
+    try:
+        deadline = time.monotonic() + 120
+        while not all(f"waiting for run {held}" in logs[n].read_text() for n in jobs):
+            assert time.monotonic() < deadline and all(p.poll() is None for p in procs.values())
+            time.sleep(0.2)
+        tracker.client.set_terminated(held, "FAILED")  # released without a model
+        for p in procs.values():
+            assert p.wait(120) == 0
+    finally:
+        for p in procs.values():
+            p.kill()
+
+    runs = tracker.client.search_runs(
+        [tracker.experiment_id],
+        f"tags.training_key = '{key}' and attributes.status = 'FINISHED'",
+    )
+    trained = [r for r in runs if "reused_from" not in r.data.tags]
+    assert len(runs) == 2 and len(trained) == 1  # one of the two trained it, once
+    reused = next(r for r in runs if "reused_from" in r.data.tags)
+    assert reused.data.tags["reused_from"] == trained[0].info.run_id
+    assert "waiting for run " + trained[0].info.run_id in "".join(
+        log.read_text() for log in logs.values()
+    )
+    by_combine = {_parent_combine(tracker, r): r for r in runs}
+    for name, reference in sequential.items():  # results equal the one-at-a-time jobs'
+        concurrent = by_combine[_parent_combine(tracker, reference)]
+        assert _scores(mlflow_uri, concurrent) == _scores(mlflow_uri, reference), name
+
+
+def _parent_combine(tracker: Tracker, child) -> str:
+    parent = tracker.client.get_run(child.data.tags["mlflow.parentRunId"])
+    return parent.data.params["combine"]
