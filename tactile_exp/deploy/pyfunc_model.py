@@ -11,7 +11,8 @@ Input, one row per trial (``INPUT_COLUMNS``): ``data`` (a PHAC-2-layout HDF5 fil
 (a trial group name) for haptic rows; ``photos`` (a folder of one object's photographs) for
 visual rows; all three for multimodal rows. Output, one row per unit predict scores (a trial, a
 trial's instance ``<trial>#<k>`` for rows G/H, an object's views, an object for combine > 1,
-named as predict names it): ``unit``, each adjective's decision value (> 0: it applies) and ``predicted``, the applying adjectives joined by spaces.
+named as predict names it): ``unit``, each adjective's decision value (> 0: it applies) and
+``predicted``, the applying adjectives joined by spaces.
 """
 
 from __future__ import annotations
