@@ -159,7 +159,10 @@ def open_data(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
             f"most {limit} {unit}; allowed 1..{limit}"
         )
-    splits = {a: make_split(dataset, a, settings.split, settings.seed) for a in settings.adjectives}
+    splits = {
+        a: make_split(dataset, a, settings.split, settings.seed, **settings.split_params)
+        for a in settings.adjectives
+    }
     return dataset, modality, splits
 
 
@@ -293,7 +296,7 @@ def _run_adjective(
         dataset=modality.dataset.identity(),
         modality=settings.modality,
         model=settings.model,
-        split=settings.split,
+        split=settings.split_key,
         validation=settings.validation_fraction,
         seed=settings.seed,
         adjective=adjective,
@@ -388,7 +391,7 @@ def _part_provider(
             dataset=modality.dataset.identity(),
             modality=part_modality,
             model=part_model,
-            split=settings.split,
+            split=settings.split_key,
             validation=settings.validation_fraction,
             seed=settings.seed,
             adjective=split.adjective,
