@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, store, termination, workers
+from tactile_exp import evaluate, stats, store, termination, workers
 from tactile_exp.combine import COMBINERS
 from tactile_exp.config import ConfigError, Settings, component_modules, param_error
 from tactile_exp.data.layout import Instances, Split
@@ -222,9 +222,12 @@ def run(settings: Settings) -> JobResult:
             )
         aucs = {a: r.auc for a, r in results.items()}
         mean = evaluate.mean_auc(aucs)
+        held_out = {a: stats.HeldOut(r.objects, r.y, r.scores) for a, r in results.items()}
+        ci = stats.mean_interval([held_out])  # over test objects (issue 27)
         tracker.log_metrics(
             parent_id,
-            {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}, **_means(results)},
+            {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}, **_means(results)}
+            | {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high},
         )
         _log_summary(tracker, parent_id, settings, dataset, results)
         log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.stats import norm
 
 from tactile_exp.data.layout import ADJECTIVES
-from tactile_exp.report.stats import Evaluation, HeldOut
+from tactile_exp.stats import Evaluation, HeldOut
 
 # Positive objects per adjective among PHAC-2's 60 (alphabetical, as ADJECTIVES).
 PHAC2_POSITIVES = (11, 3, 23, 9, 2, 7, 5, 23, 3, 1, 7, 10, 6, 9, 28, 15, 25, 7, 24, 1, 18, 11, 2, 1)

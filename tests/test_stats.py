@@ -9,7 +9,7 @@ from scipy import stats as sps
 from sklearn.metrics import roc_auc_score
 from stats_fixture import population_mean, simulate
 
-from tactile_exp.report import stats
+from tactile_exp import stats
 
 N_SETS = 400
 N_BOOT = 1000
