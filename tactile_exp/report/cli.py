@@ -401,7 +401,7 @@ def _index(
             f"`{g.method}` (mean {g.aucs.mean():.3f})" for g in (haptic, visual) if g
         )
         lines += [
-            f"## Fig. 5: {_fig5_title(haptic, visual).lower()}",
+            f"## Fig. 5: {_fig5_title(haptic, visual)}",
             "",
             f"{names}, each averaged over its seeds/splits (pooled out of fold with",
             "`split=folds`); error bars are 95% object-bootstrap intervals per adjective; only",

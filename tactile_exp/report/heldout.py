@@ -64,7 +64,10 @@ def load(tracker: Tracker, group: Group) -> Evidence:
             found = children(tracker, run.run_id)
             missing = sorted(set(run.aucs) - set(found))
             if missing:
-                return Evidence(missing=f"run {run.run_id}: no finished child run for {missing}")
+                return Evidence(
+                    missing=f"run {run.run_id}: no scores.csv for {', '.join(missing)} (no "
+                    "finished child run; logged before the report read scores?)"
+                )
             for adjective, child in found.items():
                 try:
                     units = read_scores(tracker, child)
@@ -78,6 +81,10 @@ def load(tracker: Tracker, group: Group) -> Evidence:
         evaluation = {}
         for adjective, rows in pooled.items():
             table = np.array(rows, dtype=float)
+            if len(np.unique(table[:, 1])) < 2:
+                return Evidence(
+                    missing=f"seed {seed}: {adjective}'s test units are of one class only"
+                )
             evaluation[adjective] = stats.HeldOut(
                 table[:, 0].astype(int), table[:, 1].astype(int), table[:, 2]
             )
