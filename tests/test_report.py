@@ -239,6 +239,13 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
     assert data.missing == ["compressible"] and len(data.signals) == 32
     assert [m.adjective for m in data.maps] == ["metallic", "metallic"]
     assert data.maps[0].unit.score >= data.maps[1].unit.score  # best, then worst positive
+    # The parent run carries the interval of its mean AUC, as the report computes it (issue 27).
+    metrics = tracker.client.get_run(job.run_id).data.metrics
+    evidence = heldout.load(tracker, runs.collect(tracker)[0])
+    assert (metrics["mean_auc_ci_low"], metrics["mean_auc_ci_high"]) == pytest.approx(
+        (evidence.interval().low, evidence.interval().high)
+    )
+    assert metrics["mean_auc_ci_low"] <= metrics["mean_auc"] <= metrics["mean_auc_ci_high"]
 
     # The same trials through the job's own path: its modality fits the preprocessing on the
     # training trials; the stored ConvNet's conv3 of each trial's first instance must match.
