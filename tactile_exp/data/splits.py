@@ -221,7 +221,7 @@ def folds_split(
             raise DataError(
                 f"{dataset.path} (folds split): {adjective!r} has {len(objs)} {word} object(s), "
                 f"fewer than split.folds={folds}; every fold needs one (use split.folds<="
-                f"{len(objs)} or split=random)"
+                f"{len(objs)}, leave it out of adjectives=, or use split=random)"
             )
         for k, i in enumerate(int(i) for i in rng.permutation(sorted(objs))):
             (test if (start + k) % folds == fold else train).extend(objs[i])
