@@ -214,6 +214,22 @@ def compare(
     )
 
 
+def adjective_difference(
+    a: list[Evaluation], b: list[Evaluation], adjective: str, level: float = 1 - ALPHA
+) -> Interval:
+    """One adjective's AUC difference ``a - b`` with its paired-bootstrap interval (one
+    adjective has no Wilcoxon test; choose ``level`` for the family, e.g. Bonferroni)."""
+    pairs = list(zip(a, b, strict=True)) if len(a) == len(b) else []
+    if not pairs or any(x[adjective].key != y[adjective].key for x, y in pairs):
+        raise ValueError(f"not on the same test objects ({adjective})")
+    boots = [
+        bootstrap_aucs(x[adjective], adjective) - bootstrap_aucs(y[adjective], adjective)
+        for x, y in pairs
+    ]
+    estimate = float(np.mean([x[adjective].auc - y[adjective].auc for x, y in pairs]))
+    return percentile(estimate, np.mean(boots, axis=0), level)
+
+
 def wilcoxon_p(differences: np.ndarray) -> float:
     """scipy's two-sided Wilcoxon signed-rank p-value; 1 when every difference is zero."""
     if not np.any(differences != 0):

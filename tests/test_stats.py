@@ -115,3 +115,16 @@ def test_friedman_equals_scipy_and_nemenyi_cd_equals_demsars_table() -> None:
     assert f.critical_difference == pytest.approx(2.569 * np.sqrt(20 / (6 * 24)), abs=2e-3)
     with pytest.raises(ValueError, match="at least 3 configurations"):
         stats.friedman(["a", "b"], aucs[:2])
+
+
+def test_one_adjective_difference_is_paired_and_refuses_other_objects() -> None:
+    rng = np.random.default_rng(4)
+    a, b = simulate(rng, "published", (0.0, 0.0))
+    same = stats.adjective_difference([a], [a], "hard")
+    assert (same.estimate, same.low, same.high) == (0.0, 0.0, 0.0)  # the same draws for both
+    iv = stats.adjective_difference([a], [b], "hard", level=0.99)
+    assert iv.estimate == pytest.approx(a["hard"].auc - b["hard"].auc)
+    assert iv.low <= iv.estimate <= iv.high
+    moved = {"hard": stats.HeldOut(a["hard"].object_id + 1, a["hard"].label, a["hard"].score)}
+    with pytest.raises(ValueError, match="not on the same test objects"):
+        stats.adjective_difference([a], [moved], "hard")

@@ -128,34 +128,21 @@ def by_modality(
             out.append(ClaimLine(text, "Fig. 5", "not run", "needs a haptic and a visual row"))
             continue
         eh, ev = evidence[haptic.key], evidence[visual.key]
-        runs = [ev_ for ev_ in (*eh.evaluations, *ev.evaluations) if adjective in ev_]
-        if not (eh.ok and ev.ok) or len(runs) != len(eh.evaluations) + len(ev.evaluations):
-            why = eh.missing or ev.missing or f"{adjective} not among both rows' adjectives"
+        if not (eh.ok and ev.ok):
+            out.append(ClaimLine(text, "Fig. 5", "not run", eh.missing or ev.missing))
+            continue
+        if any(adjective not in e for e in (*eh.evaluations, *ev.evaluations)):
+            why = f"{adjective} not among both rows' adjectives"
             out.append(ClaimLine(text, "Fig. 5", "not run", why))
             continue
-        pairs = list(zip(ev.evaluations, eh.evaluations, strict=False))
-        if len(ev.evaluations) != len(eh.evaluations) or any(
-            a[adjective].key != b[adjective].key for a, b in pairs
-        ):
-            out.append(ClaimLine(text, "Fig. 5", "not compared", "not on the same test objects"))
+        try:
+            iv = stats.adjective_difference(ev.evaluations, eh.evaluations, adjective, level)
+        except ValueError as err:
+            out.append(ClaimLine(text, "Fig. 5", "not compared", str(err)))
             continue
-        diff = np.mean(
-            [
-                stats.bootstrap_aucs(a[adjective], adjective)
-                - stats.bootstrap_aucs(b[adjective], adjective)
-                for a, b in pairs
-            ],
-            axis=0,
-        )
-        estimate = float(np.mean([a[adjective].auc - b[adjective].auc for a, b in pairs]))
-        iv = stats.percentile(estimate, diff, level)
         winner = "visual" if iv.low > 0 else "haptic" if iv.high < 0 else None
         result = (
-            "not distinguishable"
-            if winner is None
-            else "supported"
-            if winner == side
-            else "contradicted"
+            "supported" if winner == side else "contradicted" if winner else "not distinguishable"
         )
         detail = (
             f"{_name(visual)} - {_name(haptic)} = {iv.estimate:+.3f} [{iv.low:+.3f}, "
