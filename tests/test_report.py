@@ -10,7 +10,7 @@ from mlflow.tracking import MlflowClient
 from PIL import Image
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp import experiment, store
+from tactile_exp import experiment, stats, store
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.report import activations, cli, figures, heldout, runs, scores, table1
@@ -210,6 +210,7 @@ def test_table3_predicted_sets_from_held_out_scores(table3_tracker, tmp_path):
         assert list(csv.DictReader(f)) == lines
     md = paths[0].read_text()
     assert "| hard (1/2 agree) | soft (1/2 agree) | not run |" in md
+    assert "| 2: hard, soft |" in md  # the adjectives tested on, by name
 
 
 def test_table3_objects_chosen_on_the_command_line(table3_tracker, mlflow_uri, tmp_path):
@@ -390,3 +391,17 @@ def test_report_states_claims_friedman_and_the_ablation_view(folds_tracker, tmp_
     assert "Per-adjective AUC of the best haptic configuration (no visual row was run)" in index
     with Image.open(out / "fig5_per_adjective.png") as image:
         assert np.asarray(image.convert("L")).std() > 10
+
+
+def test_an_auc_on_few_test_objects_is_flagged(folds_tracker):
+    i = next(g for g in runs.collect(folds_tracker) if g.key == "I")
+    obj = np.repeat(np.arange(6), 3)
+    label = (obj < 2).astype(int)  # 2 positive objects: an AUC in steps of 1/2 per object
+    held = stats.HeldOut(obj, label, label + np.linspace(0, 1, len(obj)))
+    evidence = heldout.Evidence([{"hard": held, "soft": held}])
+    assert evidence.sizes() == {"hard": (2, 4), "soft": (2, 4)} and evidence.thin() == [
+        "hard",
+        "soft",
+    ]
+    md = table1.table1_markdown(table1.table1([i], {"I": evidence}))
+    assert "| 2/4 (< 3 on: hard soft) |" in md
