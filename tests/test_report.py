@@ -36,6 +36,11 @@ RUNS = [
 ]
 
 
+def _hash(key: str) -> str:
+    """A group's row hash without the experiment file that keeps a Table I row apart."""
+    return key.split(":")[0]
+
+
 def _log(tracker: Tracker, key, row, seed, overrides, fail, base, adjectives=ADJECTIVES):
     params = {"choice.schedule": "paper", "schedule.epochs": "200", "split.name": "published"}
     params |= {"schedule.finetune_epochs": "100", "seed": str(seed)} | row
@@ -69,7 +74,7 @@ def tracker(mlflow_uri):
 
 
 def test_groups_count_each_seed_once_and_label_variants(tracker):
-    groups = {g.key: g for g in runs.collect(tracker)}
+    groups = {_hash(g.key): g for g in runs.collect(tracker)}
     assert set(groups) == {"a", "a-1adj", "k", "i-quick", "i-c10", "i"}
     a = groups["a"]
     assert a.seeds == [0, 1] and sorted(a.runs) == [(0, -1), (1, -1)] and a.at_paper_settings
@@ -122,7 +127,7 @@ def test_written_files_read_back(tracker, tmp_path):
         evidence = {g.key: heldout.load(tracker, g) for g in groups}
         assert list(csv.DictReader(f)) == table1.table1(groups, evidence)
     with open(tmp_path / "out" / "per_adjective.csv") as f:
-        lines = {r["row_hash"]: r for r in csv.DictReader(f)}
+        lines = {_hash(r["row_hash"]): r for r in csv.DictReader(f)}
     assert float(lines["a"]["metallic"]) == pytest.approx(
         0.65 + 0.01 * ADJECTIVES.index("metallic")
     )
@@ -131,8 +136,8 @@ def test_written_files_read_back(tracker, tmp_path):
         assert image.size == (1200, 450)
         assert np.asarray(image.convert("L")).std() > 10  # drawn, not blank
     # Fig. 5 takes row I at the paper's settings, not its stronger combine=10 variant.
-    assert runs.best(groups, runs.HAPTIC).key == "i"
-    assert runs.best(groups, ("visual",)).key == "k"
+    assert runs.best(groups, runs.HAPTIC).key == "i:table1_i_haptic_cnn_1trial"
+    assert runs.best(groups, ("visual",)).key == "k:table1_k_image_googlenet_1view"
     index = (tmp_path / "out" / "index.md").read_text()
     assert "![Fig. 5](fig5_per_adjective.png)" in index and "`table1_i_haptic_cnn_1trial`" in index
     # Runs without scores.csv (logged before it existed) still report, without intervals.
@@ -288,17 +293,23 @@ FOLD_ADJ = ["absorbent", "compressible", "hard", "rough", "smooth", "soft", "squ
 N_OBJ, N_POS = 16, 6
 
 
-def _fold_job(tracker, key, fold, overrides, quality, objects=range(N_OBJ), folds=2):
+def _fold_job(
+    tracker, key, fold, overrides, quality, objects=range(N_OBJ), folds=2, row=None, sweep="f"
+):
     """A parent run of one fold and a child per adjective holding its scores.csv."""
     rng = np.random.default_rng([fold, int(quality * 100), len(key)])
     params = {"choice.schedule": "quick", "schedule.epochs": "2", "schedule.finetune_epochs": "20"}
     params |= {"seed": "0", "split.name": "folds", "split.fold": str(fold)}
-    params |= {"split.folds": str(folds), **ROWS_BY_KEY.get(key, SWEPT)}
+    params |= {"split.folds": str(folds), **(row or ROWS_BY_KEY.get(key, SWEPT))}
     tags = {"run_level": "parent", "row_hash": key, "config_hash": f"{key}{fold}"}
-    tags |= {"overrides": overrides, "data.identity": "synthetic-abc", "sweep_id": "f"}
+    tags |= {"overrides": overrides, "data.identity": "synthetic-abc", "sweep_id": sweep}
     tested = [o for o in objects if o % folds == fold]
     aucs = {}
-    name = params["choice.experiment"] if key in ROWS_BY_KEY else "haptic_cnn-concat"
+    name = (
+        params["choice.experiment"]
+        if params["choice.experiment"] != "None"
+        else "haptic_cnn-concat"
+    )
     with tracker.run(f"{name}-s0", params, tags) as job:  # the sweep's names alike (issue 32)
         for adjective in FOLD_ADJ:
             lines = ["unit,object_id,label,score"]
@@ -339,20 +350,25 @@ def folds_tracker(mlflow_uri):
         for (loss, combine), quality in ABLATION.items():
             key = f"abl-{loss}-{combine}"
             _fold_job(tracker, key, fold, f"loss={loss} combine={combine} seed=0", quality)
+    # A sweep job with row I's config (experiment files change no hashed value): its own line.
+    _fold_job(tracker, "I", 0, "model=haptic_cnn seed=0", 1.5, row=SWEPT, sweep="other")
     # Row G tested on half the objects only (another split): not comparable paired with I.
     _fold_job(tracker, "G", 0, "experiment=table1_g_haptic_lstm", 1.0, range(0, N_OBJ, 2), 1)
     return tracker
 
 
 def test_folds_pool_out_of_fold_scores_with_intervals_and_object_counts(folds_tracker, tmp_path):
-    groups = {g.key: g for g in runs.collect(folds_tracker)}
-    i = groups["I"]
+    groups = runs.collect(folds_tracker)
+    i = next(g for g in groups if g.row == "I")
     assert i.seeds == [0] and i.folds == 2 and sorted(i.runs) == [(0, 0), (0, 1)]
+    assert i.method == "table1_i_haptic_cnn_1trial" and i.row == "I"
+    twin = next(g for g in groups if _hash(g.key) == "I" and not g.row)
+    assert sorted(twin.runs) == [(0, 0)]  # the sweep's job of row I's config, kept apart
     evidence = heldout.load(folds_tracker, i)
     pooled = evidence.evaluations[0]["hard"]
     assert sorted(set(pooled.object_id.tolist())) == list(range(N_OBJ))  # every object once
     assert pooled.auc == pytest.approx(roc_auc_score(pooled.label, pooled.score))
-    row = next(r for r in table1.table1([i], {"I": evidence}))
+    row = next(r for r in table1.table1([i], {i.key: evidence}))
     assert float(row["mean_auc_ci_low"]) <= float(row["mean_auc"]) <= float(row["mean_auc_ci_high"])
     assert float(row["per_fold_mean_auc"]) == pytest.approx(i.aucs.mean())
     assert (row["n_seeds"], row["seeds"], row["test_objects"]) == ("1", "0", "6/10")
@@ -373,7 +389,9 @@ def test_report_states_claims_friedman_and_the_ablation_view(folds_tracker, tmp_
     index = (out / "index.md").read_text()
     assert "## Table I: mean AUC over the 8 adjectives run (absorbent, compressible, hard," in index
     claims = {r["claim"]: r for r in csv.DictReader((out / "claims.csv").read_text().splitlines())}
-    assert claims["I > A"]["result"] == "supported"  # 1.5 vs 0.2 score separation
+    assert (
+        claims["I > A"]["result"] == "supported"
+    )  # row I kept apart from the sweep's jobs  # 1.5 vs 0.2 score separation
     assert claims["I > G"]["result"] == "not compared"
     assert "different test objects" in claims["I > G"]["detail"]
     assert claims["M > I"]["result"] == "not run" and claims["thick: better by sight"][
@@ -394,7 +412,7 @@ def test_report_states_claims_friedman_and_the_ablation_view(folds_tracker, tmp_
 
 
 def test_an_auc_on_few_test_objects_is_flagged(folds_tracker):
-    i = next(g for g in runs.collect(folds_tracker) if g.key == "I")
+    i = next(g for g in runs.collect(folds_tracker) if g.row == "I")
     obj = np.repeat(np.arange(6), 3)
     label = (obj < 2).astype(int)  # 2 positive objects: an AUC in steps of 1/2 per object
     held = stats.HeldOut(obj, label, label + np.linspace(0, 1, len(obj)))
@@ -403,5 +421,5 @@ def test_an_auc_on_few_test_objects_is_flagged(folds_tracker):
         "hard",
         "soft",
     ]
-    md = table1.table1_markdown(table1.table1([i], {"I": evidence}))
+    md = table1.table1_markdown(table1.table1([i], {i.key: evidence}))
     assert "| 2/4 (< 3 on: hard soft) |" in md

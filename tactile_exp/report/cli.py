@@ -243,6 +243,8 @@ def _ablation(
     lines += ["", "| axis | comparison | combinations | difference and test |", "|---|---|---|---|"]
     for axis, cmp, n in view.effects:
         lines.append(f"| {axis} | {cmp.a} vs {cmp.b} | {n} | {comparisons.describe(cmp)} |")
+    for axis, levels, why in view.unpaired:
+        lines.append(f"| {axis} | {levels} | 0 | not compared: {why} |")
     paths = []
     for i, axis in enumerate(view.axes):
         try:

@@ -159,6 +159,7 @@ class Ablation:
     axes: dict[str, list[str]]  # axis -> its levels (numeric order where numeric)
     configs: dict[tuple[str, ...], Group]  # axis values (in `axes` order) -> group
     effects: list[tuple[str, stats.Comparison, int]]  # axis, comparison, combinations averaged
+    unpaired: list[tuple[str, str, str]]  # axis, levels, why they were not compared
 
     def name(self, values: tuple[str, ...]) -> str:
         return " ".join(f"{a}={v}" for a, v in zip(self.axes, values, strict=True))
@@ -175,10 +176,14 @@ IGNORED_AXES = ("seed", "split.fold", "hydra", "tracking")
 
 
 def ablation(groups: list[Group], evidence: dict[str, Evidence]) -> Ablation | None:
-    """The configurations outside Table I's rows (a sweep) that differ in two or more swept
-    overrides, with each axis's paired effect between each pair of its levels, averaged over
-    the other axes' combinations (Holm over all of them)."""
-    pool = [g for g in groups if not g.row and evidence[g.key].ok]
+    """The configurations outside Table I's rows of one sweep (the one with the most of them),
+    named by the overrides that differ, with each axis's paired effect between each pair of its
+    levels, averaged over the other axes' combinations (Holm over all of them)."""
+    sweeps: dict[str, list[Group]] = {}
+    for g in groups:
+        if not g.row and evidence[g.key].ok:
+            sweeps.setdefault(g.first_run.sweep_id, []).append(g)
+    pool = max(sweeps.values(), key=len, default=[])
     if len(pool) < 2:
         return None
     keys = sorted({k for g in pool for k in g.overrides})
@@ -189,10 +194,11 @@ def ablation(groups: list[Group], evidence: dict[str, Evidence]) -> Ablation | N
         return None
     configs = {tuple(g.overrides.get(k, "") for k in axes): g for g in pool}
     pending = []
+    unpaired = []
     names = list(axes)
     for i, axis in enumerate(names):
         for low, high in itertools.combinations(axes[axis], 2):
-            a_runs, b_runs, n = [], [], 0
+            a_runs, b_runs, n, why = [], [], 0, "no combination of the other axes has both"
             for values, g in configs.items():
                 if values[i] != high:
                     continue
@@ -200,16 +206,21 @@ def ablation(groups: list[Group], evidence: dict[str, Evidence]) -> Ablation | N
                 if other is None:
                     continue
                 ea, eb = evidence[g.key].evaluations, evidence[other.key].evaluations
-                if stats.unpaired_reason(ea, eb) is None:
+                reason = stats.unpaired_reason(ea, eb)
+                if reason is None:
                     a_runs += ea
                     b_runs += eb
                     n += 1
+                else:
+                    why = f"not paired: {reason}"
             if n:
                 cmp = stats.compare(f"{axis}={high}", a_runs, f"{axis}={low}", b_runs)
                 pending.append((axis, cmp, n))
+            else:
+                unpaired.append((axis, f"{axis}={high} vs {axis}={low}", why))
     adjusted = stats.with_holm([c for _, c, _ in pending])
     effects = [(axis, c, n) for (axis, _, n), c in zip(pending, adjusted, strict=True)]
-    return Ablation(axes, configs, effects)
+    return Ablation(axes, configs, effects, unpaired)
 
 
 def friedman_set(groups: list[Group], evidence: dict[str, Evidence]) -> list[Group]:

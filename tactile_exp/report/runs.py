@@ -137,8 +137,10 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
             continue
         aucs = {k.removeprefix("auc."): v for k, v in metrics.items() if k.startswith("auc.")}
         key = tags.get("row_hash") or tags["config_hash"]  # runs logged before row_hash existed
+        experiment = params.get("choice.experiment", "None")
+        if experiment != "None":  # a Table I row stays one even if a sweep ran its config
+            key = f"{key}:{experiment}"
         if key not in groups:
-            experiment = params.get("choice.experiment", "None")
             paper = params.get("paper.auc", "None")
             groups[key] = Group(
                 key=key,
