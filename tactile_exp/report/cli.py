@@ -78,7 +78,7 @@ def write(
         for g in groups:
             aucs = _per_adjective(g, evidence[g.key])
             cells = [f"{aucs[a]:.6f}" if a in aucs else "" for a in ADJECTIVES]
-            writer.writerow([g.row, _configuration(g), g.method, g.key, len(g.seeds), *cells])
+            writer.writerow([g.row, _configuration(g), g.method, g.row_hash, len(g.seeds), *cells])
     _write_csv(out / "per_adjective_intervals.csv", _interval_rows(groups, evidence))
     paths = [
         out / "table1.md",
@@ -142,7 +142,7 @@ def _interval_rows(groups: list[Group], evidence: dict[str, heldout.Evidence]):
                 {
                     "row": g.row,
                     "configuration": _configuration(g),
-                    "row_hash": g.key,
+                    "row_hash": g.row_hash,
                     "adjective": a,
                     "auc": f"{iv.estimate:.6f}",
                     "ci_low": f"{iv.low:.6f}",

@@ -53,7 +53,8 @@ class Run:
 class Group:
     """Runs of one config up to the seed: one line of Table I."""
 
-    key: str
+    key: str  # the row hash, and the experiment file when one named the row
+    row_hash: str
     method: str
     row: str  # the paper's Table I row the experiment file names, or ""
     paper_auc: float | None
@@ -137,6 +138,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
             continue
         aucs = {k.removeprefix("auc."): v for k, v in metrics.items() if k.startswith("auc.")}
         key = tags.get("row_hash") or tags["config_hash"]  # runs logged before row_hash existed
+        row_hash = key
         experiment = params.get("choice.experiment", "None")
         if experiment != "None":  # a Table I row stays one even if a sweep ran its config
             key = f"{key}:{experiment}"
@@ -144,6 +146,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
             paper = params.get("paper.auc", "None")
             groups[key] = Group(
                 key=key,
+                row_hash=row_hash,
                 method=experiment
                 if experiment != "None"
                 else re.sub(r"-s\d+$", "", run.info.run_name),
