@@ -132,6 +132,8 @@ def test_written_files_read_back(tracker, tmp_path):
         0.65 + 0.01 * ADJECTIVES.index("metallic")
     )
     assert lines["a-1adj"]["thin"] == ""
+    one = next(g for g in groups if g.n_adjectives == 1)
+    assert figures.fig5_adjectives([one]) == ["hard"]  # not run: not drawn, rather than 0
     with Image.open(tmp_path / "out" / "fig5_per_adjective.png") as image:
         assert image.size == (1200, 450)
         assert np.asarray(image.convert("L")).std() > 10  # drawn, not blank

@@ -41,7 +41,7 @@ def fig5(shown: list[tuple[str, Group, dict[str, Interval]]], title: str, path: 
     empty and named on the axis as not run."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=FIG5_SIZE)
-    run = [a for a in ADJECTIVES if any(a in g.per_adjective() for _, g, _ in shown)]
+    run = fig5_adjectives([g for _, g, _ in shown])
     x = np.arange(len(run))
     width = 0.8 / max(len(shown), 1)
     for i, ((kind, g, intervals), colour) in enumerate(
@@ -68,6 +68,11 @@ def fig5(shown: list[tuple[str, Group, dict[str, Interval]]], title: str, path: 
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
+
+
+def fig5_adjectives(groups: list[Group]) -> list[str]:
+    """The adjectives Fig. 5 draws: those any shown group ran (a missing one is no bar, not 0)."""
+    return [a for a in ADJECTIVES if any(a in g.per_adjective() for g in groups)]
 
 
 def cd_diagram(result: Friedman, path: Path) -> None:
