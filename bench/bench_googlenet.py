@@ -5,7 +5,7 @@ Times ``pooled_features`` (inception (5a), average pooling, L2 normalisation; in
 random 224x224 images, batch 32, and prints images/s per memory format and layout and their
 ratios, plus the one-pass cost of the visual modality on 530 photographs (PHAC-2) they imply.
 
-Run: ``.venv/bin/python bench/bench_googlenet.py [--batches 4] [--threads 2]``
+Run: ``.venv/bin/python bench/bench_googlenet.py [--batches 4] [--threads 2] [--json OUT]``
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -42,6 +43,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batches", type=int, default=4, help="timed batches per format")
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     model = xavier_init(GoogLeNet(transform_input=True), seed=0).eval()
@@ -69,6 +71,16 @@ def main() -> None:
     )
     for name, rate in rates.items():
         print(f"one pass over {PHOTOGRAPHS} photographs, {name}: {PHOTOGRAPHS / rate:.0f} s")
+    if args.json:
+        from record import write
+
+        figures = {f"{name}, images/s": round(rate, 1) for name, rate in rates.items()}
+        figures["channels_last / NCHW"] = round(ratio, 2)
+        figures["caffe / torchvision layout"] = round(
+            rates["caffe layout"] / rates["channels_last"], 2
+        )
+        figures["max feature difference, channels_last vs NCHW"] = float(f"{same:.2e}")
+        write(args.json, "bench_googlenet", figures, f"batch {BATCH}, {args.threads} threads")
 
 
 if __name__ == "__main__":

@@ -15,7 +15,8 @@ on a shared machine. Prints:
    with ``python -m tactile_exp experiment=table1_i_haptic_cnn_1trial``);
 5. the AUC of the two implementations after a few epochs from the same init on one case.
 
-Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 7] [--threads 2]``
+Run: ``.venv/bin/python bench/bench_haptic_cnn.py [--repeats 7] [--threads 2] [--json OUT]``
+(``--json``: the headline figures with the machine and the date, ``bench/record.py``).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -63,7 +65,7 @@ def sgd_step(impl: str) -> Callable[[], None]:
     return step
 
 
-def throughput(repeats: int) -> float:
+def throughput(repeats: int, figures: dict[str, float]) -> float:
     """Prints both implementations' steps, interleaved; returns the wall-time speed-up."""
     steps = {impl: sgd_step(impl) for impl in IMPLS}
     wall: dict[str, list[float]] = {impl: [] for impl in IMPLS}
@@ -86,6 +88,10 @@ def throughput(repeats: int) -> float:
     ratio = statistics.median(wall["torch"]) / statistics.median(wall["compiled"])
     cpu_ratio = statistics.median(cpu["torch"]) / statistics.median(cpu["compiled"])
     print(f"   compiled / torch throughput: {ratio:.1f}x wall time, {cpu_ratio:.1f}x CPU time")
+    for impl in IMPLS:
+        figures[f"training step, {impl}, ms wall"] = round(statistics.median(wall[impl]) * 1e3, 1)
+    figures["training step, compiled / torch throughput, wall"] = round(ratio, 2)
+    figures["training step, compiled / torch throughput, CPU time"] = round(cpu_ratio, 2)
     return ratio
 
 
@@ -182,7 +188,7 @@ def kernel_rates(repeats: int) -> None:
     print(f"   {'torch F.conv1d(groups=32) fwd':32s} {rate(net_gflop, conv1d)}")
 
 
-def compile_time() -> float:
+def compile_time(figures: dict[str, float]) -> float:
     """Seconds for the first compiled forward + backward with an empty numba cache (fresh
     process), then with the cache that run left."""
     code = (
@@ -206,10 +212,14 @@ def compile_time() -> float:
             for _ in range(2)
         )
     print(f"1. first use: compile {first:.1f} s (once per machine); cached load {cached:.1f} s")
+    figures["first-use compile, s"] = round(first, 1)
+    figures["cached kernel load, s"] = round(cached, 1)
     return first
 
 
-def row_estimate(rng: np.random.Generator, impl: str, compile_s: float) -> None:
+def row_estimate(
+    rng: np.random.Generator, impl: str, compile_s: float, figures: dict[str, float]
+) -> None:
     X = rng.standard_normal((N_TRAIN, CHANNELS, STEPS), dtype=np.float32)
     y = (rng.random(N_TRAIN) > 0.5).astype(int)
     train = Instances(X, y, np.zeros(N_TRAIN), np.zeros(N_TRAIN, dtype=int))
@@ -233,6 +243,8 @@ def row_estimate(rng: np.random.Generator, impl: str, compile_s: float) -> None:
         f" -> row I {total / 60:.1f} min ({per_adj:.0f} s per adjective"
         f"{', + compile once' if impl == 'compiled' else ''})"
     )
+    figures[f"full-size epoch, {impl}, s"] = round(epoch, 2)
+    figures[f"row I estimate at the paper's settings, {impl}, min"] = round(total / 60, 1)
 
 
 def head_fit(rng: np.random.Generator, impl: str) -> float:
@@ -248,7 +260,7 @@ def head_fit(rng: np.random.Generator, impl: str) -> float:
     return time.perf_counter() - start
 
 
-def auc_equivalence(rng: np.random.Generator) -> None:
+def auc_equivalence(rng: np.random.Generator, figures: dict[str, float]) -> None:
     n = 400
     X = rng.standard_normal((n, CHANNELS, STEPS), dtype=np.float32)
     y = (rng.random(n) > 0.5).astype(int)
@@ -261,12 +273,14 @@ def auc_equivalence(rng: np.random.Generator) -> None:
         aucs[impl] = roc_auc_score(y[300:], model.decision_function(X[300:]))
     diff = abs(aucs["compiled"] - aucs["torch"])
     print(f"\n5. AUC compiled {aucs['compiled']:.6f} torch {aucs['torch']:.6f} |diff| {diff:.2e}")
+    figures["AUC after 5 + 5 epochs, |compiled - torch|"] = float(f"{diff:.2e}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     kernels.numba.set_num_threads(args.threads)
@@ -275,16 +289,22 @@ def main() -> None:
         f"({kernels.numba.config.THREADING_LAYER}), {args.threads} threads, "
         f"load average {os.getloadavg()[0]:.1f}"
     )
-    compile_s = compile_time()
-    throughput(args.repeats)
+    figures: dict[str, float] = {}
+    compile_s = compile_time(figures)
+    throughput(args.repeats, figures)
     kernel_rates(args.repeats)
     rng = np.random.default_rng(0)
     print(f"\n4. full-size fit, {N_TRAIN} instances, paper settings extrapolated (not run)")
     print("   (impl also picks the layer-only SGD of the fine-tuning and the head: linear_sgd)")
     for impl in IMPLS:
-        row_estimate(rng, impl, compile_s)
-    auc_equivalence(rng)
+        row_estimate(rng, impl, compile_s, figures)
+    auc_equivalence(rng, figures)
     print(f"load average at the end {os.getloadavg()[0]:.1f}")
+    if args.json:
+        from record import write
+
+        notes = f"median/best of {args.repeats}, {args.threads} threads"
+        write(args.json, "bench_haptic_cnn", figures, notes)
 
 
 if __name__ == "__main__":

@@ -7,13 +7,15 @@ forward, backward and SGD step, alternating in one run so the ratio holds on a n
 (24 adjectives x 200 epochs; the 100 fine-tuning epochs train the output layer alone on features
 computed once and are left out) and the largest difference in the loss curve of a short run.
 
-Run: ``.venv/bin/python bench/bench_lstm.py [--repeats 2] [--threads N] [--channels 32 64]``
+Run: ``.venv/bin/python bench/bench_lstm.py [--repeats 2] [--threads N] [--channels 32 64]
+[--json OUT]``
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -36,7 +38,7 @@ def train(
     head = torch.nn.Linear(10, 1)
     start = time.perf_counter()
     curve = sgd_epochs(
-        lambda x: head(body(x)).squeeze(1),
+        lambda X_, index: head(body(X_[index])).squeeze(1),
         [*body.parameters(), *head.parameters()],
         X,
         y,
@@ -57,11 +59,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--threads", type=int, default=None, help="torch threads (default: all)")
     parser.add_argument("--channels", type=int, nargs="+", default=[32, 64])
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     rng = np.random.default_rng(0)
+    figures: dict[str, float] = {}
     for channels in args.channels:
         X = torch.as_tensor(rng.standard_normal((N_TRAIN, channels, STEPS), dtype=np.float32))
         y = torch.as_tensor((rng.random(N_TRAIN) < 0.5).astype(np.float32))
@@ -82,6 +86,15 @@ def main() -> None:
             f"after 3 epochs on 2,000 instances the loss curves differ by at most {loss_gap:.1e}, "
             f"the scores by {score_gap:.1e}"
         )
+        for impl in IMPLS:
+            figures[f"C={channels} {impl}, s/epoch"] = round(best[impl], 3)
+        figures[f"C={channels} torch / compiled"] = round(best["torch"] / best["compiled"], 2)
+        figures[f"C={channels} loss curve difference, 3 epochs"] = float(f"{loss_gap:.1e}")
+    if args.json:
+        from record import write
+
+        threads = torch.get_num_threads()
+        write(args.json, "bench_lstm", figures, f"best of {args.repeats}, {threads} threads")
 
 
 if __name__ == "__main__":

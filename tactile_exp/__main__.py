@@ -23,17 +23,25 @@ def main(cfg: DictConfig) -> float:
     from tactile_exp.config import settings_from_config
     from tactile_exp.errors import reported
     from tactile_exp.experiment import run
+    from tactile_exp.objective import value
+    from tactile_exp.sweep import SweepJob
 
     hc = HydraConfig.get()
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
     # The sweep's folder as configured (multirun/<date>/<time>): its time alone repeats daily.
     sweep_id = str(Path(hc.sweep.dir)) if hc.mode == RunMode.MULTIRUN else ""
+    job = SweepJob.of(hc)  # None for a single run
+    if job is not None and job.skipped():  # listed invalid before the sweep started
+        return float("nan")
     try:
-        with reported():
+        # A single run's bad value is one error line and exit 2; a sweep job's failure is
+        # recorded and kept from Hydra, so that the jobs after it run (tactile_exp.sweep).
+        with reported() if job is None else job.recorded():
             settings = settings_from_config(
                 cfg, choices, sweep_id, Path(hc.runtime.output_dir), tuple(hc.overrides.task)
             )
-            return run(settings).mean_auc
+            # The configured validation objective, never the test AUC: any sweeper may select on it.
+            return value(settings.objective, run(settings).val_aucs)
     except termination.Terminated:
         if hc.mode != RunMode.MULTIRUN:
             raise
@@ -41,6 +49,7 @@ def main(cfg: DictConfig) -> float:
         # runs are marked FAILED by now, so leave at once; the launcher waits for this exit.
         logging.shutdown()
         os._exit(128 + signal.SIGTERM)
+    return float("nan")  # a sweep job that FAILED
 
 
 if __name__ == "__main__":

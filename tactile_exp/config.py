@@ -10,6 +10,7 @@ import hashlib
 import importlib
 import json
 import re
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,15 @@ DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accept
 # of the config hash. ``trunk`` only feeds the visual modalities' nodes, hashed there: a haptic
 # row is the same job whatever trunk weights the grid was given. ``workers`` changes how fast a
 # job runs, not its results (beyond float rounding): a finished job is not rerun for it.
-UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers")
+# ``objective`` is what the job returns to Hydra and ``study`` only tags it (issue 28): a search
+# trial is the same job as the plain run of its values, and is skipped once either finished.
+# ``sweep`` (sweep.on_invalid) says what a sweep does with its other jobs.
+UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "objective", "study", "sweep")
+STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best values' test run
+# Overrides that say where results go or how a search tags a job, not which job it is: left out
+# of run names and axes.
+UNNAMED = ("tracking", "hydra", "sweep", "cache_dir", "study", "objective")
+ADJECTIVES_SPELLED_OUT = 3  # a run name lists at most this many adjectives, else counts them
 
 
 class ConfigError(ValueError):
@@ -70,6 +79,9 @@ class Settings:
     )
     overrides: tuple[str, ...] = ()  # the job's command-line overrides (Hydra's task overrides)
     workers: int = 1  # processes that train adjectives side by side (tactile_exp.workers)
+    objective: str = "mean_val_auc"  # what the job returns to Hydra (tactile_exp.objective)
+    study_tags: dict[str, str] = field(default_factory=dict)  # search.study, search.role, ...
+    axes: dict[str, str] = field(default_factory=dict)  # the job's overrides: see ``axes``
     split_params: dict[str, Any] = field(default_factory=dict)  # e.g. folds=5, fold=0
 
     @property
@@ -82,6 +94,50 @@ class Settings:
 def config_hash(resolved: dict[str, Any]) -> str:
     kept = {k: v for k, v in resolved.items() if k not in UNHASHED}
     return hashlib.sha256(json.dumps(kept, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def axes(overrides: tuple[str, ...]) -> dict[str, str]:
+    """What this job sets apart from the defaults: ``{"model": "haptic_lstm", "combine": "10",
+    "model.lr": "0.01"}`` from its command-line overrides (a sweep's swept values are among
+    them), without those that only say where results go (``UNNAMED``)."""
+    out = {}
+    for item in overrides:
+        key, _, value = item.partition("=")
+        deleted = key.startswith("~")
+        key = key.lstrip("+~")
+        if re.split(r"[./]", key)[0] not in UNNAMED:
+            out[key] = "(deleted)" if deleted else value
+    return out
+
+
+def _short(key: str, value: str, groups: Collection[str]) -> str:
+    """One axis in a run name: a group's option alone (``logistic``), ``c10`` for combine, the
+    adjectives (or their count), else ``leaf=value`` with a file path as its stem."""
+    if key == "combine":
+        return f"c{value}"
+    if key == "adjectives":
+        names = [a.strip(" '\"") for a in value.strip("[]").split(",") if a.strip()]
+        if len(names) <= ADJECTIVES_SPELLED_OUT:
+            return "+".join(names)
+        return f"{len(names)}adj-{hashlib.sha256(value.encode()).hexdigest()[:4]}"
+    if "/" in value:
+        value = Path(value).stem
+    return value if key in groups else f"{key.rsplit('.', 1)[-1]}={value}"
+
+
+def run_name(
+    choices: dict[str, str], combiner: str, combine: int, seed: int, job_axes: dict[str, str]
+) -> str:
+    """The Table I row (or model, combiner and combine), then every other axis the job sets,
+    then the seed: the jobs of one sweep differ in some axis, so their names differ too."""
+    experiment = choices.get("experiment")
+    if experiment and experiment != "None":
+        parts, named = [experiment], {"experiment", "seed"}
+    else:
+        parts = [choices["model"], combiner, f"c{combine}"]
+        named = {"model", "combine_instances", "combine", "seed"}
+    parts += [_short(k, v, choices) for k, v in job_axes.items() if k not in named]
+    return "-".join([*parts, f"s{seed}"])
 
 
 def _component(node: Any, group: str) -> Component:
@@ -192,14 +248,11 @@ def settings_from_config(
     if isinstance(fraction, bool) or not isinstance(fraction, int | float) or not 0 <= fraction < 1:
         raise ConfigError(f"validation.fraction: must be a number in [0, 1), got {fraction!r}")
 
+    objective = _check_objective(resolved.get("objective", "mean_val_auc"))
+    study_tags = _check_study(resolved.get("study") or {}, float(fraction))
+
     tracking = resolved["tracking"]
-    experiment = choices.get("experiment")
-    model = choices["model"]
-    run_name = (
-        f"{experiment}-s{seed}"
-        if experiment and experiment != "None"
-        else f"{model}-{combiner}-c{combine}-s{seed}"
-    )
+    job_axes = axes(overrides)
     settings = Settings(
         data=_component(resolved["data"], "data"),
         modality=_component(resolved["modality"], "modality"),
@@ -220,16 +273,55 @@ def settings_from_config(
         resolved=resolved,
         config_hash=config_hash(resolved),
         row_hash=config_hash(row_config),
-        run_name=run_name,
+        run_name=run_name(choices, combiner, combine, seed, job_axes),
         sweep_id=sweep_id,
         output_dir=output_dir,
         validation_fraction=float(fraction),
         overrides=overrides,
         workers=workers,
+        objective=objective,
+        study_tags=study_tags,
+        axes=job_axes,
         split_params={k: v for k, v in resolved["split"].items() if k != "name"},
     )
     check_components(settings)
     return settings
+
+
+def _check_objective(name: Any) -> str:
+    """A validation metric: the value Hydra gets never depends on a test object's score."""
+    from tactile_exp.objective import OBJECTIVES, TEST_METRICS
+
+    if name in OBJECTIVES:
+        return str(name)
+    known = ", ".join(OBJECTIVES.names())
+    if isinstance(name, str) and name.split(".")[0] in TEST_METRICS:
+        raise ConfigError(
+            f"objective: {name} is scored on the test objects; what a job returns to Hydra (and "
+            f"a search selects on) must be a validation metric: {known}"
+        )
+    raise ConfigError(f"objective: unknown {name!r}; allowed: {known}")
+
+
+def _check_study(study: dict[str, Any], fraction: float) -> dict[str, str]:
+    """The search tags of a job; a search trial needs validation objects to be scored on."""
+    name, role, trial = study.get("name"), study.get("role"), study.get("trial")
+    if role is not None and role not in STUDY_ROLES:
+        raise ConfigError(f"study.role: must be one of {', '.join(STUDY_ROLES)}, got {role!r}")
+    if role is not None and not name:
+        raise ConfigError(f"study.name: missing; a job with study.role={role} names its study")
+    if role == "trial" and fraction == 0:
+        raise ConfigError(
+            f"validation.fraction: 0 holds out no validation objects, but study {name!r} selects "
+            "on them (its objective is a validation metric, never the test AUC); "
+            "set validation.fraction in (0, 1), e.g. 0.15"
+        )
+    if name is None:
+        return {}
+    tags = {"search.study": str(name), "search.role": str(role or "")}
+    if trial is not None:
+        tags["search.trial"] = str(trial)
+    return tags
 
 
 def check_components(settings: Settings) -> None:

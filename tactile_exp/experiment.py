@@ -30,7 +30,7 @@ from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
-from tactile_exp.tracking import Tracker, flatten
+from tactile_exp.tracking import MAX_PARAM_LENGTH, Tracker, canonical_column, flatten
 from tactile_exp.train import device_name
 from tactile_exp.validation import take_trials, validation_split
 
@@ -56,6 +56,9 @@ class JobResult:
     mean_auc: float
     results: dict[str, AdjectiveResult]
     skipped: bool = False
+    # Per adjective, the held-out validation objects' AUC (where they hold both classes): what
+    # the job's objective is computed from (tactile_exp.objective); read back when skipped.
+    val_aucs: dict[str, float] = field(default_factory=dict)
 
 
 def fit_model(
@@ -178,12 +181,14 @@ def run(settings: Settings) -> JobResult:
                 settings.run_name,
                 done,
             )
-            return JobResult(done, float("nan"), {}, skipped=True)
+            _log_view(tracker, settings)
+            return JobResult(
+                done, float("nan"), {}, skipped=True, val_aucs=_val_aucs(tracker, done)
+            )
     tracker.end_stale_runs(settings.config_hash)
     dataset, modality, splits = open_data(settings)
 
-    params = flatten(settings.resolved)
-    params.update({f"choice.{k}": v for k, v in settings.choices.items()})
+    params = {**flatten(settings.resolved), **key_params(settings)}
     tags = {
         "config_hash": settings.config_hash,
         "row_hash": settings.row_hash,
@@ -191,6 +196,7 @@ def run(settings: Settings) -> JobResult:
         "sweep_id": settings.sweep_id,
         "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
         "device": device_name(settings.resolved["device"]),  # what device=auto picked here
+        **settings.study_tags,  # search.study, search.role, search.trial (issue 28)
     }
     with tracker.run(settings.run_name, params, tags) as parent_id:
         log.info(
@@ -203,12 +209,7 @@ def run(settings: Settings) -> JobResult:
         _log_config(tracker, parent_id, settings)
         modality.prepare()
         tracker.set_tags(parent_id, {"data.identity": dataset.identity()})
-        tracker.log_dataset(
-            parent_id,
-            name=dataset.path.stem,
-            digest=dataset.digest(),
-            source=dataset.path.resolve().as_uri(),
-        )
+        _log_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
         for i, result in enumerate(_adjectives(settings, tracker, parent_id, modality, splits), 1):
             results[result.adjective] = result
@@ -231,7 +232,61 @@ def run(settings: Settings) -> JobResult:
         )
         _log_summary(tracker, parent_id, settings, dataset, results)
         log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)
-    return JobResult(parent_id, mean, results)
+    val_aucs = {
+        a: r.diagnostics["val_auc"] for a, r in results.items() if "val_auc" in r.diagnostics
+    }
+    _log_view(tracker, settings)
+    return JobResult(parent_id, mean, results, val_aucs=val_aucs)
+
+
+def _val_aucs(tracker: Tracker, parent_id: str) -> dict[str, float]:
+    """A finished job's per-adjective validation AUCs, from its adjectives' runs."""
+    runs = tracker.client.search_runs(
+        [tracker.experiment_id],
+        filter_string=f"tags.mlflow.parentRunId = '{parent_id}' and tags.run_level = 'child'",
+        max_results=1000,
+    )
+    return {
+        r.data.tags["adjective"]: r.data.metrics["val_auc"]
+        for r in runs
+        if "val_auc" in r.data.metrics
+    }
+
+
+def key_params(settings: Settings) -> dict[str, str]:
+    """The params that say which job a run belongs to: the config-group choices (``choice.*``,
+    none left at None) and every axis the job sets (``axis.*``: a sweep's swept values, plain
+    ones like ``combine`` too), which sort first among the params that differ, so the compare
+    view's parallel-coordinates plot, which starts on the first three of those, shows them."""
+    out = {f"choice.{k}": v for k, v in settings.choices.items() if v != "None"}
+    out.update({f"axis.{k}": v[:MAX_PARAM_LENGTH] for k, v in settings.axes.items()})
+    return out
+
+
+def _log_data(tracker: Tracker, run_id: str, dataset: PHAC2) -> None:
+    tracker.log_dataset(
+        run_id,
+        name=dataset.path.stem,
+        digest=dataset.digest(),
+        source=dataset.path.resolve().as_uri(),
+    )
+
+
+def _log_view(tracker: Tracker, settings: Settings) -> None:
+    """The last lines of a job's log: where its sweep's runs table is, with its numbers."""
+    columns = [canonical_column("metrics", "mean_auc")]
+    columns += [canonical_column("params", f"axis.{k}") for k in settings.axes]
+    if not settings.axes:
+        columns += [canonical_column("params", k) for k in ("choice.model", "combine")]
+    url = tracker.runs_view(
+        columns,
+        order_by=canonical_column("metrics", "mean_auc"),
+        filter_string="tags.run_level = 'parent'",
+    )
+    log.info("runs table (jobs by mean AUC, with what each sets): %s", url)
+    if not tracker.uri.startswith(("http://", "https://")):
+        log.info("  serve it first: mlflow ui --backend-store-uri %s", tracker.uri)
+    log.info("  (MLflow opened without this link shows its GenAI Overview: click 'Model training')")
 
 
 def _adjectives(
@@ -304,13 +359,22 @@ def _run_adjective(
         seed=settings.seed,
         adjective=adjective,
     )
-    tags = {"config_hash": settings.config_hash, "run_level": "child", "adjective": adjective}
+    tags = {
+        "config_hash": settings.config_hash,
+        "run_level": "child",
+        "adjective": adjective,
+        "job": settings.run_name,  # a child found alone says which job it is part of
+        "sweep_id": settings.sweep_id,
+    }
+    params = {"adjective": adjective, "combine": str(settings.combine), "seed": str(settings.seed)}
+    params.update(key_params(settings))
     trains = model.storable and (
         model.learns_representation or COMBINERS.build(settings.combiner).keeps_instances
     )
     if trains:
         tags["training_key"] = key
-    with tracker.run(f"adj={adjective}", {"adjective": adjective}, tags, parent_id) as run_id:
+    with tracker.run(f"adj={adjective}", params, tags, parent_id) as run_id:
+        _log_data(tracker, run_id, modality.dataset)
         start = time.perf_counter()
         parts: dict[str, tuple[str, Model]] = {}
         modality.use_parts(_part_provider(settings, tracker, parent_id, run_id, modality, parts))

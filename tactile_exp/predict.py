@@ -15,8 +15,9 @@ import functools
 import io
 import json
 import sys
+import urllib.parse
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,21 @@ class Prediction:
     units: list[str]
     adjectives: list[str]
     scores: np.ndarray  # (n_units, n_adjectives) decision values
+    job: str = ""  # the job as a person knows it: run name, model, combine, Table I row
+    chosen: str = ""  # how the job was chosen when no run id was given
+    data: str = ""  # the data file the trials were read from, and why that one
+    objects: list[int | None] = field(default_factory=list)  # each unit's object, when known
+    object_names: dict[int, str] = field(default_factory=dict)  # object -> e.g. car_sponge_101
+    labels: dict[int, list[str]] = field(default_factory=dict)  # object -> its true adjectives
+
+    def object_predictions(self) -> dict[int, list[str]]:
+        """Per object: the adjectives whose mean decision value over its units is > 0."""
+        out = {}
+        for obj in dict.fromkeys(o for o in self.objects if o is not None):
+            rows = [i for i, o in enumerate(self.objects) if o == obj]
+            mean = self.scores[rows].mean(axis=0)
+            out[obj] = [a for a, s in zip(self.adjectives, mean, strict=True) if s > 0]
+        return out
 
     def predicted(self) -> list[list[str]]:
         """The adjectives whose decision value is > 0, per unit."""
@@ -61,19 +77,53 @@ class Prediction:
              "predicted": chosen}
             for u, row, chosen in zip(self.units, self.scores, self.predicted(), strict=True)
         ]  # fmt: skip
-        return json.dumps({"run_id": self.run_id, "units": units}, indent=1)
+        head = {"run_id": self.run_id, "job": self.job, "data": self.data}
+        return json.dumps({**head, "units": units}, indent=1)
+
+    def header(self) -> list[str]:
+        """Which job, which data file and what the numbers are: the lines above the table."""
+        lines = [f"job {self.run_id}: {self.job}" if self.job else f"job {self.run_id}"]
+        lines += [f"  {self.chosen}"] if self.chosen else []
+        lines += [f"data {self.data}"] if self.data else []
+        lines.append(
+            "scores: each adjective classifier's decision value; > 0 means the adjective is "
+            "predicted"
+        )
+        return lines
 
     def to_table(self) -> str:
-        lines = [f"job {self.run_id}"]
+        lines = [*self.header(), ""]
         for unit, chosen in zip(self.units, self.predicted(), strict=True):
             lines.append(f"{unit}: {', '.join(chosen) or '(none)'}")
         width = max(len(a) for a in self.adjectives)
+        cell = max(10, *(len(u) for u in self.units))  # whole unit names, never cut
         lines.append("")
-        lines.append(" " * width + "  " + "  ".join(f"{u[-12:]:>12}" for u in self.units))
+        lines.append(" " * width + "  " + "  ".join(f"{u:>{cell}}" for u in self.units))
         for j, adjective in enumerate(self.adjectives):
-            values = "  ".join(f"{s:>12.4f}" for s in self.scores[:, j])
+            values = "  ".join(f"{s:>{cell}.4f}" for s in self.scores[:, j])
             lines.append(f"{adjective:>{width}}  {values}")
+        lines += self._object_lines()
         return "\n".join(lines) + "\n"
+
+    def _object_lines(self) -> list[str]:
+        """Each object's predicted set (mean decision value over its units > 0), against its
+        true adjectives where the data file has labels (among the adjectives scored)."""
+        predicted = self.object_predictions()
+        if not predicted:
+            return []
+        lines = ["", "per object (mean decision value over its units > 0):"]
+        for obj, chosen in predicted.items():
+            name = f" ({self.object_names[obj]})" if obj in self.object_names else ""
+            line = f"  object {obj}{name}: predicted {', '.join(chosen) or '(none)'}"
+            if obj in self.labels:
+                true = [a for a in self.adjectives if a in self.labels[obj]]
+                agree = sum((a in chosen) == (a in true) for a in self.adjectives)
+                line += (
+                    f"; true {', '.join(true) or '(none)'}; "
+                    f"{agree} of {len(self.adjectives)} adjectives right"
+                )
+            lines.append(line)
+        return lines
 
 
 # modality -> (takes trials, takes photographs)
@@ -104,6 +154,11 @@ def predict(
     job = _job(tracker, run_id)
     job_id = job.info.run_id
     config = _config(tracker, job_id)
+    chosen = (
+        ""
+        if run_id is not None
+        else f"no run id given: the newest FINISHED job of experiment {experiment!r}"
+    )
     modality, model_name = str(config["modality"]["name"]), str(config["model"]["name"])
     if model_name == "random":
         raise PredictError(
@@ -114,13 +169,16 @@ def predict(
     if modality not in INPUTS:
         raise PredictError(f"run {job_id}: modality {modality!r}; predict applies {list(INPUTS)}")
     takes_trials, takes_photos = INPUTS[modality]
-    has_trials = data is not None or bool(trials) or object_id is not None
+    has_trials = bool(trials) or object_id is not None
     if takes_trials and not has_trials:
         wanted = "and a folder of its photographs" if takes_photos else "not photographs"
         raise PredictError(
-            f"run {job_id} holds {modality} models (modality {modality}): give trials (data "
-            f"with trials or an object id) {wanted}"
+            f"run {job_id} holds {modality} models (modality {modality}): give trials "
+            f"(--trial NAME, repeated, or --object ID), {wanted}"
         )
+    data_line = ""
+    if takes_trials:
+        data, data_line = _data_file(job, data)
     if takes_photos and photos is None:
         wanted = "and the object's trials (data with trials)" if takes_trials else "not trials"
         raise PredictError(
@@ -129,6 +187,17 @@ def predict(
         )
     children = _children(tracker, job_id, adjectives)
     given = _Inputs(tracker, data=data, trials=trials, object_id=object_id, photos=photos)
+    scored = apply_job(tracker, job_id, config, children, given)
+    return _presented(scored, job, config, chosen, data_line, data if takes_trials else None)
+
+
+def apply_job(
+    tracker: Any, job_id: str, config: dict[str, Any], children: dict[str, str], given: _Inputs
+) -> Prediction:
+    """Scores of ``given`` by each adjective's child run (adjective -> run id) of job ``job_id``
+    with its ``config``; ``tracker`` is anything whose ``client`` downloads and lists the
+    children's artifacts (an MLflow store, or the folder an MLflow model keeps them in)."""
+    modality, model_name = str(config["modality"]["name"]), str(config["model"]["name"])
     inputs = {
         "haptic": given.haptic,
         "haptic_features": given.features,
@@ -148,6 +217,122 @@ def predict(
         )
         columns.append(scores)
     return Prediction(job_id, units, list(children), np.column_stack(columns))
+
+
+def _presented(
+    scored: Prediction,
+    job: Any,
+    config: dict[str, Any],
+    chosen: str,
+    data_line: str,
+    data: str | Path | None,
+) -> Prediction:
+    """``scored`` as predict shows it: which job and data, each unit's object (a unit of
+    several trials named by its object, not its first trial) and the objects' true labels."""
+    units = scored.units
+    objects = [_object_of(u) for u in units]
+    names = {
+        n.object_id: n.stem for u in units if (n := TrialName.parse(u.split("#", 1)[0])) is not None
+    }  # fmt: skip
+    return replace(
+        scored,
+        units=unit_labels(units, config),
+        job=_describe(job, config),
+        chosen=chosen,
+        data=data_line,
+        objects=objects,
+        object_names=names,
+        labels=_labels(data, objects),
+    )
+
+
+def _describe(job: Any, config: dict[str, Any]) -> str:
+    """The job as its run name, what it trains on what, and its Table I row (if one)."""
+    combine = int(config["combine"])
+    units = (
+        "one trial per unit"
+        if combine == 1
+        else f"units of {combine} trials combined by {config['combine_instances']['name']}"
+    )
+    what = f"model {config['model']['name']} on modality {config['modality']['name']}, {units}"
+    paper = config.get("paper")
+    row = f", Table I row {paper['row']}" if isinstance(paper, dict) and paper.get("row") else ""
+    return f"{job.info.run_name} ({what}{row})"
+
+
+def _recorded_data(job: Any) -> Path | None:
+    """The data file the job logged as its dataset input (a ``file://`` source)."""
+    for dataset_input in job.inputs.dataset_inputs if job.inputs else ():
+        parsed = urllib.parse.urlparse(dataset_input.dataset.source)
+        if parsed.scheme == "file":
+            return Path(urllib.parse.unquote(parsed.path))
+    return None
+
+
+def _data_file(job: Any, data: str | Path | None) -> tuple[str | Path, str]:
+    """The data file to read trials from: the one given, else the job's own while it exists."""
+    if data is not None:
+        return data, f"{data} (given)"
+    recorded = _recorded_data(job)
+    if recorded is None:
+        raise PredictError(
+            f"run {job.info.run_id} records no data file: give --data FILE, a PHAC-2-layout "
+            "file holding the trials"
+        )
+    if not recorded.is_file():
+        raise PredictError(
+            f"the job's data file {recorded} is no longer there: give --data FILE, a "
+            "PHAC-2-layout file holding the trials"
+        )
+    return recorded, f"{recorded} (the job's own data file; --data to read another)"
+
+
+def _object_of(unit: str) -> int | None:
+    """The object of a unit named by a trial (``<object>_<id>_<trial>[#k]``), else None."""
+    name = TrialName.parse(unit.split("#", 1)[0])
+    return None if name is None else name.object_id
+
+
+def unit_labels(units: list[str], config: dict[str, Any]) -> list[str]:
+    """The names predict (and the deployed model) show for scored ``units``: a unit of several
+    trials is named by its object, a single trial or instance by itself."""
+    from tactile_exp.combine import COMBINERS
+
+    combiner, combine = str(config["combine_instances"]["name"]), int(config["combine"])
+    if not COMBINERS.build(combiner).keeps_instances and combine > 1:
+        return _object_units(units)
+    return list(units)
+
+
+def _object_units(units: list[str]) -> list[str]:
+    """Units of several trials named by their object (``car_sponge_101``, or ``..#2`` for an
+    object's second unit), not by the first trial in them."""
+    stems = [
+        name.stem if (name := TrialName.parse(u)) is not None else u for u in units
+    ]  # fmt: skip
+    seen: dict[str, int] = {}
+    out = []
+    for stem in stems:
+        seen[stem] = seen.get(stem, 0) + 1
+        out.append(stem if stems.count(stem) == 1 else f"{stem}#{seen[stem]}")
+    return out
+
+
+def _labels(data: str | Path | None, objects: list[int | None]) -> dict[int, list[str]]:
+    """The true adjectives of ``objects`` where the data file has labels; {} where not."""
+    from tactile_exp.data.phac2 import PHAC2, DataError
+
+    if data is None:
+        return {}
+    try:
+        labels = PHAC2(data).labels()
+    except (DataError, OSError, KeyError, ValueError):
+        return {}
+    return {
+        obj: [a for a, v in labels[obj].items() if v == 1]
+        for obj in dict.fromkeys(objects)
+        if obj is not None and obj in labels
+    }
 
 
 def _tracker(uri: str | None, experiment: str) -> Any:
@@ -266,7 +451,7 @@ class _Inputs:
         from tactile_exp.data.phac2 import PHAC2, DataError
 
         if self.data is None:
-            raise PredictError("haptic models need data: a PHAC-2-layout file holding the trials")
+            raise PredictError("haptic models need --data FILE: a PHAC-2-layout file of the trials")
         try:
             dataset = PHAC2(self.data)
             names = [dataset.trial_name(t) for t in self.trials]
@@ -278,7 +463,7 @@ class _Inputs:
             if not any(t.object_id == obj for t in names):
                 raise PredictError(f"{self.data}: no trials of object {obj}")
         if not names:
-            raise PredictError("give at least one trial (trials=...) or an object id")
+            raise PredictError("give at least one trial (--trial NAME) or an object (--object ID)")
         return dataset, names
 
     def state(self, child: str) -> tuple[dict[str, Any], dict[str, np.ndarray], str]:
@@ -473,7 +658,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("run_id", nargs="?", help="the job's (parent) run id; default: newest")
     parser.add_argument("--experiment", default="tactile_exp", help="MLflow experiment name")
     parser.add_argument("--tracking-uri", help="MLflow store (default: as the jobs use)")
-    parser.add_argument("--data", help="a PHAC-2-layout HDF5 file holding the trials")
+    parser.add_argument(
+        "--data",
+        help="a PHAC-2-layout HDF5 file holding the trials; default: the job's own data file",
+    )
     parser.add_argument("--trial", action="append", default=[], help="a trial group (repeat)")
     parser.add_argument("--object", type=int, help="all trials of this object id")
     parser.add_argument("--photos", help="a folder of one object's photographs")
@@ -490,6 +678,8 @@ def main(argv: list[str] | None = None) -> int:
     except (PredictError, store.ArtifactError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if args.format != "table":  # the table says it itself; csv and json stay data only
+        print("\n".join(result.header()), file=sys.stderr)
     text = {"table": result.to_table, "csv": result.to_csv, "json": result.to_json}[args.format]()
     if args.out:
         Path(args.out).write_text(text)

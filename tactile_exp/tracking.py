@@ -5,15 +5,21 @@ FINISHED on success, FAILED (with the error as a tag) on any exception. Jobs are
 job whose ``config_hash`` already has a FINISHED parent run on the same data file (its
 ``data.identity``) is skipped, so re-running a crashed sweep's command resumes it.
 
-What ``mlflow ui`` needs to show these runs as training runs: the experiment is tagged as
-traditional ML (``mlflow.experimentKind``; without it the UI opens on its GenAI traces page),
-every run carries source tags (entry point, git commit of the checkout), and a job's parent run
-lists its data file as a dataset input (name + digest = the file identity).
+What ``mlflow ui`` needs to show these runs as training runs: every run carries source tags
+(entry point, git commit of the checkout) and its job's data file as a dataset input (name +
+digest = the file identity). MLflow 3.x opens an experiment on its GenAI Overview whatever the
+experiment says: its UI reads the ``workflowType`` URL parameter, else the browser's remembered
+choice (the "GenAI | Model training" switch), default GenAI; the ``mlflow.experimentKind`` tag
+only counts where that switch is off. No tag or server option selects the runs, so each job
+ends its log with ``Tracker.runs_view``: a link to the runs table with ``workflowType`` set and
+the job's columns, filter and order as an MLflow shared view (an experiment tag the UI reads).
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import logging
 import os
 import re
@@ -22,7 +28,7 @@ import subprocess
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Callable, Collection, Iterator, Mapping
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -38,8 +44,12 @@ log = logging.getLogger(__name__)
 
 MAX_PARAM_LENGTH = 6000  # MLflow's limit on a param value
 MAX_BATCH = 1000  # MLflow's limit on metrics per log_batch call
-# The UI's switch between its traditional-ML run views and its GenAI (traces) views.
+# The UI's switch between its traditional-ML run views and its GenAI (traces) views, read where
+# MLflow's workflow switch is off; MLflow 3.17 reads ``WORKFLOW`` instead (see the docstring).
 EXPERIMENT_TAGS = {"mlflow.experimentKind": "custom_model_development"}
+WORKFLOW = "workflowType=machine_learning"  # URL parameter: the UI's "Model training" views
+SHARED_VIEW_TAG = "mlflow.sharedViewState."  # + key: a runs-table state the UI's URL can name
+UI_DEFAULT = "http://127.0.0.1:5000"  # where ``mlflow ui`` serves by default
 
 
 def project_root() -> Path:
@@ -90,6 +100,16 @@ def _artifact_root(uri: str) -> str | None:
     if uri.startswith("sqlite:///"):
         return (Path(uri.removeprefix("sqlite:///")).parent / "mlartifacts").as_uri()
     return None
+
+
+def ui_base(uri: str) -> str:
+    """The address of the MLflow UI for store ``uri``: the server itself, else ``mlflow ui``."""
+    return uri.rstrip("/") if uri.startswith(("http://", "https://")) else UI_DEFAULT
+
+
+def canonical_column(kind: str, key: str) -> str:
+    """A runs-table column as the UI names it, e.g. ``metrics.`mean_auc```."""
+    return f"{kind}.`{key}`"
 
 
 class TrackingError(RuntimeError):
@@ -209,6 +229,24 @@ class Tracker:
                     raise
                 time.sleep(0.5 * (attempt + 1))
         raise RuntimeError("unreachable")
+
+    def runs_view(self, columns: Sequence[str], *, order_by: str, filter_string: str) -> str:
+        """A link that opens the UI on this experiment's runs table (not its GenAI Overview)
+        with ``columns`` shown, ``filter_string`` applied and sorted by ``order_by``, best
+        first. The state is a shared view: an experiment tag named by its content, so the jobs
+        of one sweep write the same tag once each and print the same link."""
+        state = {
+            "selectedColumns": list(columns),
+            "searchFilter": filter_string,
+            "orderByKey": order_by,
+            "orderByAsc": False,
+        }
+        text = json.dumps(state, sort_keys=True)
+        key = hashlib.sha256(text.encode()).hexdigest()[:12]
+        with shielded():
+            self.client.set_experiment_tag(self.experiment_id, f"{SHARED_VIEW_TAG}{key}", text)
+        page = f"{ui_base(self.uri)}/#/experiments/{self.experiment_id}/runs"
+        return f"{page}?{WORKFLOW}&viewStateShareKey={key}"
 
     def finished_run(self, config_hash: str, *, data_identity: str) -> str | None:
         """A FINISHED job of ``config_hash`` on the data file ``data_identity`` (its

@@ -208,3 +208,55 @@ def test_one_trunk_override_reaches_every_visual_row(compose_config):
         given = settings_from_config(compose_config([f"experiment={row}", *trunk]))
         assert (given.config_hash != plain.config_hash) is changes, row  # resume skips A
         assert (given.row_hash != plain.row_hash) is changes, row
+
+
+SWEEP_16 = [  # the issue's ablation: -m model=... loss=... combine_instances=... combine=1,10
+    [f"model={m}", f"loss={lo}", f"combine_instances={ci}", f"combine={c}"]
+    for m in ("haptic_cnn", "haptic_lstm")
+    for lo in ("hinge", "logistic")
+    for ci in ("concat", "mean")
+    for c in (1, 10)
+]
+
+
+def _job(overrides: list[str]):
+    """Settings as ``python -m tactile_exp`` builds them: Hydra's choices and task overrides."""
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=overrides, return_hydra_config=True)
+    hc = cfg.hydra
+    choices = {k: str(v) for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
+    return settings_from_config(cfg, choices, overrides=tuple(hc.overrides.task))
+
+
+def test_the_jobs_of_a_sweep_have_distinct_names_from_their_overrides(compose_config):
+    """Each job of the 16-job ablation gets its own name from what it sets (the loss too) and
+    its own axis values; its config hash is that of the same config without names or axes."""
+    common = ["schedule=tiny", "adjectives=[hard,soft]", "tracking.uri=sqlite:///x.db"]
+    jobs = [(overrides, _job([*overrides, *common])) for overrides in SWEEP_16]
+    names = [s.run_name for _, s in jobs]
+    assert len(set(names)) == 16
+    assert "haptic_lstm-mean-c10-logistic-tiny-hard+soft-s0" in names
+    for overrides, s in jobs:
+        assert s.axes == dict(o.split("=") for o in [*overrides, *common[:2]])  # no tracking
+    for overrides, s in jobs[::5]:
+        plain = settings_from_config(compose_config([*overrides, *common]))
+        assert plain.config_hash == s.config_hash
+        assert plain.run_name == "-".join(s.run_name.split("-")[:3] + [f"s{s.seed}"])
+
+
+def test_run_name_short_forms():
+    s = _job(
+        [
+            "experiment=table1_i_haptic_cnn_1trial",
+            "model.lr=0.001",
+            "seed=3",
+            "adjectives=[hard,soft,smooth,thick]",
+            "cache_dir=/tmp/c",
+            "data=phac2",
+            "data.path=" + __file__,  # a file that exists: data=phac2 checks it
+        ]
+    )
+    # the Table I row, then each axis short; the seed once, last; cache_dir says nothing
+    assert s.run_name.startswith("table1_i_haptic_cnn_1trial-lr=0.001-4adj-")
+    assert s.run_name.endswith("-phac2-path=test_config-s3")
+    assert s.axes["model.lr"] == "0.001" and "cache_dir" not in s.axes

@@ -153,10 +153,12 @@ def test_parallel_sweep_runs_every_job(tiny_config, cache_dir, mlflow_uri, tmp_p
     ]
     subprocess.run([sys.executable, "-m", "tactile_exp", "-m", *args], check=True, timeout=300)
     client, runs = _runs(mlflow_uri)
-    parents = [
-        r for r in runs if r.info.run_name in ("random-separate-c1-s21", "random-separate-c1-s22")
-    ]
+    parents = [r for r in runs if r.data.tags["run_level"] == "parent"]
     assert len(parents) == 2 and all(r.info.status == "FINISHED" for r in parents)
+    tiny = "trials=2-duration_scale=0.1-views=1-image_width=96-image_height=64"  # TINY_DATA
+    assert sorted(r.info.run_name for r in parents) == [
+        f"random-separate-c1-{tiny}-hard-s{seed}" for seed in (21, 22)
+    ]
     # one sweep id, the sweep's folder (not its last part: multirun/<date>/<time> repeats times)
     assert {r.data.tags["sweep_id"] for r in parents} == {f"{tmp_path}/multirun"}
     assert (tmp_path / "multirun" / "0" / ".hydra" / "config.yaml").exists()
@@ -216,7 +218,7 @@ def test_sigterm_marks_the_runs_failed(cache_dir, mlflow_uri):
     finally:
         job.kill()
     _, runs = _runs(mlflow_uri)
-    parent = next(r for r in runs if r.info.run_name == "haptic_cnn-concat-c1-s31")
+    parent = next(r for r in runs if r.data.tags["run_level"] == "parent")
     child = next(r for r in runs if r.data.tags.get("mlflow.parentRunId") == parent.info.run_id)
     assert (parent.info.status, child.info.status) == ("FAILED", "FAILED")
     assert "signal 15" in parent.data.tags["error"]

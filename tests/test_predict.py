@@ -14,9 +14,18 @@ from mlflow.tracking import MlflowClient
 
 from tactile_exp import store
 from tactile_exp.config import settings_from_config
+from tactile_exp.data.layout import TrialName
+from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.experiment import run
-from tactile_exp.predict import PredictError, main, predict, read_photographs
+from tactile_exp.predict import (
+    PredictError,
+    _tracker,
+    haptic_instances,
+    main,
+    predict,
+    read_photographs,
+)
 
 
 @pytest.fixture
@@ -156,7 +165,8 @@ def test_predict_baseline_rows_equal_the_logged_scores(tiny_config, mlflow_uri, 
     logged = _logged(mlflow_uri, result.run_id)["hard"]
     obj, units = _test_object(logged, dataset)
     got = predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=dataset.path, object_id=obj)
-    assert got.units == units
+    # a unit of several trials is named by its object (tiny data: one unit per object)
+    assert got.units == (units if settings.combine == 1 else [TrialName.parse(units[0]).stem])
     np.testing.assert_allclose(got.scores[:, 0], [logged[u] for u in units], atol=1e-5)
 
 
@@ -224,3 +234,65 @@ def test_predict_multimodal_row_equals_the_logged_scores(tiny_config, mlflow_uri
     other = next(t.name for t in dataset.trials if t.object_id != obj)
     with pytest.raises(PredictError, match="trials of one object"):
         predict(**args, trials=[units[0], other], photos=folder)
+
+
+def test_the_table_names_the_job_its_data_and_what_the_scores_mean(job, mlflow_uri, capsys):
+    """No run id, no --data: the newest job and its own data file, both said; whole trial
+    names as column headers; one line per object against the file's true adjectives."""
+    result, data = job
+    trials = sorted(_logged(mlflow_uri, result.run_id)["hard"])[:2]
+    assert main(["--tracking-uri", mlflow_uri, *(f"--trial={t}" for t in trials)]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert lines[0] == (
+        f"job {result.run_id}: haptic_cnn-concat-c1-s0 (model haptic_cnn on modality haptic, "
+        "one trial per unit)"
+    )
+    assert lines[1] == "  no run id given: the newest FINISHED job of experiment 'tactile_exp'"
+    assert lines[2].startswith(f"data {Path(data).resolve()} (the job's own data file")
+    assert "decision value; > 0 means the adjective is predicted" in lines[3]
+    assert [line.split() for line in lines].count(trials) == 1  # the header: whole names
+    labels = PHAC2(data).labels()
+    got = predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=data, trials=trials)
+    for obj, chosen in got.object_predictions().items():
+        true = [a for a in ("hard", "soft") if labels[obj][a]]
+        line = next(x for x in lines if x.startswith(f"  object {obj} ("))
+        assert f"predicted {', '.join(chosen) or '(none)'}; true {', '.join(true) or '(none)'}" in (
+            line
+        )
+
+
+def test_missing_trials_name_the_flags(job, mlflow_uri, capsys):
+    result, _ = job
+    assert main([result.run_id, "--tracking-uri", mlflow_uri]) == 2
+    assert "--trial NAME" in capsys.readouterr().err
+    tracker = _tracker(mlflow_uri, "tactile_exp")
+    child = tracker.client.search_runs(
+        [tracker.experiment_id], f"tags.mlflow.parentRunId = '{result.run_id}'"
+    )[0].info.run_id
+    with pytest.raises(PredictError, match=r"--trial NAME\) or an object \(--object ID\)"):
+        haptic_instances(tracker, data=job[1], trials=[], child=child)
+
+
+def test_a_combined_unit_is_its_object_and_a_gone_data_file_asks_for_data(
+    tiny_config, mlflow_uri, tmp_path, capsys
+):
+    """combine=2 (all of a tiny object's trials): the unit is named by its object, its score
+    is the logged one; the job's own data file is used until it is gone, then --data is asked."""
+    copy = tmp_path / "phac2.h5"
+    settings = settings_from_config(tiny_config(["combine=2"], "[hard]"))
+    shutil.copy(DATA_SOURCES.build(settings.data.name, **settings.data.params).path, copy)
+    settings = settings_from_config(
+        tiny_config(["data=phac2", f"data.path={copy}", "combine=2"], "[hard]")
+    )
+    result = run(settings)
+    (unit, score), *_ = _logged(mlflow_uri, result.run_id)["hard"].items()
+    name = TrialName.parse(unit)
+    got = predict(run_id=result.run_id, tracking_uri=mlflow_uri, object_id=name.object_id)
+    assert got.units == [name.stem] and got.scores[0, 0] == pytest.approx(score, abs=1e-5)
+    assert got.data.startswith(f"{copy} (the job's own data file")
+    copy.unlink()
+    assert main([result.run_id, "--tracking-uri", mlflow_uri, f"--object={name.object_id}"]) == 2
+    assert f"the job's data file {copy} is no longer there: give --data" in (
+        capsys.readouterr().err
+    )

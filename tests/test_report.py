@@ -10,7 +10,7 @@ from mlflow.tracking import MlflowClient
 from PIL import Image
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp import experiment, stats, store
+from tactile_exp import experiment, stats, store, sweep
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.report import activations, cli, figures, heldout, runs, scores, table1
@@ -151,8 +151,14 @@ def test_written_files_read_back(tracker, tmp_path):
 
 
 def test_cli_logs_a_report_run(tracker, mlflow_uri, tmp_path, capsys):
+    cell = {"num": 3, "cell": "model=haptic_cnn modality=visual", "reason": "modality: no"}
+    sweep.track_invalid(tracker, "s1", {"on_invalid": "skip", "jobs": 9, "invalid": [cell]})
+    sweep.track_invalid(tracker, "s2", {"on_invalid": "skip", "jobs": 2, "invalid": [cell]})
     cli.main(["--tracking-uri", mlflow_uri, "--experiment", "report_test"] + [
         "--sweep-id", "s1", "--out", str(tmp_path / "r")])  # fmt: skip
+    index = (tmp_path / "r" / "index.md").read_text()  # the sweep's skipped cell, once
+    assert index.endswith("\n- #3 model=haptic_cnn modality=visual: modality: no\n")
+    assert index.count("modality: no") == 1
     client = MlflowClient(mlflow_uri)
     runs = client.search_runs([tracker.experiment_id], "tags.run_level = 'report'")
     assert [r.info.run_name for r in runs] == ["report"]

@@ -1,23 +1,37 @@
 """The named grids: `sweep=table1` is every table1_* file and takes seed/split lists; `sweep=smoke`
-runs every row end to end, and the report built from it matches the runs."""
+runs every row end to end, and the report built from it matches the runs. A sweep survives its
+invalid cells and failed jobs (issue 33, ``tactile_exp.sweep``): every job's config is checked
+before the first starts, invalid cells are listed and skipped (or nothing runs), a job that fails
+while training leaves its runs FAILED and the jobs after it run, and one line sums it up."""
 
 import csv
+import logging
+import os
+import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CONF
+import yaml
+from conftest import CONF, TINY_DATA
 from hydra import compose, initialize_config_dir
 from hydra._internal.config_loader_impl import ConfigLoaderImpl
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra._internal.utils import create_config_search_path
+from hydra.core.global_hydra import GlobalHydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.types import RunMode
 from mlflow.tracking import MlflowClient
+from omegaconf import OmegaConf
 from PIL import Image
 from test_extending import table1_rows
 
+from tactile_exp import sweep
+from tactile_exp.config import ConfigError
 from tactile_exp.report import cli, figures, table3
+from tactile_exp.termination import Terminated
 
 
 def _jobs(sweep: str, *arguments: str) -> list[list[str]]:
@@ -113,3 +127,285 @@ def test_smoke_sweep_and_report(cache_dir, mlflow_uri, tmp_path):
     # Table I (md, csv), per-adjective (2 csv), Fig. 5, claims (md, csv), the CD diagram,
     # Fig. 6 of metallic, Table III (md, csv), index.md
     assert len(listed) == 12
+
+
+# Issue 33's grid: model=haptic_cnn takes the haptic modality only, so its first cell is invalid.
+GRID = ["model=haptic_cnn,linear", "modality=visual,haptic", "schedule=tiny", "adjectives=[hard]"]
+INVALID_REASON = "modality: model=haptic_cnn takes modality haptic, got 'visual'"
+# A model that trains like `random` but raises while training for one seed: a job failing mid-sweep.
+FAILING_MODULE = '''
+"""Random scores, or an error while training for one seed: a job that fails mid-sweep."""
+
+from tactile_exp.models.random_guess import RandomGuess
+from tactile_exp.models.registry import MODELS
+
+
+@MODELS.register("fails_for_seed")
+class FailsForSeed(RandomGuess):
+    def __init__(self, *, seed: int = 0, fail_seed: int = -1) -> None:
+        super().__init__(seed=seed)
+        self.fail_seed = fail_seed
+
+    def fit(self, train, on_epoch=None):
+        if self.seed == self.fail_seed:
+            raise RuntimeError(f"planned failure while training with seed {self.seed}")
+        return super().fit(train, on_epoch)
+'''
+
+
+@pytest.fixture
+def multirun(cache_dir, mlflow_uri, tmp_path):
+    """The config Hydra hands the sweep callback for `python -m tactile_exp -m <overrides>` on
+    tiny data, composed in multirun mode, with GlobalHydra up as in a real sweep."""
+
+    def _compose(*overrides: str):
+        args = [*overrides, *TINY_DATA, f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}"]
+        args.append(f"hydra.sweep.dir={tmp_path / 'multirun'}")
+        return GlobalHydra.instance().hydra.compose_config(  # type: ignore[union-attr]
+            "config", args, run_mode=RunMode.MULTIRUN, with_log_configuration=False
+        )
+
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        yield _compose
+
+
+def test_every_cell_is_checked_before_the_first_job(multirun):
+    config = multirun(*GRID)
+    jobs = sweep.sweep_jobs(config)
+    assert [job[:2] for job in jobs] == [
+        ("model=haptic_cnn", "modality=visual"),
+        ("model=haptic_cnn", "modality=haptic"),
+        ("model=linear", "modality=visual"),
+        ("model=linear", "modality=haptic"),
+    ]
+    assert all(job[2:4] == ("schedule=tiny", "adjectives=[hard]") for job in jobs)
+    valid, invalid = sweep.check_jobs(config, jobs)
+    assert [(e["num"], e["cell"], e["reason"]) for e in invalid] == [
+        (0, "model=haptic_cnn modality=visual", INVALID_REASON)
+    ]
+    assert invalid[0]["overrides"] == list(jobs[0])
+    assert [(s.model.name, s.modality.name) for s in valid] == [
+        ("haptic_cnn", "haptic"),
+        ("linear", "visual"),
+        ("linear", "haptic"),
+    ]
+    assert {s.sweep_id for s in valid} == {str(config.hydra.sweep.dir)}
+
+
+def test_a_sweep_file_s_params_come_first_and_another_sweeper_is_not_enumerated(multirun):
+    jobs = sweep.sweep_jobs(multirun("sweep=table1", "seed=0,1"))
+    assert len(jobs) == 2 * len(table1_rows(CONF))
+    first = "experiment=table1_a_haptic_static_1trial"
+    assert [job[:3] for job in jobs[:2]] == [(first, "sweep=table1", f"seed={s}") for s in (0, 1)]
+    config = multirun("seed=0,1")
+    config.hydra.sweeper._target_ = "hydra_plugins.hydra_optuna_sweeper.OptunaSweeper"
+    assert sweep.sweep_jobs(config) is None
+
+
+def _restore_sigterm():
+    handler = signal.getsignal(signal.SIGTERM)
+    return lambda: signal.signal(signal.SIGTERM, handler)
+
+
+@pytest.mark.parametrize("full_error", ["0", "1"])
+def test_on_invalid_fail_runs_nothing(
+    full_error, multirun, mlflow_uri, tmp_path, capsys, monkeypatch
+):
+    """Also with HYDRA_FULL_ERROR=1 (a traceback): Hydra only warns about a callback's exception
+    and launches the jobs all the same, so the callback exits itself."""
+    monkeypatch.setenv("HYDRA_FULL_ERROR", full_error)
+    config = multirun(*GRID, "sweep.on_invalid=fail")
+    with pytest.raises(SystemExit) as stop:
+        sweep.PrepareSweep().on_multirun_start(config)
+    assert stop.value.code == 2
+    error = "sweep.on_invalid=fail: 1 of 4 jobs have an invalid config (listed above); none run"
+    last = capsys.readouterr().err.splitlines()[-1]
+    assert last == (
+        f"error: {error}" if full_error == "0" else f"tactile_exp.config.ConfigError: {error}"
+    )
+    listed = yaml.safe_load((tmp_path / "multirun" / "invalid.yaml").read_text())
+    assert listed["on_invalid"] == "fail" and listed["jobs"] == 4
+    assert [e["reason"] for e in listed["invalid"]] == [INVALID_REASON]
+    # Nothing tracked: not even the experiment is created.
+    assert [e.name for e in MlflowClient(mlflow_uri).search_experiments()] == ["Default"]
+
+
+def test_a_cell_without_a_config_file_is_left_to_hydra_s_own_error(multirun, tmp_path):
+    """`model=nope`: the sweeper names the missing file before it launches anything."""
+    sweep.PrepareSweep().on_multirun_start(multirun("model=linear,nope", "adjectives=[hard]"))
+    assert not (tmp_path / "multirun" / "invalid.yaml").exists()
+
+
+def test_skipped_cells_are_listed_for_the_report_before_any_job(
+    multirun, mlflow_uri, tmp_path, caplog
+):
+    restore = _restore_sigterm()
+    try:
+        with caplog.at_level(logging.WARNING, logger="tactile_exp.sweep"):
+            sweep.PrepareSweep().on_multirun_start(multirun(*GRID))
+    finally:
+        restore()
+    block = caplog.records[-1].getMessage().splitlines()
+    assert block == [
+        "1 of 4 jobs have an invalid config, skipped (sweep.on_invalid=skip); in "
+        f"{tmp_path / 'multirun' / 'invalid.yaml'}:",
+        f"  #0 model=haptic_cnn modality=visual: {INVALID_REASON}",
+    ]
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("tactile_exp")
+    (record,) = client.search_runs([experiment.experiment_id], "tags.run_level = 'sweep'")
+    assert record.info.status == "FINISHED"
+    assert record.data.tags["sweep_id"] == str(tmp_path / "multirun")
+    assert record.data.tags["n_jobs"] == "4" and record.data.tags["n_invalid"] == "1"
+    assert record.data.tags["invalid"] == f"#0 model=haptic_cnn modality=visual: {INVALID_REASON}"
+    stored = client.download_artifacts(record.info.run_id, "invalid.yaml", str(tmp_path))
+    assert yaml.safe_load(Path(stored).read_text()) == yaml.safe_load(
+        (tmp_path / "multirun" / "invalid.yaml").read_text()
+    )
+
+
+def test_a_listed_job_is_skipped_and_a_failed_one_is_kept_from_hydra(tmp_path, capsys):
+    folder = tmp_path / "multirun"
+    listing = {"invalid": [{"num": 1, "overrides": ["seed=2"], "reason": "seed: no"}]}
+    sweep._write(folder / sweep.INVALID_FILE, listing)
+    outcome = lambda num: yaml.safe_load((folder / "outcomes" / f"{num}.yaml").read_text())  # noqa: E731
+
+    assert not sweep.SweepJob(folder, 0, ("seed=1",)).skipped()
+    assert sweep.SweepJob(folder, 1, ("seed=2",)).skipped()
+    assert outcome(1) == {
+        "num": 1,
+        "status": "skipped",
+        "overrides": ["seed=2"],
+        "reason": "seed: no",
+    }
+
+    with sweep.SweepJob(folder, 0, ("seed=1",)).recorded():
+        raise RuntimeError("boom")  # logged with its traceback, not raised
+    assert outcome(0)["status"] == "FAILED" and outcome(0)["reason"] == "RuntimeError: boom"
+    with sweep.SweepJob(folder, 2, ("seed=3",)).recorded():
+        raise ConfigError("combine: found only now")
+    assert capsys.readouterr().err == "error: combine: found only now\n"
+    assert outcome(2)["reason"] == "combine: found only now"
+    with sweep.SweepJob(folder, 3, ("seed=4",)).recorded():
+        pass
+    assert outcome(3)["status"] == "FINISHED"
+    with pytest.raises(RuntimeError), sweep.SweepJob(folder, 5, (), raises=True).recorded():
+        raise RuntimeError("boom")  # another sweeper (the study's) handles it: it gets it
+    assert outcome(5)["status"] == "FAILED"
+    with pytest.raises(Terminated), sweep.SweepJob(folder, 4, ("seed=5",)).recorded():
+        raise Terminated("terminated by signal 15")  # the job exits: nothing recorded
+    assert not (folder / "outcomes" / "4.yaml").exists()
+
+
+def test_the_summary_line_counts_every_job(tmp_path, caplog):
+    config = OmegaConf.create({"hydra": {"runtime": {"cwd": str(tmp_path)}, "sweep": {"dir": "m"}}})
+    callback = sweep.PrepareSweep()
+    callback.jobs = [
+        (f"model={m}", f"seed={s}", "schedule=tiny") for m in ("a", "b") for s in (1, 2)
+    ]
+    folder = tmp_path / "m"
+    for num, status in enumerate(["FINISHED", "skipped", "FINISHED"]):  # job #3 never recorded
+        sweep.SweepJob(folder, num, callback.jobs[num]).record(status)
+    caplog.set_level(logging.INFO, logger="tactile_exp.sweep")
+    with pytest.raises(SystemExit) as stop:
+        callback.on_multirun_end(config)
+    assert stop.value.code == 1
+    assert caplog.records[-1].getMessage() == (
+        "2 FINISHED, 1 skipped (invalid), 1 FAILED: model=b seed=2"
+    )
+    sweep.SweepJob(folder, 3, callback.jobs[3]).record("FINISHED")
+    callback.on_multirun_end(config)  # nothing FAILED: no exit
+    assert caplog.records[-1].getMessage() == "3 FINISHED, 1 skipped (invalid), 0 FAILED"
+
+
+def _sweep(tmp_path, mlflow_uri, cache_dir, *overrides, env=None):
+    args = [*overrides, *TINY_DATA, f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}"]
+    args.append(f"hydra.sweep.dir={tmp_path / 'multirun'}")
+    return subprocess.run(
+        [sys.executable, "-m", "tactile_exp", "-m", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        timeout=600,
+        env={**os.environ, **(env or {})},
+    )
+
+
+def _parents(mlflow_uri):
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("tactile_exp")
+    return client.search_runs([experiment.experiment_id], "tags.run_level = 'parent'")
+
+
+@pytest.mark.slow
+@pytest.mark.job
+def test_the_issue_s_sweep_runs_its_valid_cells_and_skips_the_invalid_one(
+    tmp_path, mlflow_uri, cache_dir
+):
+    done = _sweep(tmp_path, mlflow_uri, cache_dir, *GRID)
+    assert done.returncode == 0, done.stdout[-3000:]
+    out = done.stdout
+    listed = f"#0 model=haptic_cnn modality=visual: {INVALID_REASON}"
+    assert out.index(listed) < out.index("Launching 4 jobs") < out.index("MLflow run")
+    assert "skipped: invalid config" in out and "error:" not in out
+    assert out.rstrip().endswith("3 FINISHED, 1 skipped (invalid), 0 FAILED")
+    parents = _parents(mlflow_uri)
+    assert sorted(
+        (r.data.params["choice.model"], r.data.params["choice.modality"]) for r in parents
+    ) == [
+        ("haptic_cnn", "haptic"),
+        ("linear", "haptic"),
+        ("linear", "visual"),
+    ]
+    assert all(r.info.status == "FINISHED" for r in parents)
+    folder = tmp_path / "multirun"
+    (invalid,) = yaml.safe_load((folder / "invalid.yaml").read_text())["invalid"]
+    assert (invalid["num"], invalid["reason"]) == (0, INVALID_REASON)
+    # The skipped cell keeps its number and folder (its config, no run): #1..#3 are the others.
+    assert (
+        yaml.safe_load((folder / "0" / ".hydra" / "overrides.yaml").read_text())
+        == invalid["overrides"]
+    )
+    status = {
+        n: yaml.safe_load((folder / "outcomes" / f"{n}.yaml").read_text())["status"]
+        for n in range(4)
+    }
+    assert status == {0: "skipped", 1: "FINISHED", 2: "FINISHED", 3: "FINISHED"}
+
+
+@pytest.mark.slow
+@pytest.mark.job
+@pytest.mark.parametrize(
+    "launcher", [[], ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]], ids=["basic", "joblib"]
+)
+def test_a_job_failing_in_training_leaves_its_runs_failed_and_the_rest_run(
+    launcher, tmp_path, mlflow_uri, cache_dir
+):
+    (tmp_path / "fails_for_seed.py").write_text(FAILING_MODULE)
+    path = os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])
+    overrides = [
+        "model=random",
+        "model.name=fails_for_seed",
+        "+model._module_=fails_for_seed",
+        "+model.fail_seed=1",
+        "combine_instances=separate",
+        "adjectives=[hard]",
+        "seed=1,2,3",
+        *launcher,
+    ]
+    done = _sweep(tmp_path, mlflow_uri, cache_dir, *overrides, env={"PYTHONPATH": path})
+    assert done.returncode == 1, done.stdout[-3000:]
+    assert done.stdout.rstrip().endswith("2 FINISHED, 0 skipped (invalid), 1 FAILED: seed=1")
+    assert "Error executing job" not in done.stdout  # Hydra never saw the failure
+    client = MlflowClient(mlflow_uri)
+    runs = client.search_runs([client.get_experiment_by_name("tactile_exp").experiment_id])
+    assert sorted((r.info.run_name, r.info.status) for r in runs) == [
+        ("adj=hard", "FAILED"),
+        ("adj=hard", "FINISHED"),
+        ("adj=hard", "FINISHED"),
+        ("random-separate-c1-s1", "FAILED"),
+        ("random-separate-c1-s2", "FINISHED"),
+        ("random-separate-c1-s3", "FINISHED"),
+    ]
+    failed = [r for r in runs if r.info.status == "FAILED"]
+    assert all("planned failure while training with seed 1" in r.data.tags["error"] for r in failed)

@@ -1,17 +1,29 @@
 """What `mlflow ui` shows of a job: experiment kind, source tags, dataset input, row grouping."""
 
+import json
+import logging
+import re
 import socket
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pytest
+from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
+from mlflow_ui_fixture import CHROMIUM, mlflow_ui, page
 
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.experiment import run
-from tactile_exp.tracking import EXPERIMENT_TAGS, Tracker, git_commit
+from tactile_exp.tracking import (
+    EXPERIMENT_TAGS,
+    SHARED_VIEW_TAG,
+    UI_DEFAULT,
+    Tracker,
+    git_commit,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 FAST = ["model=random", "combine_instances=separate"]
@@ -577,3 +589,96 @@ def test_a_tracking_server_is_checked_before_mlflow_is_asked(mlflow_uri, monkeyp
         ):
             Tracker(uri, "x")
     assert Tracker(mlflow_uri, "x").source_tags["mlflow.source.name"] == "python -m tactile_exp"
+
+
+@pytest.mark.job
+def test_a_child_found_alone_names_its_job_choices_and_data(tiny_config, mlflow_uri, caplog):
+    overrides = (*FAST, "seed=41")
+    settings = settings_from_config(tiny_config(list(overrides), "[hard]"), overrides=overrides)
+    with caplog.at_level(logging.INFO, logger="tactile_exp.experiment"):
+        run(settings)
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("tactile_exp")
+    runs = client.search_runs([experiment.experiment_id])
+    parent = next(r for r in runs if r.data.tags["run_level"] == "parent")
+    child = next(r for r in runs if r.data.tags["run_level"] == "child")
+    assert parent.info.run_name == "random-separate-c1-s41"  # what it sets is in the pattern
+    assert child.data.tags["job"] == parent.info.run_name
+    assert [(i.dataset.name, i.dataset.digest) for i in child.inputs.dataset_inputs] == [
+        (i.dataset.name, i.dataset.digest) for i in parent.inputs.dataset_inputs
+    ]
+    axes = {"axis.model": "random", "axis.combine_instances": "separate", "axis.seed": "41"}
+    for r in (parent, child):
+        assert r.data.params.items() >= {"choice.model": "random", **axes}.items()
+        assert not [k for k, v in r.data.params.items() if k.startswith("choice.") and v == "None"]
+    assert child.data.params.items() >= {"adjective": "hard", "combine": "1", "seed": "41"}.items()
+    # the log's last lines: the runs table of this job's sweep, and the click without it
+    lines = [r.getMessage() for r in caplog.records]
+    (link,) = [line for line in lines if line.startswith("runs table")]
+    key = link.rsplit("viewStateShareKey=", 1)[1]
+    view = json.loads(client.get_experiment(experiment.experiment_id).tags[SHARED_VIEW_TAG + key])
+    assert view["selectedColumns"] == [
+        "metrics.`mean_auc`",
+        *(f"params.`{k}`" for k in ("axis.model", "axis.combine_instances", "axis.seed")),
+    ]
+    assert "'Model training'" in lines[-1]
+
+
+def test_runs_view_opens_the_runs_table_with_its_columns(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "views")
+    columns = ["metrics.`mean_auc`", "params.`axis.combine`"]
+    where = {"order_by": "metrics.`mean_auc`", "filter_string": "tags.run_level = 'parent'"}
+    url = tracker.runs_view(columns, **where)
+    page, query = url.split("?")
+    assert page == f"http://127.0.0.1:5000/#/experiments/{tracker.experiment_id}/runs"
+    params = dict(item.split("=") for item in query.split("&"))
+    assert params["workflowType"] == "machine_learning"  # not the GenAI Overview
+    tags = MlflowClient(mlflow_uri).get_experiment(tracker.experiment_id).tags
+    assert json.loads(tags[SHARED_VIEW_TAG + params["viewStateShareKey"]]) == {
+        "selectedColumns": columns,
+        "searchFilter": "tags.run_level = 'parent'",
+        "orderByKey": "metrics.`mean_auc`",
+        "orderByAsc": False,
+    }
+    assert tracker.runs_view(columns, **where) == url  # the jobs of a sweep share one view
+    assert tracker.runs_view(columns[:1], **where) != url
+
+
+@pytest.mark.slow
+@pytest.mark.job
+@pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium on PATH (Debian: apt-get install chromium)"
+)
+def test_the_real_ui_opens_the_link_on_the_runs_of_a_sweep(cache_dir, mlflow_uri, tmp_path):
+    """A 2-job sweep differing only in the loss (one name, twice, before issue 32), then the
+    real ``mlflow ui`` in headless Chromium: the link each job printed opens the runs table
+    (not the GenAI Overview) on the two jobs, by name, with mean_auc and the swept axis."""
+    args = [*TINY_DATA, f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}"]
+    args += ["schedule=tiny", "adjectives=[hard]", "loss=hinge,logistic"]
+    args += [f"hydra.sweep.dir={tmp_path}/multirun"]
+    job = subprocess.run(
+        [sys.executable, "-m", "tactile_exp", "-m", *args],
+        capture_output=True, text=True, timeout=300, check=True,
+    )  # fmt: skip
+    links = {
+        line.split(": ", 1)[1]
+        for line in (job.stdout + job.stderr).splitlines()
+        if "runs table" in line
+    }
+    assert len(links) == 1  # both jobs print one link: their sweep's table
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("tactile_exp").experiment_id
+    parents = client.search_runs([experiment], "tags.run_level = 'parent'")
+    names = sorted(r.info.run_name for r in parents)
+    assert len(names) == 2 and names[0] != names[1]
+    assert "-hinge-" in names[0] and "-logistic-" in names[1]  # the loss, in its short form
+    with mlflow_ui(mlflow_uri, tmp_path) as base:
+        runs = page(links.pop().replace(UI_DEFAULT, base))
+        plain = page(f"{base}/#/experiments/{experiment}")
+    assert all(name in runs for name in names)
+    text = " ".join(re.sub(r"<[^>]+>", " ", runs).split())
+    assert "2 matching runs" in text and "adj=hard" not in runs  # jobs only, children filtered
+    assert "mean_auc" in runs and "axis.adjectives" in runs  # the shared view's columns
+    assert "Detect Issues" not in runs
+    # without the link MLflow 3.17 opens its GenAI Overview; the documented click is there
+    assert "Detect Issues" in plain and "Model training" in plain and "matching runs" not in plain

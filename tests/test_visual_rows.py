@@ -14,7 +14,7 @@ from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import ConfigError, param_error, settings_from_config
 from tactile_exp.data.layout import TrialName, objects
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
@@ -158,8 +158,10 @@ def test_weights_file_and_fitted_mean(dataset, cache_dir, tmp_path):
     a, b, c = (m.instances(split)[0].X for m in (from_file, random7, fitted))
     np.testing.assert_allclose(a, b, atol=1e-5)
     assert np.abs(c - b).max() > 1e-3  # a different mean is subtracted before the trunk
-    with pytest.raises(FileNotFoundError, match=r"trunk.weights .*missing.pth not found"):
+    with pytest.raises(ValueError, match=r"trunk.weights .*missing.pth not found") as missing:
         _small_visual(dataset, cache_dir, weights=str(tmp_path / "missing.pth"))
+    line = str(param_error("modality", {"weights": None}, missing.value))
+    assert line.startswith("modality: modality.weights") and "\n" not in line
     with pytest.raises(ValueError, match="modality.mean must be"):
         _small_visual(dataset, cache_dir, mean="dataset")
 

@@ -61,7 +61,8 @@ class Visual(Modality):
                 f"row), got {layout!r}"
             )
         if weights is not None and not Path(weights).is_file():
-            raise FileNotFoundError(
+            # ValueError: the job's config check turns it into one `error: modality...` line.
+            raise ValueError(
                 f"modality.weights (trunk.weights for every visual row): GoogLeNet weights file "
                 f"{weights} not found"
             )

@@ -40,7 +40,7 @@ from tactile_exp.report import comparisons, heldout
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
 from tactile_exp.report.figures import cd_diagram, fig5, fig6, numeric_axis
-from tactile_exp.report.runs import HAPTIC, Group, best, collect, row_group
+from tactile_exp.report.runs import HAPTIC, Group, best, collect, row_group, skipped_cells
 from tactile_exp.report.runs_table import runs_table
 from tactile_exp.report.scores import THRESHOLD, ReportError
 from tactile_exp.report.table1 import table1, table1_markdown
@@ -64,9 +64,16 @@ class Choices:
 
 
 def write(
-    *, groups: list[Group], out: Path, source: str, tracker: Tracker, choices: Choices
+    *,
+    groups: list[Group],
+    out: Path,
+    source: str,
+    tracker: Tracker,
+    choices: Choices,
+    skipped: tuple[str, ...] = (),
 ) -> list[Path]:
-    """Every report file into ``out``; returns their paths, ``index.md`` last."""
+    """Every report file into ``out``; returns their paths, ``index.md`` last. ``skipped``: the
+    sweep's cells that did not run (invalid config), listed at the end of ``index.md``."""
     out.mkdir(parents=True, exist_ok=True)
     evidence = {g.key: heldout.load(tracker, g) for g in groups}
     rows = table1(groups, evidence)
@@ -105,6 +112,10 @@ def write(
     index = _index(groups, rows, source, visual, haptic, evidence)
     index += claim_text + friedman_text + ablation_text
     index += fig6_text + _table3_text(table3_lines)
+    if skipped:
+        index += "\n## Not run: invalid config\n\nCells of this sweep listed invalid before its "
+        index += "first job and skipped (`sweep.on_invalid=skip`):\n\n"
+        index += "".join(f"- {line}\n" for line in skipped)
     (out / "index.md").write_text(index)
     return [*paths, out / "index.md"]
 
@@ -498,7 +509,15 @@ def main(argv: list[str] | None = None) -> None:
         table3_objects=tuple(args.table3_object),
     )
     try:
-        paths = write(groups=groups, out=args.out, source=source, tracker=tracker, choices=choices)
+        skipped = tuple(skipped_cells(tracker, args.sweep_id)) if args.sweep_id else ()
+        paths = write(
+            groups=groups,
+            out=args.out,
+            source=source,
+            tracker=tracker,
+            choices=choices,
+            skipped=skipped,
+        )
     except (ReportError, ArtifactError) as err:
         sys.exit(f"error: {err}")
     params = {"experiment": args.experiment, "sweep_id": args.sweep_id or "", "out": str(args.out)}

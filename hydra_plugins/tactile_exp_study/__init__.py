@@ -1,0 +1,1 @@
+"""tactile_exp's Hydra plugins: the ``study`` sweeper (issue 28)."""

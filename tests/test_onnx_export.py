@@ -1,0 +1,168 @@
+"""ONNX networks of a finished job: onnxruntime gives predict's decision values on a held-out
+object, from the manifest's inputs and the stored preprocessing; rows without a network refused."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_exp.combine import unit_members
+from tactile_exp.config import settings_from_config
+from tactile_exp.data.sources import DATA_SOURCES
+from tactile_exp.deploy.__main__ import main
+from tactile_exp.deploy.onnx_export import channel_names, export_job
+from tactile_exp.experiment import run
+from tactile_exp.modalities.multimodal import visual_units
+from tactile_exp.models.googlenet import network_input
+from tactile_exp.predict import (
+    PredictError,
+    _children,
+    _Inputs,
+    _tracker,
+    haptic_instances,
+    predict,
+    read_photographs,
+)
+from tactile_exp.preprocess.haptic import trial_signals
+
+SMALL_VISUAL = ["modality.size=32", "modality.batch_size=64"]
+SMALL_MULTIMODAL = ["modality.visual.size=32", "modality.visual.batch_size=128"]
+
+
+def _session(path: Path):
+    ort = pytest.importorskip("onnxruntime")
+    return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+
+
+def _held_out(uri: str, job: str, dataset) -> tuple[int, list[str]]:
+    """A test object of the job's one adjective and its trials (sorted by name)."""
+    tracker = _tracker(uri, "tactile_exp")
+    (child,) = _children(tracker, job, None).values()
+    scores = tracker.client.download_artifacts(child, "scores.csv")
+    units = [r["unit"] for r in csv.DictReader(io.StringIO(Path(scores).read_text()))]
+    by_stem = {t.stem: t.object_id for t in dataset.trials}
+    by_name = {t.name: t.object_id for t in dataset.trials}
+    first = units[0].split("#")[0]
+    obj = by_name.get(first, by_stem.get(first.rsplit("_v", 1)[0]))
+    return obj, sorted(t.name for t in dataset.trials if t.object_id == obj)
+
+
+def _docs_reference() -> dict[str, object]:
+    """The numpy reference of the haptic preprocessing in docs/deployment.md, executed."""
+    text = (Path(__file__).parents[1] / "docs" / "deployment.md").read_text()
+    block = text.split("<!-- reference: haptic preprocessing -->\n```python\n")[1].split("```")[0]
+    namespace: dict[str, object] = {}
+    exec(compile(block, "docs/deployment.md", "exec"), namespace)
+    return namespace
+
+
+def _photos(dataset, obj: int, folder: Path) -> Path:
+    folder.mkdir()
+    for path in dataset.photographs()[obj]:
+        shutil.copy(path, folder / path.name)
+    return folder
+
+
+@pytest.mark.job
+@pytest.mark.parametrize(
+    "row, overrides",
+    [
+        pytest.param("G", ["experiment=table1_g_haptic_lstm"], marks=pytest.mark.slow),
+        ("I", ["experiment=table1_i_haptic_cnn_1trial"]),
+        pytest.param("J", ["experiment=table1_j_haptic_cnn_10trials"], marks=pytest.mark.slow),
+        pytest.param(
+            "L",
+            ["experiment=table1_l_image_googlenet_8views", "data.views=2", *SMALL_VISUAL],
+            marks=pytest.mark.slow,
+        ),
+        pytest.param(
+            "M", ["experiment=table1_m_multimodal_i_l", *SMALL_MULTIMODAL], marks=pytest.mark.slow
+        ),
+    ],
+)
+def test_onnxruntime_equals_predict_on_a_held_out_object(
+    tiny_config, mlflow_uri, tmp_path, row, overrides
+):
+    onnx = pytest.importorskip("onnx")
+    settings = settings_from_config(tiny_config(overrides, "[hard]"))
+    job = run(settings).run_id
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+    obj, trials = _held_out(mlflow_uri, job, dataset)
+    out = tmp_path / "onnx"
+    assert main(["--tracking-uri", mlflow_uri, "onnx", job, str(out)]) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["row"] == row and list(manifest["adjectives"]) == ["hard"]
+    entry = manifest["adjectives"]["hard"]
+    for path in out.glob("*.onnx"):
+        onnx.checker.check_model(str(path), full_check=True)
+    state = np.load(out / "preprocess.npz", allow_pickle=False)
+
+    feeds: dict[str, np.ndarray] = {}
+    photos = None
+    if "haptic" in manifest:
+        tracker = _tracker(mlflow_uri, "tactile_exp")
+        haptic = manifest["haptic"]
+        assert len(haptic["channels"]) == 32 and haptic["channels"] == channel_names(4)
+        if manifest["modality"] == "multimodal":  # its haptic part's stored preprocessing
+            given = _Inputs(tracker, data=dataset.path, trials=trials, object_id=None, photos=None)
+            stored, arrays, where = given.state(entry["run_id"])
+            part = {k[7:]: v for k, v in arrays.items() if k.startswith("haptic.")}
+            instances = given._haptic(stored["haptic"], part, where)
+        else:
+            instances = haptic_instances(
+                tracker, data=dataset.path, trials=trials, child=entry["run_id"]
+            )
+        reference = _docs_reference()
+        trial = next(dataset.iter_trials([trials[0]]))
+        x = trial_signals(trial, haptic["pac_downsample"])
+        rows = trial.ep_segments()
+        segments = [[x[f, rows[ep]] for ep in haptic["eps"]] for f in range(2)]
+        ours = reference["trial_instances"](segments, state, "hard", haptic)
+        np.testing.assert_allclose(ours, instances.X[: len(ours)], rtol=1e-4, atol=1e-4)
+        per_unit = haptic["instances_per_unit"]
+        if manifest["combine_instances"] == "separate" and manifest["modality"] == "haptic":
+            feeds["instances"] = instances.X
+        else:
+            members = unit_members(instances, haptic["trials_per_unit"], pad=True)
+            feeds["instances"] = np.stack([instances.X[m] for m in members])
+            assert feeds["instances"].shape[1] == per_unit
+        assert list(feeds["instances"].shape[1:]) == entry["inputs"]["instances"][1:]
+    if "visual" in manifest:
+        visual = manifest["visual"]
+        photos = _photos(dataset, obj, tmp_path / "photos")
+        _, images = read_photographs(photos, visual["size"])
+        mean = state["hard.visual.channel_mean"]
+        trunk = _session(out / visual["trunk"])
+        (features,) = trunk.run(None, {"images": network_input(images, mean, visual["layout"])})
+        views = visual["views_per_unit"]
+        unit = visual_units(features, np.zeros(len(features), np.int64), views)[0]
+        n = len(feeds["instances"]) if feeds else 1
+        feeds["views"] = np.repeat(unit.reshape(1, views, -1), n, axis=0)
+    (got,) = _session(out / entry["file"]).run(None, feeds)
+
+    data = None if manifest["modality"] == "visual" else dataset.path
+    expected = predict(
+        run_id=job, tracking_uri=mlflow_uri, data=data, trials=trials if data else (), photos=photos
+    )
+    # float32 sums over ~25,000 standardised features (row M): numba kernels vs onnxruntime
+    np.testing.assert_allclose(got, expected.scores[:, 0], atol=1e-5, rtol=1e-5)
+    assert (got > 0).tolist() == [p == ["hard"] for p in expected.predicted()]
+
+
+def test_rows_without_a_network_are_refused(tiny_config, mlflow_uri, tmp_path, capsys):
+    settings = settings_from_config(
+        tiny_config(["experiment=table1_a_haptic_static_1trial"], "[hard]")
+    )
+    job = run(settings).run_id
+    with pytest.raises(PredictError, match="keeps no network.*linear SVM"):
+        export_job(job, tmp_path / "out", tracking_uri=mlflow_uri)
+    assert main(["--tracking-uri", mlflow_uri, "onnx", job, str(tmp_path / "out")]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"error: run {job} is a linear_svm job on modality haptic_features")
+    assert not (tmp_path / "out").exists()

@@ -1,0 +1,308 @@
+"""Search on validation objects (issue 28): what a job returns to Hydra is its validation
+objective, never the test AUC; a search without validation objects is refused before any run; an
+interrupted study continues to its number of trials; trials are tagged in MLflow."""
+
+from __future__ import annotations
+
+import math
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+import optuna
+import pytest
+from conftest import CONF, TINY_DATA
+from hydra.core.global_hydra import GlobalHydra
+from mlflow.tracking import MlflowClient
+
+from tactile_exp import evaluate, experiment, search
+from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.data.layout import Instances
+from tactile_exp.modalities.haptic import Haptic
+from tactile_exp.objective import value
+
+
+def _search(monkeypatch, tmp_path: Path, cache_dir: Path, mlflow_uri: str, *args: str) -> None:
+    """``python -m tactile_exp -m search=haptic_cnn <tiny data> <args>``, in this process."""
+    from tactile_exp.__main__ import main
+
+    argv = ["tactile_exp", f"--config-path={CONF}", "-m", "search=haptic_cnn", *TINY_DATA]
+    argv.append("schedule=tiny")
+    argv += [f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}", "adjectives=[hard,soft]"]
+    argv += [f"hydra.sweep.dir={tmp_path}/multirun", *args]
+    monkeypatch.setattr(sys, "argv", argv)
+    handler = signal.getsignal(signal.SIGTERM)
+    try:
+        main()
+    finally:
+        signal.signal(signal.SIGTERM, handler)
+        GlobalHydra.instance().clear()
+
+
+def _study(mlflow_uri: str, name: str = "haptic_cnn") -> optuna.Study:
+    return optuna.load_study(study_name=name, storage=search.default_storage(mlflow_uri))
+
+
+def _parents(mlflow_uri: str) -> list:
+    client = MlflowClient(mlflow_uri)
+    experiment_id = client.get_experiment_by_name("tactile_exp").experiment_id
+    return client.search_runs([experiment_id], "tags.run_level = 'parent'")
+
+
+def _child_val_aucs(mlflow_uri: str, parent_id: str) -> dict[str, float]:
+    client = MlflowClient(mlflow_uri)
+    runs = client.search_runs(
+        [client.get_run(parent_id).info.experiment_id],
+        f"tags.mlflow.parentRunId = '{parent_id}' and tags.run_level = 'child'",
+    )
+    return {r.data.tags["adjective"]: r.data.metrics["val_auc"] for r in runs}
+
+
+def test_objective_is_a_validation_metric(tiny_config):
+    with pytest.raises(ConfigError, match=r"^objective: mean_auc is scored on the test objects"):
+        settings_from_config(tiny_config(["objective=mean_auc"]))
+    settings = settings_from_config(tiny_config(["objective=min_val_auc"]))
+    assert value(settings.objective, {"a": 0.9, "b": 0.6}) == 0.6
+    assert value("mean_val_auc", {"a": 0.9, "b": 0.6}) == pytest.approx(0.75)
+    assert math.isnan(value("mean_val_auc", {}))  # validation.fraction=0: nothing to select on
+
+
+def test_search_trial_needs_validation_objects(tiny_config):
+    with pytest.raises(ConfigError, match=r"^validation\.fraction: 0 holds out no validation"):
+        settings_from_config(tiny_config(["search=haptic_cnn", "validation.fraction=0"]))
+    settings = settings_from_config(tiny_config(["search=haptic_cnn"]))
+    assert settings.study_tags == {"search.study": "haptic_cnn", "search.role": "trial"}
+    # The study's keys only tag a job: a trial is the same job as a plain run of its values.
+    plain = settings_from_config(tiny_config(["validation.fraction=0.15"]))
+    assert settings.config_hash == plain.config_hash
+
+
+def test_search_space_from_hydra_expressions():
+    space = search.search_space(
+        {
+            "model.kernel_sizes": "choice([3,3,3],[5,5,5])",
+            "model.widths.0": "range(2,9,step=2)",
+            "schedule.lr": "tag(log, interval(0.001, 0.1))",
+            "schedule.momentum": "interval(0.5, 0.99)",
+        }
+    )
+    assert space["model.kernel_sizes"].choices == ("[3,3,3]", "[5,5,5]")
+    assert (space["model.widths.0"].low, space["model.widths.0"].high) == (2, 8)
+    assert space["model.widths.0"].step == 2
+    assert space["schedule.lr"].log and (space["schedule.lr"].low, space["schedule.lr"].high) == (
+        0.001,
+        0.1,
+    )
+    assert not space["schedule.momentum"].log
+    with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.params\.validation\.fraction: "):
+        search.search_space({"validation.fraction": "interval(0.1, 0.3)"})
+    with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.params\.schedule\.lr: expected"):
+        search.search_space({"schedule.lr": "0.01"})
+
+
+def test_resume_queues_interrupted_and_orphaned_trials_again(monkeypatch):
+    study = optuna.create_study(direction="maximize")
+    space = search.search_space({"schedule.lr": "interval(0.001, 0.1)"})
+    done = study.ask(space)
+    study.tell(done, 0.7)
+    broken = study.ask(space)
+    search.failed(study, broken, "ValueError: job failed")  # a result: counted, not rerun
+    stopped = study.ask(space)
+    search.interrupted(study, stopped)  # Ctrl-C: not counted, rerun
+    orphan = study.ask(space)  # RUNNING in a process that died (kill -9)
+    search.claim(orphan)
+    orphan.set_user_attr("pid", 2**22 + 1)  # above pid_max: no such process
+    assert search.counted(study) == 2
+    assert search.resume(study) == 2
+    assert search.resume(study) == 0  # queued once
+    assert study.trials[orphan.number].state == optuna.trial.TrialState.FAIL
+    again = [study.ask(space).params["schedule.lr"] for _ in range(2)]  # queued values first
+    assert sorted(again) == sorted([stopped.params["schedule.lr"], orphan.params["schedule.lr"]])
+
+
+def test_best_prints_overrides_and_the_final_command(tmp_path):
+    storage = f"sqlite:///{tmp_path}/optuna.db"
+    study = search.open_study(
+        "s1", storage, direction="maximize", sampler=optuna.samplers.RandomSampler(seed=0)
+    )
+    fixed = ["search=haptic_cnn", "experiment=table1_i_haptic_cnn_1trial", "adjectives=[hard]"]
+    search.check_same_search(study, [*fixed, "validation.fraction=0.2"], "mean_val_auc")
+    space = search.search_space({"model.kernel_sizes": "choice([3,3,3],[5,5,5])"})
+    for score in (0.6, 0.8):
+        study.tell(study.ask(space), score)
+    best = study.best_trial
+    command = search.final_command(search.load_study("s1", storage))
+    assert command == [
+        "python",
+        "-m",
+        "tactile_exp",
+        *fixed,
+        f"model.kernel_sizes={best.params['model.kernel_sizes']}",
+        "validation.fraction=0",
+        "study.name=s1",
+        "study.role=final",
+        f"study.trial={best.number}",
+    ]
+    with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.study_name: study 's1' was run with"):
+        search.check_same_search(study, fixed, "mean_val_auc")
+    assert search.main(["best", "s1", "--storage", storage]) == 0
+    with pytest.raises(SystemExit) as exit_info:
+        search.main(["best", "nope", "--storage", storage])
+    assert exit_info.value.code == 2
+
+
+@pytest.mark.job
+def test_search_without_validation_objects_is_refused_before_any_run(
+    monkeypatch, tmp_path, cache_dir, mlflow_uri, capsys
+):
+    with pytest.raises(SystemExit) as exit_info:
+        _search(monkeypatch, tmp_path, cache_dir, mlflow_uri, "validation.fraction=0")
+    assert exit_info.value.code == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and errors[0].startswith("error: validation.fraction: 0 holds out")
+    assert not Path(search.default_storage(mlflow_uri).removeprefix("sqlite:///")).exists()
+    client = MlflowClient(mlflow_uri)
+    assert not client.search_runs([e.experiment_id for e in client.search_experiments()])
+
+
+@pytest.mark.slow
+@pytest.mark.job
+def test_returned_objective_is_the_validation_mean_not_the_test_mean(
+    monkeypatch, tmp_path, cache_dir, mlflow_uri
+):
+    """Test objects made easy (each replaced by a training instance of its label, which the
+    model has fitted), validation objects as they are: the study receives the validation mean."""
+    real_instances, real_take = Haptic.instances, experiment.take_trials
+    fitted: list[Instances] = []
+
+    def keep_train(self, split):
+        train, rest = real_instances(self, split)
+        fitted.append(train)
+        return train, rest
+
+    def easy_test(instances: Instances, trials: tuple[str, ...]):
+        val, test = real_take(instances, trials)
+        train = fitted[-1]
+        rows = [np.flatnonzero(train.y == label)[i] for i, label in enumerate(test.y)]
+        return val, Instances(train.X[rows], test.y, test.trial, test.object_id)
+
+    monkeypatch.setattr(Haptic, "instances", keep_train)
+    monkeypatch.setattr(experiment, "take_trials", easy_test)
+    _search(monkeypatch, tmp_path, cache_dir, mlflow_uri, "hydra.sweeper.n_trials=1")
+    (trial,) = _study(mlflow_uri).trials
+    (parent,) = _parents(mlflow_uri)
+    val_aucs = _child_val_aucs(mlflow_uri, parent.info.run_id)
+    assert set(val_aucs) == {"hard", "soft"}
+    assert trial.value == pytest.approx(np.mean(list(val_aucs.values())), abs=1e-12)
+    assert trial.value == pytest.approx(parent.data.metrics["mean_val_auc"], abs=1e-12)
+    assert parent.data.metrics["mean_auc"] > trial.value + 0.2  # the easy test objects
+
+
+@pytest.mark.slow
+@pytest.mark.job
+def test_interrupted_study_continues_to_its_number_of_trials(
+    monkeypatch, tmp_path, cache_dir, mlflow_uri
+):
+    """Ctrl-C after the third trial's job finished (before the study heard of it): the same
+    command ends with 4 finished trials, the third's job skipped as FINISHED, not rerun."""
+    real_run = experiment.run
+    calls = []
+
+    def interrupted_third(settings):
+        result = real_run(settings)
+        calls.append(result.run_id)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return result
+
+    monkeypatch.setattr(experiment, "run", interrupted_third)
+    with pytest.raises(KeyboardInterrupt):
+        _search(monkeypatch, tmp_path, cache_dir, mlflow_uri, "hydra.sweeper.n_trials=4")
+    State = optuna.trial.TrialState
+    assert [t.state for t in _study(mlflow_uri).trials] == [State.COMPLETE] * 2 + [State.FAIL]
+
+    monkeypatch.setattr(experiment, "run", real_run)
+    _search(monkeypatch, tmp_path, cache_dir, mlflow_uri, "hydra.sweeper.n_trials=4")
+    trials = _study(mlflow_uri).trials
+    complete = [t for t in trials if t.state == State.COMPLETE]
+    assert len(complete) == 4 and len(trials) == 5  # 4 finished, 1 interrupted: not 6
+    rerun = trials[3]
+    assert rerun.user_attrs["requeue_of"] == 2 and rerun.params == trials[2].params
+    # Every job ran once: 4 FINISHED runs, tagged with the study and the trial that ran them.
+    parents = {r.info.run_id: r for r in _parents(mlflow_uri)}
+    assert len(parents) == 4 and all(r.info.status == "FINISHED" for r in parents.values())
+    tags = sorted(
+        (r.data.tags["search.study"], r.data.tags["search.trial"]) for r in parents.values()
+    )
+    assert tags == [("haptic_cnn", str(n)) for n in (0, 1, 2, 4)]
+    third = parents[calls[2]]
+    assert rerun.value == pytest.approx(third.data.metrics["mean_val_auc"], abs=1e-12)
+    assert third.data.params["schedule.lr"] == str(trials[2].params["schedule.lr"])
+    # The study's summary run: best values, trials.csv, Optuna's two plots.
+    client = MlflowClient(mlflow_uri)
+    (summary,) = client.search_runs(
+        [third.info.experiment_id], "tags.run_level = 'study'", order_by=["start_time DESC"]
+    )[:1]
+    best = max(complete, key=lambda t: t.value)
+    assert summary.data.metrics["best_value"] == pytest.approx(best.value)
+    assert summary.data.params["schedule.lr"] == str(best.params["schedule.lr"])
+    listed = {a.path for a in client.list_artifacts(summary.info.run_id)}
+    assert listed == {"trials.csv", "optimization_history.png", "param_importances.png"}
+    csv = client.download_artifacts(summary.info.run_id, "trials.csv", str(tmp_path))
+    assert sum(",COMPLETE," in line for line in Path(csv).read_text().splitlines()) == 4
+
+
+@pytest.mark.slow
+@pytest.mark.job
+def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
+    """Sentinel: with every test object's score set to NaN the objective is unchanged."""
+    overrides = ["validation.fraction=0.3", "tracking.skip_finished=false"]
+    settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
+    clean = value(settings.objective, experiment.run(settings).val_aucs)
+
+    real_score, real_auc = experiment.score, evaluate.auc
+
+    def nan_test_scores(*args, **kwargs):
+        scored, head, history = real_score(*args, **kwargs)
+        scores, units = scored["test"]
+        scored["test"] = (np.full_like(scores, np.nan, dtype=float), units)
+        return scored, head, history
+
+    def nan_tolerant_auc(y, scores):
+        return float("nan") if not np.all(np.isfinite(scores)) else real_auc(y, scores)
+
+    monkeypatch.setattr(experiment, "score", nan_test_scores)
+    monkeypatch.setattr(evaluate, "auc", nan_tolerant_auc)
+    monkeypatch.setattr(experiment, "_log_summary", lambda *args: None)  # ROC of NaN scores
+    sentinel = experiment.run(settings)
+    assert math.isnan(sentinel.mean_auc)  # the test scores were NaN
+    assert math.isfinite(clean) and value(settings.objective, sentinel.val_aucs) == clean
+
+
+SEARCHES = {  # each search file, and the Table I row it is meant for
+    "haptic_cnn": "table1_i_haptic_cnn_1trial",
+    "haptic_lstm": "table1_g_haptic_lstm",
+    "head": "table1_j_haptic_cnn_10trials",
+}
+
+
+@pytest.mark.parametrize("name", sorted(SEARCHES))
+def test_search_files_sample_keys_that_exist(name, compose_config):
+    """Each conf/search file is a study of its own name whose sampled keys exist in its row."""
+    assert {p.stem for p in (CONF / "search").glob("*.yaml")} == set(SEARCHES)
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", [f"search={name}"], return_hydra_config=True)
+    assert cfg.hydra.sweeper.study_name == name and cfg.study.role == "trial"
+    assert 0 < cfg.validation.fraction < 1
+    space = search.search_space(dict(cfg.hydra.sweeper.params))
+    values = {k: d.choices[0] if hasattr(d, "choices") else d.low for k, d in space.items()}
+    sampled = [f"{k}={search.as_override(v)}" for k, v in values.items()]
+    row = compose_config([f"search={name}", f"experiment={SEARCHES[name]}", *sampled])
+    for key, v in values.items():
+        node = row
+        for part in key.split("."):
+            node = node[int(part)] if part.isdigit() else node[part]
+        assert str(node) == str(v)
