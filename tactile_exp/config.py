@@ -82,6 +82,13 @@ class Settings:
     objective: str = "mean_val_auc"  # what the job returns to Hydra (tactile_exp.objective)
     study_tags: dict[str, str] = field(default_factory=dict)  # search.study, search.role, ...
     axes: dict[str, str] = field(default_factory=dict)  # the job's overrides: see ``axes``
+    split_params: dict[str, Any] = field(default_factory=dict)  # e.g. folds=5, fold=0
+
+    @property
+    def split_key(self) -> str:
+        """The split rule with its parameters: what a stored model's training key records."""
+        params = ",".join(f"{k}={v}" for k, v in sorted(self.split_params.items()))
+        return f"{self.split}({params})" if params else self.split
 
 
 def config_hash(resolved: dict[str, Any]) -> str:
@@ -199,6 +206,8 @@ def settings_from_config(
     # differ only in seed, or with split=random in the split it draws, repeat one row.
     unseeded = OmegaConf.masked_copy(ours, list(ours))
     unseeded.seed = None
+    if "fold" in unseeded.split:  # split=folds: a seed's folds together are one repeat
+        unseeded.split.fold = None
     row_config: dict[str, Any] = OmegaConf.to_container(unseeded, resolve=True)  # type: ignore[assignment]
     choices = dict(choices or {})
     for group in ("data", "modality", "model", "combine_instances", "split"):
@@ -273,6 +282,7 @@ def settings_from_config(
         objective=objective,
         study_tags=study_tags,
         axes=job_axes,
+        split_params={k: v for k, v in resolved["split"].items() if k != "name"},
     )
     check_components(settings)
     return settings
@@ -318,7 +328,7 @@ def check_components(settings: Settings) -> None:
     """Every named component exists and accepts its parameters (models built once, untrained)."""
     from tactile_exp.combine import COMBINERS
     from tactile_exp.data.sources import DATA_SOURCES
-    from tactile_exp.data.splits import SPLITS
+    from tactile_exp.data.splits import SPLITS, check_split_params
     from tactile_exp.modalities import MODALITIES
     from tactile_exp.models.registry import MODELS
 
@@ -339,6 +349,10 @@ def check_components(settings: Settings) -> None:
         if name not in registry:
             known = ", ".join(registry.names())
             raise ConfigError(f"{key}: unknown option {name!r}; known: {known}")
+    try:
+        check_split_params(settings.split, settings.split_params)
+    except ValueError as err:
+        raise ConfigError(f"split.{err}") from err
     try:
         model = MODELS.build(settings.model.name, **settings.model.params)
     except (TypeError, ValueError) as err:

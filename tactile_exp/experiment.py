@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, store, termination, workers
+from tactile_exp import evaluate, stats, store, termination, workers
 from tactile_exp.combine import COMBINERS
 from tactile_exp.config import ConfigError, Settings, component_modules, param_error
 from tactile_exp.data.layout import Instances, Split
@@ -162,7 +162,10 @@ def open_data(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
             f"most {limit} {unit}; allowed 1..{limit}"
         )
-    splits = {a: make_split(dataset, a, settings.split, settings.seed) for a in settings.adjectives}
+    splits = {
+        a: make_split(dataset, a, settings.split, settings.seed, **settings.split_params)
+        for a in settings.adjectives
+    }
     return dataset, modality, splits
 
 
@@ -221,9 +224,12 @@ def run(settings: Settings) -> JobResult:
             )
         aucs = {a: r.auc for a, r in results.items()}
         mean = evaluate.mean_auc(aucs)
+        held_out = {a: stats.HeldOut(r.objects, r.y, r.scores) for a, r in results.items()}
+        ci = stats.mean_interval([held_out])  # over test objects (issue 27)
         tracker.log_metrics(
             parent_id,
-            {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}, **_means(results)},
+            {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}, **_means(results)}
+            | {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high},
         )
         _log_summary(tracker, parent_id, settings, dataset, results)
         log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)
@@ -349,7 +355,7 @@ def _run_adjective(
         dataset=modality.dataset.identity(),
         modality=settings.modality,
         model=settings.model,
-        split=settings.split,
+        split=settings.split_key,
         validation=settings.validation_fraction,
         seed=settings.seed,
         adjective=adjective,
@@ -457,7 +463,7 @@ def _part_provider(
             dataset=modality.dataset.identity(),
             modality=part_modality,
             model=part_model,
-            split=settings.split,
+            split=settings.split_key,
             validation=settings.validation_fraction,
             seed=settings.seed,
             adjective=split.adjective,

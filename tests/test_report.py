@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 from PIL import Image
+from sklearn.metrics import roc_auc_score
 
-from tactile_exp import experiment, store, sweep
+from tactile_exp import experiment, stats, store, sweep
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
-from tactile_exp.report import activations, cli, figures, runs, scores, table1
+from tactile_exp.report import activations, cli, figures, heldout, runs, scores, table1
 from tactile_exp.report import table3 as t3
 from tactile_exp.tracking import Tracker
 
@@ -33,6 +34,11 @@ RUNS = [
     ("i-c10", ROW_I, 0, "combine=10", False, 0.75),  # a stronger variant, not row I
     ("i", ROW_I, 0, "", False, 0.68),
 ]
+
+
+def _hash(key: str) -> str:
+    """A group's row hash without the experiment file that keeps a Table I row apart."""
+    return key.split(":")[0]
 
 
 def _log(tracker: Tracker, key, row, seed, overrides, fail, base, adjectives=ADJECTIVES):
@@ -68,10 +74,10 @@ def tracker(mlflow_uri):
 
 
 def test_groups_count_each_seed_once_and_label_variants(tracker):
-    groups = {g.key: g for g in runs.collect(tracker)}
+    groups = {_hash(g.key): g for g in runs.collect(tracker)}
     assert set(groups) == {"a", "a-1adj", "k", "i-quick", "i-c10", "i"}
     a = groups["a"]
-    assert sorted(a.runs) == [0, 1] and a.at_paper_settings
+    assert a.seeds == [0, 1] and sorted(a.runs) == [(0, -1), (1, -1)] and a.at_paper_settings
     mean_a = np.mean(0.01 * np.arange(24))
     assert a.aucs == pytest.approx([0.60 + mean_a, 0.70 + mean_a])  # the rerun of seed 1
     assert groups["k"].at_paper_settings  # split, data, weights overrides keep the paper's method
@@ -109,27 +115,37 @@ def test_written_files_read_back(tracker, tmp_path):
         "table1.md",
         "table1.csv",
         "per_adjective.csv",
+        "per_adjective_intervals.csv",
         "fig5_per_adjective.png",
+        "claims.md",
+        "claims.csv",
         "table3.md",
         "table3.csv",
         "index.md",
     ]
     with open(tmp_path / "out" / "table1.csv") as f:
-        assert list(csv.DictReader(f)) == table1.table1(groups)
+        evidence = {g.key: heldout.load(tracker, g) for g in groups}
+        assert list(csv.DictReader(f)) == table1.table1(groups, evidence)
     with open(tmp_path / "out" / "per_adjective.csv") as f:
         lines = {r["row_hash"]: r for r in csv.DictReader(f)}
     assert float(lines["a"]["metallic"]) == pytest.approx(
         0.65 + 0.01 * ADJECTIVES.index("metallic")
     )
     assert lines["a-1adj"]["thin"] == ""
+    one = next(g for g in groups if g.n_adjectives == 1)
+    assert figures.fig5_adjectives([one]) == ["hard"]  # not run: not drawn, rather than 0
     with Image.open(tmp_path / "out" / "fig5_per_adjective.png") as image:
         assert image.size == (1200, 450)
         assert np.asarray(image.convert("L")).std() > 10  # drawn, not blank
     # Fig. 5 takes row I at the paper's settings, not its stronger combine=10 variant.
-    assert runs.best(groups, runs.HAPTIC).key == "i"
-    assert runs.best(groups, ("visual",)).key == "k"
+    assert runs.best(groups, runs.HAPTIC).key == "i:table1_i_haptic_cnn_1trial"
+    assert runs.best(groups, ("visual",)).key == "k:table1_k_image_googlenet_1view"
     index = (tmp_path / "out" / "index.md").read_text()
     assert "![Fig. 5](fig5_per_adjective.png)" in index and "`table1_i_haptic_cnn_1trial`" in index
+    # Runs without scores.csv (logged before it existed) still report, without intervals.
+    assert "No interval for 6 configuration(s)" in index and "no scores.csv for" in index
+    assert "I > A | deep (ConvNet) beats hand-designed features | **not compared**" in index
+    assert "I > G | the ConvNet beats the LSTM | **not run** | row G not run" in index
     # Row I's runs here hold no models: Fig. 6 says why it is missing, the rest stands.
     assert "Not drawn: run " in index and "config.yaml unreadable" in index
 
@@ -207,6 +223,7 @@ def test_table3_predicted_sets_from_held_out_scores(table3_tracker, tmp_path):
         assert list(csv.DictReader(f)) == lines
     md = paths[0].read_text()
     assert "| hard (1/2 agree) | soft (1/2 agree) | not run |" in md
+    assert "| 2: hard, soft |" in md  # the adjectives tested on, by name
 
 
 def test_table3_objects_chosen_on_the_command_line(table3_tracker, mlflow_uri, tmp_path):
@@ -236,6 +253,13 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
     assert data.missing == ["compressible"] and len(data.signals) == 32
     assert [m.adjective for m in data.maps] == ["metallic", "metallic"]
     assert data.maps[0].unit.score >= data.maps[1].unit.score  # best, then worst positive
+    # The parent run carries the interval of its mean AUC, as the report computes it (issue 27).
+    metrics = tracker.client.get_run(job.run_id).data.metrics
+    evidence = heldout.load(tracker, runs.collect(tracker)[0])
+    assert (metrics["mean_auc_ci_low"], metrics["mean_auc_ci_high"]) == pytest.approx(
+        (evidence.interval().low, evidence.interval().high)
+    )
+    assert metrics["mean_auc_ci_low"] <= metrics["mean_auc"] <= metrics["mean_auc_ci_high"]
 
     # The same trials through the job's own path: its modality fits the preprocessing on the
     # training trials; the stored ConvNet's conv3 of each trial's first instance must match.
@@ -268,3 +292,142 @@ def test_runs_table_lists_a_job_and_its_children(table3_tracker, mlflow_uri, cap
     assert parent[0] == "| table1_i_haptic_cnn_1trial-s0"
     assert parent[-2] == f"{job.mean_auc:.3f}" and parent[3].startswith("python -m tactile_exp")
     assert [line.split(" | ")[0] for line in lines[3:]] == ["| └ adj=hard", "| └ adj=soft"]
+
+
+# Issue 27/32: held-out scores of 2-fold jobs (rows I, A; an ablation sweep) and one job of
+# row G on other objects. 8 adjectives (Wilcoxon over 6 cannot pass Holm over 2 tests),
+# 16 objects (6 positive), 2 units each.
+FOLD_ADJ = ["absorbent", "compressible", "hard", "rough", "smooth", "soft", "squishy", "thick"]
+N_OBJ, N_POS = 16, 6
+
+
+def _fold_job(
+    tracker, key, fold, overrides, quality, objects=range(N_OBJ), folds=2, row=None, sweep="f"
+):
+    """A parent run of one fold and a child per adjective holding its scores.csv."""
+    rng = np.random.default_rng([fold, int(quality * 100), len(key)])
+    params = {"choice.schedule": "quick", "schedule.epochs": "2", "schedule.finetune_epochs": "20"}
+    params |= {"seed": "0", "split.name": "folds", "split.fold": str(fold)}
+    params |= {"split.folds": str(folds), **(row or ROWS_BY_KEY.get(key, SWEPT))}
+    tags = {"run_level": "parent", "row_hash": key, "config_hash": f"{key}{fold}"}
+    tags |= {"overrides": overrides, "data.identity": "synthetic-abc", "sweep_id": sweep}
+    tested = [o for o in objects if o % folds == fold]
+    aucs = {}
+    name = (
+        params["choice.experiment"]
+        if params["choice.experiment"] != "None"
+        else "haptic_cnn-concat"
+    )
+    with tracker.run(f"{name}-s0", params, tags) as job:  # the sweep's names alike (issue 32)
+        for adjective in FOLD_ADJ:
+            lines = ["unit,object_id,label,score"]
+            ys, ss = [], []
+            for o in tested:
+                y = int(o < N_POS)
+                for u in range(2):
+                    score = quality * y + rng.normal(0, 0.3)
+                    lines.append(f"t{o}_{u},{o},{y},{score}")
+                    ys.append(y)
+                    ss.append(score)
+            aucs[f"auc.{adjective}"] = roc_auc_score(ys, ss)
+            ctags = {"run_level": "child", "adjective": adjective}
+            with tracker.run(f"adj={adjective}", {}, ctags, job) as child:
+                tracker.log_text(child, "\n".join(lines) + "\n", "scores.csv")
+        tracker.log_metrics(job, {"mean_auc": float(np.mean(list(aucs.values()))), **aucs})
+
+
+ROW_G = {**ROW_I, "paper.row": "G", "choice.experiment": "table1_g_haptic_lstm"}
+ROWS_BY_KEY = {"I": ROW_I, "A": ROW_A, "G": ROW_G}
+SWEPT = {"choice.experiment": "None", "model.name": "haptic_cnn", "modality.name": "haptic"}
+
+
+ABLATION = {  # (loss, combine) -> quality: combine matters, loss does not
+    ("hinge", "1"): 0.3,
+    ("logistic", "1"): 0.3,
+    ("hinge", "10"): 1.2,
+    ("logistic", "10"): 1.2,
+}
+
+
+@pytest.fixture(scope="module")
+def folds_tracker(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "folds_test")
+    for fold in (0, 1):
+        _fold_job(tracker, "I", fold, "experiment=table1_i_haptic_cnn_1trial", 1.5)
+        _fold_job(tracker, "A", fold, "experiment=table1_a_haptic_static_1trial", 0.2)
+        for (loss, combine), quality in ABLATION.items():
+            key = f"abl-{loss}-{combine}"
+            _fold_job(tracker, key, fold, f"loss={loss} combine={combine} seed=0", quality)
+    # A sweep job with row I's config (experiment files change no hashed value): its own line.
+    _fold_job(tracker, "I", 0, "model=haptic_cnn seed=0", 1.5, row=SWEPT, sweep="other")
+    # Row G tested on half the objects only (another split): not comparable paired with I.
+    _fold_job(tracker, "G", 0, "experiment=table1_g_haptic_lstm", 1.0, range(0, N_OBJ, 2), 1)
+    return tracker
+
+
+def test_folds_pool_out_of_fold_scores_with_intervals_and_object_counts(folds_tracker, tmp_path):
+    groups = runs.collect(folds_tracker)
+    i = next(g for g in groups if g.row == "I")
+    assert i.seeds == [0] and i.folds == 2 and sorted(i.runs) == [(0, 0), (0, 1)]
+    assert i.method == "table1_i_haptic_cnn_1trial" and i.row == "I"
+    twin = next(g for g in groups if _hash(g.key) == "I" and not g.row)
+    assert sorted(twin.runs) == [(0, 0)]  # the sweep's job of row I's config, kept apart
+    evidence = heldout.load(folds_tracker, i)
+    pooled = evidence.evaluations[0]["hard"]
+    assert sorted(set(pooled.object_id.tolist())) == list(range(N_OBJ))  # every object once
+    assert pooled.auc == pytest.approx(roc_auc_score(pooled.label, pooled.score))
+    row = next(r for r in table1.table1([i], {i.key: evidence}))
+    assert float(row["mean_auc_ci_low"]) <= float(row["mean_auc"]) <= float(row["mean_auc_ci_high"])
+    assert float(row["per_fold_mean_auc"]) == pytest.approx(i.aucs.mean())
+    assert (row["n_seeds"], row["seeds"], row["test_objects"]) == ("1", "0", "6/10")
+    assert row["split"] == "folds (2/2 folds pooled)"
+
+
+def test_report_states_claims_friedman_and_the_ablation_view(folds_tracker, tmp_path):
+    out = tmp_path / "out"
+    paths = cli.write(
+        groups=runs.collect(folds_tracker),
+        out=out,
+        source="test",
+        tracker=folds_tracker,
+        choices=cli.Choices(),
+    )
+    names = [p.name for p in paths]
+    assert {"claims.md", "cd_diagram.png", "ablation.md", "ablation_combine.png"} <= set(names)
+    index = (out / "index.md").read_text()
+    assert "## Table I: mean AUC over the 8 adjectives run (absorbent, compressible, hard," in index
+    claims = {r["claim"]: r for r in csv.DictReader((out / "claims.csv").read_text().splitlines())}
+    assert (
+        claims["I > A"]["result"] == "supported"
+    )  # row I kept apart from the sweep's jobs  # 1.5 vs 0.2 score separation
+    assert claims["I > G"]["result"] == "not compared"
+    assert "different test objects" in claims["I > G"]["detail"]
+    assert claims["M > I"]["result"] == "not run" and claims["thick: better by sight"][
+        "result"
+    ] == ("not run")
+    ablation = (out / "ablation.md").read_text()
+    assert "| combine=1 loss=hinge |" in ablation and "| combine=10 loss=logistic |" in ablation
+    effect = {line.split(" | ")[1]: line for line in ablation.splitlines() if line.startswith("| ")}
+    assert "combine=10 beats combine=1" in effect["combine=10 vs combine=1"]
+    assert "not distinguishable" in effect["loss=logistic vs loss=hinge"]
+    assert "Friedman chi2" in index and "![critical-difference diagram](cd_diagram.png)" in index
+    per_adjective = list(csv.DictReader((out / "per_adjective.csv").read_text().splitlines()))
+    configurations = [r["configuration"] for r in per_adjective]
+    assert len(set(configurations)) == len(configurations)  # no two lines named alike
+    assert "Per-adjective AUC of the best haptic configuration (no visual row was run)" in index
+    with Image.open(out / "fig5_per_adjective.png") as image:
+        assert np.asarray(image.convert("L")).std() > 10
+
+
+def test_an_auc_on_few_test_objects_is_flagged(folds_tracker):
+    i = next(g for g in runs.collect(folds_tracker) if g.row == "I")
+    obj = np.repeat(np.arange(6), 3)
+    label = (obj < 2).astype(int)  # 2 positive objects: an AUC in steps of 1/2 per object
+    held = stats.HeldOut(obj, label, label + np.linspace(0, 1, len(obj)))
+    evidence = heldout.Evidence([{"hard": held, "soft": held}])
+    assert evidence.sizes() == {"hard": (2, 4), "soft": (2, 4)} and evidence.thin() == [
+        "hard",
+        "soft",
+    ]
+    md = table1.table1_markdown(table1.table1([i], {i.key: evidence}))
+    assert "| 2/4 (< 3 on: hard soft) |" in md

@@ -156,7 +156,7 @@ def test_check_split_rejects_shared_object() -> None:
 
 
 def test_unknown_rule_and_adjective(full: PHAC2) -> None:
-    assert SPLITS.names() == ["published", "random"]
+    assert SPLITS.names() == ["folds", "published", "random"]
     with pytest.raises(KeyError, match="unknown split 'nope'"):
         make_split(full, "soft", "nope")
     with pytest.raises(DataError, match="unknown adjective 'gritty'"):
@@ -268,3 +268,77 @@ def test_check_split_rejects_shared_trials_and_one_class_sides() -> None:
     for message, split in one_class.items():
         with pytest.raises(DataError, match=f"^split of 'soft': {message} \\(expected at least"):
             check_split(split)
+
+
+def _n_positive(adj: str) -> int:
+    return sum(o.labels[adj] == 1 for o in OBJECTS.values())
+
+
+# Adjectives with at least 5 objects of each class (PHAC-2 has 17 such): 5 folds fit them.
+FOLDABLE = [a for a in ADJECTIVES if 5 <= _n_positive(a) <= len(OBJECTS) - 5]
+
+
+def test_folds_test_every_object_once_and_never_on_both_sides(full: PHAC2) -> None:
+    assert len(FOLDABLE) >= 10
+    for adj in FOLDABLE:
+        for seed in (0, 1):
+            tested: list[int] = []
+            for fold in range(5):
+                split = make_split(full, adj, "folds", seed, folds=5, fold=fold)
+                assert not split.objects("train") & split.objects("test"), (adj, seed, fold)
+                assert set(split.train) | set(split.test) == set(split.labels)
+                tested += sorted(split.objects("test"))
+                positives = {o for o in split.objects("test") if OBJECTS[o].labels[adj] == 1}
+                assert positives and positives != split.objects("test")  # both classes tested
+            assert sorted(tested) == sorted(ALL), (adj, seed)  # each object exactly once
+
+
+def test_folds_are_stratified_balanced_and_seeded(full: PHAC2) -> None:
+    adj = FOLDABLE[0]
+    n_pos = _n_positive(adj)
+    sizes, positives = [], []
+    for fold in range(5):
+        split = make_split(full, adj, "folds", 0, folds=5, fold=fold)
+        sizes.append(len(split.objects("test")))
+        positives.append(sum(OBJECTS[o].labels[adj] for o in split.objects("test")))
+    assert max(sizes) - min(sizes) <= 1
+    assert max(positives) - min(positives) <= 1 and sum(positives) == n_pos
+    again = make_split(full, adj, "folds", 0, folds=5, fold=2)
+    assert again == make_split(full, adj, "folds", 0, folds=5, fold=2)
+    other = make_split(full, adj, "folds", 1, folds=5, fold=2)
+    assert other.test != again.test  # another seed deals the objects anew
+
+
+def test_folds_refuse_a_class_smaller_than_k(full: PHAC2) -> None:
+    adj = FOLDABLE[0]
+    n_pos = _n_positive(adj)
+    with pytest.raises(DataError, match=rf"{n_pos} positive object\(s\), fewer than split.folds"):
+        make_split(full, adj, "folds", 0, folds=n_pos + 1, fold=0)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        (["split=folds", "split.fold=5"], r"^split\.fold: must be a whole number in 0\.\.4"),
+        (["split=folds", "split.folds=1"], r"^split\.folds: must be a whole number of folds >= 2"),
+        (["split=random", "+split.fold=1"], r"^split\.fold: not a parameter of split=random"),
+    ],
+)
+def test_folds_parameters_checked_before_a_job(
+    compose_config, overrides: list[str], message: str
+) -> None:
+    from tactile_exp.config import ConfigError, settings_from_config
+
+    with pytest.raises(ConfigError, match=message):
+        settings_from_config(compose_config(overrides))
+
+
+def test_folds_of_one_seed_share_a_row_and_keep_their_own_models(compose_config) -> None:
+    from tactile_exp.config import settings_from_config
+
+    a, b = (
+        settings_from_config(compose_config(["split=folds", f"split.fold={k}"])) for k in (0, 1)
+    )
+    assert a.row_hash == b.row_hash and a.config_hash != b.config_hash
+    assert a.split_key == "folds(fold=0,folds=5)" != b.split_key  # no model reused across folds
+    assert settings_from_config(compose_config([])).split_key == "published"

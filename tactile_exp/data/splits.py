@@ -1,7 +1,8 @@
 """Per-adjective train/test splits (METHOD E1, E3; PHAC2_FORMAT §2).
 
-Each rule is a function ``(dataset, adjective, seed) -> Split`` in `SPLITS`; `make_split` is the
-one way to get a split. Every split leaves `check_split`, so no rule can hand out a split with
+Each rule is a function ``(dataset, adjective, seed, **params) -> Split`` in `SPLITS` (params
+from the rule's YAML, checked by `check_split_params` before a job starts); `make_split` is the one
+way to get a split. Every split leaves `check_split`, so no rule can hand out a split with
 object leakage or a one-class side.
 """
 
@@ -29,14 +30,35 @@ if TYPE_CHECKING:
 
 TRAIN_RATIO = 0.9  # the authors' 90/10 (the "90_10" in the file name)
 
-SPLITS: Registry[Split] = Registry("split")  # rule(dataset, adjective, seed) -> Split
+SPLITS: Registry[Split] = Registry("split")  # rule(dataset, adjective, seed, **params) -> Split
 
 
-def make_split(dataset: PHAC2, adjective: str, rule: str = "published", seed: int = 0) -> Split:
-    """One adjective's train/test split by a rule of `SPLITS` (E1, E3)."""
+def make_split(
+    dataset: PHAC2, adjective: str, rule: str = "published", seed: int = 0, **params: int
+) -> Split:
+    """One adjective's train/test split by a rule of `SPLITS` (E1, E3; ``folds``: ours)."""
     if adjective not in ADJECTIVES:
         raise DataError(f"{dataset.path}: unknown adjective {adjective!r} (expected one of D4)")
-    return SPLITS[rule](dataset, adjective, seed)
+    return SPLITS[rule](dataset, adjective, seed, **params)
+
+
+def check_split_params(rule: str, params: dict[str, object]) -> None:
+    """A rule's parameters, before any data is read: ValueError naming the key otherwise."""
+    allowed = {"folds": ("folds", "fold")}.get(rule, ())
+    extra = sorted(set(params) - set(allowed))
+    if extra:
+        raise ValueError(
+            f"{extra[0]}: not a parameter of split={rule} (it takes {allowed or 'none'})"
+        )
+    if rule != "folds":
+        return
+    folds, fold = params.get("folds"), params.get("fold")
+    if not isinstance(folds, int) or isinstance(folds, bool) or folds < 2:
+        raise ValueError(f"folds: must be a whole number of folds >= 2, got {folds!r}")
+    if not isinstance(fold, int) or isinstance(fold, bool) or not 0 <= fold < folds:
+        raise ValueError(
+            f"fold: must be a whole number in 0..{folds - 1} (split.folds-1), got {fold!r}"
+        )
 
 
 def check_split(split: Split, where: str = "") -> Split:
@@ -175,6 +197,36 @@ def random_split(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
         train += [n for i in ids[:n_train] for n in objs[i]]
         test += [n for i in ids[n_train:] for n in objs[i]]
     return _make(dataset, adjective, train, test, f"random seed={seed}")
+
+
+@SPLITS.register("folds")
+def folds_split(
+    dataset: PHAC2, adjective: str, seed: int = 0, folds: int = 5, fold: int = 0
+) -> Split:
+    """Object-grouped, class-stratified K-fold (ours, issue 27): fold ``fold`` of ``folds`` is
+    the test side. Over ``fold = 0..folds-1`` of one seed every object is tested exactly once.
+
+    Each class's objects are shuffled (seeded by ``seed`` and the adjective) and dealt to the
+    folds in turn; the negatives continue the deal where the positives stopped, so the folds
+    differ in size by at most one object.
+    """
+    check_split_params("folds", {"folds": folds, "fold": fold})
+    rng = np.random.default_rng([seed, ADJECTIVES.index(adjective), 27])
+    train: list[str] = []
+    test: list[str] = []
+    start = 0
+    for label, objs in sorted(_trials_by_object(dataset, adjective).items(), reverse=True):
+        if len(objs) < folds:
+            word = "positive" if label == 1 else "negative"
+            raise DataError(
+                f"{dataset.path} (folds split): {adjective!r} has {len(objs)} {word} object(s), "
+                f"fewer than split.folds={folds}; every fold needs one (use split.folds<="
+                f"{len(objs)}, leave it out of adjectives=, or use split=random)"
+            )
+        for k, i in enumerate(int(i) for i in rng.permutation(sorted(objs))):
+            (test if (start + k) % folds == fold else train).extend(objs[i])
+        start = (start + len(objs)) % folds
+    return _make(dataset, adjective, train, test, f"folds seed={seed} fold={fold}/{folds}")
 
 
 def split_photographs(

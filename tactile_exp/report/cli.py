@@ -3,11 +3,18 @@
 Reads the FINISHED job runs of one MLflow experiment (optionally of one sweep), groups them into
 Table I's lines (``runs``) and writes into ``--out``:
 
-- ``table1.md`` / ``table1.csv``: one line per configuration up to the seed: its Table I row,
-  whether it ran at the paper's settings (else what differs), mean AUC and its spread over
-  seeds/splits, the paper's figure, the data file's identity and the run ids;
+- ``table1.md`` / ``table1.csv``: one line per configuration up to the seed (and fold): its
+  Table I row, whether it ran at the paper's settings (else what differs), mean AUC with its 95%
+  object-bootstrap interval (``split=folds``: pooled out of fold, and the per-fold mean), its
+  spread over seeds/splits, how many test objects each AUC rests on, the paper's figure, the data
+  file's identity and the run ids;
 - ``per_adjective.csv``: per-adjective AUC of every configuration, averaged over its seeds;
-- ``fig5_per_adjective.png``: the best haptic against the best visual configuration per adjective;
+  ``per_adjective_intervals.csv`` the same with intervals and test-object counts;
+- ``fig5_per_adjective.png``: the best haptic against the best visual configuration per
+  adjective, with error bars;
+- ``claims.md`` / ``claims.csv``: the paper's claims as paired verdicts on the runs at hand
+  (``comparisons``, ``tactile_exp.stats``); ``cd_diagram.png``: Friedman's test and Nemenyi's
+  critical difference; ``ablation.md`` / ``ablation_<axis>.png``: the ablation view of a sweep;
 - ``fig6_<adjective>.png``: conv3 activation maps of row I's stored haptic ConvNet (else H's,
   J's) on test trials of chosen adjectives (``activations``);
 - ``table3.md`` / ``table3.csv``: ground truth and the predicted adjectives of rows I, L and M for
@@ -27,10 +34,12 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
+from tactile_exp import stats
 from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.report import comparisons, heldout
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
-from tactile_exp.report.figures import fig5, fig6
+from tactile_exp.report.figures import cd_diagram, fig5, fig6, numeric_axis
 from tactile_exp.report.runs import HAPTIC, Group, best, collect, row_group, skipped_cells
 from tactile_exp.report.runs_table import runs_table
 from tactile_exp.report.scores import THRESHOLD, ReportError
@@ -66,28 +75,42 @@ def write(
     """Every report file into ``out``; returns their paths, ``index.md`` last. ``skipped``: the
     sweep's cells that did not run (invalid config), listed at the end of ``index.md``."""
     out.mkdir(parents=True, exist_ok=True)
-    rows = table1(groups)
+    evidence = {g.key: heldout.load(tracker, g) for g in groups}
+    rows = table1(groups, evidence)
     (out / "table1.md").write_text(table1_markdown(rows))
-    with open(out / "table1.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    _write_csv(out / "table1.csv", rows)
     with open(out / "per_adjective.csv", "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["row", "method", "row_hash", "seeds", *ADJECTIVES])
+        writer.writerow(["row", "configuration", "method", "row_hash", "n_seeds", *ADJECTIVES])
         for g in groups:
-            aucs = g.per_adjective()
+            aucs = _per_adjective(g, evidence[g.key])
             cells = [f"{aucs[a]:.6f}" if a in aucs else "" for a in ADJECTIVES]
-            writer.writerow([g.row, g.method, g.key, len(g.runs), *cells])
-    paths = [out / "table1.md", out / "table1.csv", out / "per_adjective.csv"]
+            writer.writerow([g.row, _configuration(g), g.method, g.row_hash, len(g.seeds), *cells])
+    _write_csv(out / "per_adjective_intervals.csv", _interval_rows(groups, evidence))
+    paths = [
+        out / "table1.md",
+        out / "table1.csv",
+        out / "per_adjective.csv",
+        out / "per_adjective_intervals.csv",
+    ]
     visual, haptic = best(groups, ("visual",)), best(groups, HAPTIC)
     if visual or haptic:
-        fig5(visual, haptic, out / "fig5_per_adjective.png")
+        shown = [
+            (kind, g, evidence[g.key].per_adjective() if evidence[g.key].ok else {})
+            for kind, g in (("best haptic", haptic), ("best visual", visual))
+            if g is not None
+        ]
+        fig5(shown, _fig5_title(haptic, visual), out / "fig5_per_adjective.png")
         paths.append(out / "fig5_per_adjective.png")
+    claim_text, claim_paths = _claims(groups, evidence, haptic, visual, out)
+    friedman_text, friedman_paths = _friedman(groups, evidence, out)
+    ablation_text, ablation_paths = _ablation(groups, evidence, out)
+    paths += claim_paths + friedman_paths + ablation_paths
     fig6_paths, fig6_text = _fig6(groups, out, tracker, choices)
     table3_lines = _table3(groups, tracker, choices)
     paths += fig6_paths + t3.write_table3(table3_lines, out)
-    index = _index(groups, rows, source, visual, haptic)
+    index = _index(groups, rows, source, visual, haptic, evidence)
+    index += claim_text + friedman_text + ablation_text
     index += fig6_text + _table3_text(table3_lines)
     if skipped:
         index += "\n## Not run: invalid config\n\nCells of this sweep listed invalid before its "
@@ -95,6 +118,163 @@ def write(
         index += "".join(f"- {line}\n" for line in skipped)
     (out / "index.md").write_text(index)
     return [*paths, out / "index.md"]
+
+
+def _write_csv(path: Path, rows: list[dict[str, str]]) -> None:
+    with open(path, "w", newline="") as f:
+        if rows:
+            writer = csv.DictWriter(f, list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+
+
+def _configuration(g: Group) -> str:
+    """The method and what differs: tells apart configurations that share a method name."""
+    return f"{g.method} [{'; '.join(g.differences)}]" if g.differences else g.method
+
+
+def _per_adjective(g: Group, ev: heldout.Evidence) -> dict[str, float]:
+    """Pooled out-of-fold AUC per adjective where the scores are there, else the runs' own."""
+    if ev.ok and g.folds:
+        return {a: iv.estimate for a, iv in ev.per_adjective().items()}
+    return g.per_adjective()
+
+
+def _interval_rows(groups: list[Group], evidence: dict[str, heldout.Evidence]):
+    rows = []
+    for g in groups:
+        ev = evidence[g.key]
+        if not ev.ok:
+            continue
+        sizes = ev.sizes()
+        for a, iv in ev.per_adjective().items():
+            n_pos, n_neg = sizes[a]
+            rows.append(
+                {
+                    "row": g.row,
+                    "configuration": _configuration(g),
+                    "row_hash": g.row_hash,
+                    "adjective": a,
+                    "auc": f"{iv.estimate:.6f}",
+                    "ci_low": f"{iv.low:.6f}",
+                    "ci_high": f"{iv.high:.6f}",
+                    "positive_objects": str(n_pos),
+                    "negative_objects": str(n_neg),
+                    "few_objects": str(min(n_pos, n_neg) < heldout.FEW_OBJECTS),
+                }
+            )
+    return rows
+
+
+def _fig5_title(haptic: Group | None, visual: Group | None) -> str:
+    if haptic and visual:
+        return "Per-adjective AUC: best haptic vs best visual configuration"
+    kind = "haptic" if haptic else "visual"
+    other = "visual" if haptic else "haptic"
+    return f"Per-adjective AUC of the best {kind} configuration (no {other} row was run)"
+
+
+def _claims(
+    groups: list[Group],
+    evidence: dict[str, heldout.Evidence],
+    haptic: Group | None,
+    visual: Group | None,
+    out: Path,
+) -> tuple[str, list[Path]]:
+    lines = comparisons.claims(groups, evidence) + comparisons.by_modality(haptic, visual, evidence)
+    rows = [vars(c) for c in lines]
+    _write_csv(out / "claims.csv", rows)
+    text = [
+        "## The paper's claims, on these runs",
+        "",
+        "Each claim compares two Table I rows paired (the same test objects): the difference of",
+        "mean AUC with its 95% paired-bootstrap interval and a Wilcoxon signed-rank test over the",
+        "per-adjective differences, Holm-corrected over the claims compared. A claim is",
+        "`supported` only when the corrected test and the interval agree on the winner,",
+        "`contradicted` when they agree on the other, else `not distinguishable`; never from the",
+        "point estimates alone. The by-adjective lines (Fig. 5) compare the best visual and the",
+        "best haptic configuration on one adjective (interval only, Bonferroni level).",
+        "Machine-readable: [claims.csv](claims.csv).",
+        "",
+        "| claim | what the paper says | verdict here | numbers |",
+        "|---|---|---|---|",
+        *(f"| {c.claim} | {c.says} | **{c.result}** | {c.detail} |" for c in lines),
+        "",
+    ]
+    (out / "claims.md").write_text("\n".join(text) + "\n")
+    return "\n".join(text) + "\n", [out / "claims.md", out / "claims.csv"]
+
+
+def _friedman(
+    groups: list[Group], evidence: dict[str, heldout.Evidence], out: Path
+) -> tuple[str, list[Path]]:
+    head = ["## All configurations: Friedman's test and the critical-difference diagram", ""]
+    result = comparisons.friedman(groups, evidence)
+    if result is None:
+        why = "fewer than 3 configurations tested on the same objects with scores"
+        return "\n".join([*head, f"Not drawn: {why}.", "", ""]), []
+    cd_diagram(result, out / "cd_diagram.png")
+    ranks = ", ".join(
+        f"{n} {r:.2f}"
+        for n, r in sorted(zip(result.names, result.mean_ranks, strict=True), key=lambda x: x[1])
+    )
+    text = [
+        *head,
+        f"{len(result.names)} configurations tested on the same objects, ranked on each of "
+        f"{result.n_adjectives} adjectives (1 = best AUC): Friedman chi2 = {result.statistic:.2f},"
+        f" p = {result.p:.3g}. Mean ranks: {ranks}. Nemenyi's critical difference at 0.05 is "
+        f"{result.critical_difference:.2f}: configurations joined by a red bar are not",
+        "distinguishable (scipy's Friedman test; the diagram is drawn with matplotlib).",
+        "",
+        "![critical-difference diagram](cd_diagram.png)",
+        "",
+        "",
+    ]
+    return "\n".join(text), [out / "cd_diagram.png"]
+
+
+def _ablation(
+    groups: list[Group], evidence: dict[str, heldout.Evidence], out: Path
+) -> tuple[str, list[Path]]:
+    view = comparisons.ablation(groups, evidence)
+    if view is None:
+        return "", []
+    lines = [
+        "## The ablation view",
+        "",
+        "The configurations outside Table I's rows, named by the swept settings that differ. For",
+        "each axis, every pair of its levels compared paired, averaged over the other axes'",
+        "combinations (Holm over all these comparisons).",
+        "",
+        "| configuration | mean AUC [95% CI] | seeds |",
+        "|---|---|---|",
+    ]
+    for values, g in sorted(view.configs.items()):
+        lines.append(f"| {view.name(values)} | {evidence[g.key].interval()} | {len(g.seeds)} |")
+    lines += ["", "| axis | comparison | combinations | difference and test |", "|---|---|---|---|"]
+    for axis, cmp, n in view.effects:
+        lines.append(f"| {axis} | {cmp.a} vs {cmp.b} | {n} | {comparisons.describe(cmp)} |")
+    for axis, levels, why in view.unpaired:
+        lines.append(f"| {axis} | {levels} | 0 | not compared: {why} |")
+    paths = []
+    for i, axis in enumerate(view.axes):
+        try:
+            [float(v) for v in view.axes[axis]]
+        except ValueError:
+            continue
+        series: dict[str, list[tuple[float, stats.Interval]]] = {}
+        for values, g in view.configs.items():
+            rest = " ".join(
+                f"{a}={v}" for j, (a, v) in enumerate(zip(view.axes, values, strict=True)) if j != i
+            )
+            series.setdefault(rest, []).append((float(values[i]), evidence[g.key].interval()))
+        path = out / f"ablation_{axis.replace('/', '_')}.png"
+        numeric_axis(axis, series, path)
+        paths.append(path)
+        lines += ["", f"![mean AUC against {axis}]({path.name})"]
+    text = "\n".join(lines) + "\n\n"
+    (out / "ablation.md").write_text(text)
+    return text, [out / "ablation.md", *paths]
 
 
 def _fig6(
@@ -133,10 +313,12 @@ def _fig6(
         "",
     ]
     paths = []
+    absent = [a for a in choices.fig6_adjectives if not any(m.adjective == a for m in data.maps)]
+    if absent:
+        lines += [f"Not drawn for {', '.join(absent)}: the job did not run them.", ""]
     for adjective in choices.fig6_adjectives:
         maps = [m for m in data.maps if m.adjective == adjective]
         if not maps:
-            lines += [f"- {adjective}: not among the job's adjectives.", ""]
             continue
         path = out / f"fig6_{adjective}.png"
         title = f"conv3 activations for '{adjective}': {name} (job {job_id[:8]})"
@@ -183,33 +365,62 @@ def _index(
     source: str,
     visual: Group | None,
     haptic: Group | None,
+    evidence: dict[str, heldout.Evidence],
 ) -> str:
+    counts = sorted({g.n_adjectives for g in groups})
+    over = (
+        f"over the {counts[0]} adjectives run"
+        if len(counts) == 1
+        else "over each configuration's adjectives (column `adj.`)"
+    )
+    if len(counts) == 1 and counts[0] < len(ADJECTIVES):
+        names = sorted({a for g in groups for a in g.per_adjective()})
+        over += f" ({', '.join(names)})"
+    missing = [g for g in groups if not evidence[g.key].ok]
     lines = [
         "# Gao et al. (ICRA 2016), regenerated from tracked runs",
         "",
-        f"{source}; {len(groups)} configurations, {_n_runs(groups)} runs (each seed once). "
-        f"Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by `{ENTRY_POINT}`"
+        f"{source}; {len(groups)} configurations, {_n_runs(groups)} runs (each seed and fold "
+        f"once). Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by `{ENTRY_POINT}`"
         + (f" at commit `{commit}`." if (commit := _commit()) else "."),
         "",
-        "## Table I: mean AUC over the 24 adjectives",
+        f"## Table I: mean AUC {over}",
         "",
-        "One line per configuration up to the seed; `std` is the spread of the mean AUC over its",
-        "seeds (splits, with `split=random`). A row letter in brackets ran with other settings",
-        "than the paper's (the `setting` column says which). The paper's figures are on the real",
-        "PHAC-2 data; on the embedded synthetic data set they are a reference, not a target.",
-        "Machine-readable: [table1.csv](table1.csv) (AUC as fractions, full precision).",
+        "One line per configuration up to the seed (and fold); `n seeds` counts its seeds",
+        "(splits, with `split=random`), `std over seeds` is the spread of their mean AUC. The",
+        "bracket is a 95% confidence interval of the mean over adjectives from a bootstrap of",
+        "the test objects (an object's units together, positives and negatives separately, all",
+        "adjectives at once; averaged over seeds): it is about which objects happened to be",
+        "tested. With `split=folds` every object is tested once per seed and the AUC is over",
+        "all objects' pooled out-of-fold scores; `per-fold mean` is the mean of the folds' own",
+        "AUCs, for reference. `test objects +/-` gives the positive/negative test objects each",
+        f"adjective's AUC rests on (range over adjectives); fewer than {heldout.FEW_OBJECTS} of a",
+        "class make an AUC that moves in steps of a third or more per object: such an",
+        "adjective's number cannot carry a conclusion alone (listed in brackets). A row letter",
+        "in brackets ran with other settings than the paper's (`setting` says which). The",
+        "paper's figures are on the real PHAC-2 data; on the embedded synthetic data set they",
+        "are a reference, not a target. Machine-readable: [table1.csv](table1.csv).",
         "",
-        table1_markdown(rows),
     ]
+    if missing:
+        lines += [
+            f"No interval for {len(missing)} configuration(s): "
+            + "; ".join(f"`{g.method}`: {evidence[g.key].missing}" for g in missing),
+            "",
+        ]
+    lines.append(table1_markdown(rows))
     if visual or haptic:
         names = " vs ".join(
             f"`{g.method}` (mean {g.aucs.mean():.3f})" for g in (haptic, visual) if g
         )
         lines += [
-            "## Fig. 5: per-adjective AUC, best haptic vs best visual",
+            f"## Fig. 5: {_fig5_title(haptic, visual)}",
             "",
-            f"{names}, each averaged over its seeds/splits; every configuration's per-adjective",
-            "AUC is in [per_adjective.csv](per_adjective.csv).",
+            f"{names}, each averaged over its seeds/splits (pooled out of fold with",
+            "`split=folds`); error bars are 95% object-bootstrap intervals per adjective; only",
+            "the adjectives run are drawn. Every configuration's per-adjective AUC is in",
+            "[per_adjective.csv](per_adjective.csv), with intervals and test-object counts in",
+            "[per_adjective_intervals.csv](per_adjective_intervals.csv).",
             "",
             "![Fig. 5](fig5_per_adjective.png)",
             "",

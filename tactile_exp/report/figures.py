@@ -1,5 +1,6 @@
-"""The report's figures as PNGs of fixed pixel size: Fig. 5 (per-adjective AUC) and Fig. 6
-(conv3 activation maps)."""
+"""The report's figures as PNGs of fixed pixel size: Fig. 5 (per-adjective AUC), Fig. 6
+(conv3 activation maps), the critical-difference diagram and the ablation's numeric-axis plot
+(drawn with matplotlib: ``autorank`` would add pandas-era pins for one figure)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from tactile_exp.data.layout import ADJECTIVES, EPS
 from tactile_exp.report.activations import Conv3Map
 from tactile_exp.report.runs import Group
 from tactile_exp.report.scores import ReportError
+from tactile_exp.stats import Friedman, Interval
 
 DPI = 100
 FIG5_SIZE = (12.0, 4.5)  # inches: 1200 x 450 pixels
@@ -33,23 +35,130 @@ def _pyplot():
     return plt
 
 
-def fig5(visual: Group | None, haptic: Group | None, path: Path) -> None:
-    """The best haptic and the best visual group's AUC per adjective, side by side."""
+def fig5(shown: list[tuple[str, Group, dict[str, Interval]]], title: str, path: Path) -> None:
+    """Per-adjective AUC of the given groups (kind, group, intervals) side by side, with 95%
+    object-bootstrap error bars where the scores allow; adjectives a group did not run are left
+    empty and named on the axis as not run."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=FIG5_SIZE)
-    x = np.arange(len(ADJECTIVES))
-    shown = [(g, c) for g, c in ((haptic, "tab:red"), (visual, "tab:blue")) if g is not None]
-    for i, (g, colour) in enumerate(shown):
-        aucs = g.per_adjective()
-        label = f"{g.row + ' ' if g.row else ''}{g.method} ({len(g.runs)} seed(s)/split(s))"
-        values = [aucs.get(a, np.nan) for a in ADJECTIVES]
-        ax.bar(x + (i - (len(shown) - 1) / 2) * 0.4, values, 0.4, color=colour, label=label)
-    ax.axhline(0.5, color="k", lw=0.8, ls=":")
-    ax.set_xticks(x, ADJECTIVES, rotation=60, ha="right", fontsize=8)
-    ax.set_ylabel("AUC")
-    ax.set_ylim(0, 1)
-    ax.set_title("Per-adjective AUC: best haptic vs best visual model", fontsize=10)
-    ax.legend(fontsize=8, loc="lower right")
+    run = fig5_adjectives([g for _, g, _ in shown])
+    x = np.arange(len(run))
+    width = 0.8 / max(len(shown), 1)
+    for i, ((kind, g, intervals), colour) in enumerate(
+        zip(shown, ("tab:red", "tab:blue", "tab:green"), strict=False)
+    ):
+        aucs = {a: iv.estimate for a, iv in intervals.items()} or g.per_adjective()
+        values = np.array([aucs.get(a, np.nan) for a in run])
+        label = f"{kind}: {g.row + ' ' if g.row else ''}{g.method} ({len(g.seeds)} seed(s))"
+        offset = x + (i - (len(shown) - 1) / 2) * width
+        errors = None
+        if intervals:
+            low = np.array([intervals[a].low if a in intervals else np.nan for a in run])
+            high = np.array([intervals[a].high if a in intervals else np.nan for a in run])
+            errors = np.vstack([values - low, high - values])
+            label += ", 95% interval"
+        ax.bar(offset, values, width, color=colour, label=label, yerr=errors, capsize=2)
+    ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance (AUC 0.5)")
+    ax.set_xticks(x, run, rotation=60, ha="right", fontsize=8)
+    ax.set_xlabel("haptic adjective (only those run)")
+    ax.set_ylabel("ROC AUC on held-out objects")
+    ax.set_ylim(0, 1.3)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7, loc="upper left", ncol=3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def fig5_adjectives(groups: list[Group]) -> list[str]:
+    """The adjectives Fig. 5 draws: those any shown group ran (a missing one is no bar, not 0)."""
+    return [a for a in ADJECTIVES if any(a in g.per_adjective() for g in groups)]
+
+
+def cd_diagram(result: Friedman, path: Path) -> None:
+    """Demsar's critical-difference diagram: mean ranks on one axis (1 = best, on the left),
+    bars joining configurations whose ranks differ by less than Nemenyi's CD."""
+    plt = _pyplot()
+    order = np.argsort(result.mean_ranks)
+    k = len(order)
+    fig, ax = plt.subplots(figsize=(8.0, 1.6 + 0.3 * k))
+    ax.set_xlim(0.5, k + 0.5)
+    ax.set_ylim(-k * 0.35 - 0.5, 1.2)
+    ax.axhline(0, color="k", lw=1)
+    for r in range(1, k + 1):
+        ax.plot([r, r], [0, 0.1], color="k", lw=1)
+        ax.text(r, 0.2, str(r), ha="center", fontsize=8)
+    for j, i in enumerate(order):
+        rank = result.mean_ranks[i]
+        y = -0.35 * (j + 1)
+        left = j < (k + 1) // 2
+        end = 0.5 if left else k + 0.5
+        ax.plot([rank, rank, end], [0, y, y], color="k", lw=0.8)
+        ax.text(
+            end,
+            y + 0.05,
+            f"{result.names[i]} ({rank:.2f})",
+            fontsize=8,
+            ha="left" if left else "right",
+            va="bottom",
+        )
+    cliques = []
+    for a in range(k):
+        b = a
+        while b + 1 < k and result.mean_ranks[order[b + 1]] - result.mean_ranks[order[a]] < (
+            result.critical_difference
+        ):
+            b += 1
+        if b > a and not any(a >= s and b <= e for s, e in cliques):
+            cliques.append((a, b))
+    for n, (a, b) in enumerate(cliques):
+        y = -0.12 - 0.08 * n
+        ax.plot(
+            [result.mean_ranks[order[a]] - 0.03, result.mean_ranks[order[b]] + 0.03],
+            [y, y],
+            color="tab:red",
+            lw=3,
+        )
+    ax.plot([1, 1 + result.critical_difference], [0.8, 0.8], color="k", lw=1.5)
+    ax.text(
+        1 + result.critical_difference / 2,
+        0.9,
+        f"CD = {result.critical_difference:.2f}",
+        ha="center",
+        fontsize=8,
+    )
+    ax.set_title(
+        f"Mean rank over {result.n_adjectives} adjectives (Friedman p = {result.p:.3g}); red bars: "
+        "not distinguishable (Nemenyi, 0.05)",
+        fontsize=9,
+    )
+    ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def numeric_axis(axis: str, lines: dict[str, list[tuple[float, Interval]]], path: Path) -> None:
+    """Mean AUC (95% interval) against a numeric swept axis, one line per combination of the
+    other axes."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.0, 4.0))
+    for name, points in sorted(lines.items()):
+        points = sorted(points, key=lambda p: p[0])
+        xs = np.array([p[0] for p in points])
+        ys = np.array([p[1].estimate for p in points])
+        err = np.array(
+            [
+                [p[1].estimate - p[1].low for p in points],
+                [p[1].high - p[1].estimate for p in points],
+            ]
+        )
+        ax.errorbar(xs, ys, yerr=err, marker="o", capsize=3, label=name or "(all)")
+    ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance")
+    ax.set_xlabel(axis)
+    ax.set_ylabel("mean AUC over adjectives (95% interval)")
+    ax.set_title(f"Mean AUC against {axis}", fontsize=10)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
@@ -93,6 +202,7 @@ def fig6(maps: list[Conv3Map], signals: list[str], title: str, path: Path) -> No
     axes[0].set_ylabel(f"conv3 channel ({width} filters per input signal)", fontsize=8)
     colorbar = fig.colorbar(image, cax=fig.add_axes((0.93, 0.3, 0.015, 0.4)))
     colorbar.ax.tick_params(labelsize=7)
+    colorbar.set_label("conv3 activation (after ReLU)", fontsize=7)
     fig.suptitle(title, fontsize=9)
     fig.savefig(path, dpi=DPI)
     plt.close(fig)

@@ -1,8 +1,8 @@
 """The tracked runs the report reads: FINISHED job (parent) runs grouped into Table I's lines.
 
-Runs are grouped by ``row_hash``, the resolved config up to the seed: runs in a group differ only
-in seed (and, with ``split=random``, in the split the seed draws). Each seed counts once (its
-latest run).
+Runs are grouped by ``row_hash``, the resolved config up to the seed (and fold): runs in a group
+differ only in seed (and, with ``split=random``, in the split the seed draws; with
+``split=folds``, in the fold). Each (seed, fold) counts once (its latest run).
 """
 
 from __future__ import annotations
@@ -45,13 +45,16 @@ class Run:
     aucs: dict[str, float]
     data: str  # the data file's identity
     sweep_id: str
+    fold: int = -1  # split=folds: the tested fold; -1 for the other split rules
+    folds: int = 0  # split=folds: K; 0 otherwise
 
 
 @dataclass
 class Group:
     """Runs of one config up to the seed: one line of Table I."""
 
-    key: str
+    key: str  # the row hash, and the experiment file when one named the row
+    row_hash: str
     method: str
     row: str  # the paper's Table I row the experiment file names, or ""
     paper_auc: float | None
@@ -62,19 +65,37 @@ class Group:
     model: str
     n_adjectives: int
     differences: tuple[str, ...]  # what differs from the paper's settings of the row
-    runs: dict[int, Run] = field(default_factory=dict)  # seed -> its latest run
+    params: dict[str, str] = field(default_factory=dict)  # the first run's params
+    overrides: dict[str, str] = field(default_factory=dict)  # its command line, key -> value
+    runs: dict[tuple[int, int], Run] = field(default_factory=dict)  # (seed, fold) -> latest run
 
     @property
     def at_paper_settings(self) -> bool:
         return bool(self.row) and not self.differences
 
     @property
+    def seeds(self) -> list[int]:
+        return sorted({seed for seed, _ in self.runs})
+
+    @property
+    def folds(self) -> int:
+        """K of ``split=folds`` (0 for the other rules)."""
+        return max(r.folds for r in self.runs.values())
+
+    def fold_runs(self, seed: int) -> list[Run]:
+        """One seed's runs, by fold (a single run unless ``split=folds``)."""
+        return [self.runs[k] for k in sorted(self.runs) if k[0] == seed]
+
+    @property
     def aucs(self) -> np.ndarray:
-        return np.array([r.mean_auc for r in self.sorted_runs])
+        """Each seed's mean AUC over adjectives (with folds: the mean over its folds' runs, the
+        per-fold mean; the pooled out-of-fold AUC needs the scores, see ``report.heldout``)."""
+        return np.array([np.mean([r.mean_auc for r in self.fold_runs(s)]) for s in self.seeds])
 
     @property
     def first_run(self) -> Run:
-        """The run of the lowest seed: the one a per-run view (Fig. 6, Table III) shows."""
+        """The run of the lowest seed (and fold): the one a per-run view (Fig. 6, Table III)
+        shows."""
         return self.runs[min(self.runs)]
 
     @property
@@ -117,11 +138,15 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
             continue
         aucs = {k.removeprefix("auc."): v for k, v in metrics.items() if k.startswith("auc.")}
         key = tags.get("row_hash") or tags["config_hash"]  # runs logged before row_hash existed
+        row_hash = key
+        experiment = params.get("choice.experiment", "None")
+        if experiment != "None":  # a Table I row stays one even if a sweep ran its config
+            key = f"{key}:{experiment}"
         if key not in groups:
-            experiment = params.get("choice.experiment", "None")
             paper = params.get("paper.auc", "None")
             groups[key] = Group(
                 key=key,
+                row_hash=row_hash,
                 method=experiment
                 if experiment != "None"
                 else re.sub(r"-s\d+$", "", run.info.run_name),
@@ -135,6 +160,12 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
                 model=params.get("model.name", ""),
                 n_adjectives=len(aucs),
                 differences=_differences(params, tags.get("overrides", ""), len(aucs)),
+                params=dict(params),
+                overrides=dict(
+                    item.lstrip("+~").split("=", 1)
+                    for item in tags.get("overrides", "").split()
+                    if "=" in item
+                ),
             )
         entry = Run(
             run_id=run.info.run_id,
@@ -144,11 +175,16 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
             aucs=aucs,
             data=tags.get("data.identity", ""),
             sweep_id=tags.get("sweep_id", ""),
+            fold=int(params.get("split.fold", -1)),
+            folds=int(params.get("split.folds", 0)),
         )
-        kept = groups[key].runs.get(entry.seed)
+        kept = groups[key].runs.get((entry.seed, entry.fold))
         if kept is None or entry.start_time > kept.start_time:
-            groups[key].runs[entry.seed] = entry
-    return sorted(groups.values(), key=lambda g: (g.row or "~", g.method, g.key))
+            groups[key].runs[entry.seed, entry.fold] = entry
+    return sorted(
+        groups.values(),
+        key=lambda g: (g.row or "~", g.method, sorted(g.overrides.items()), g.key),
+    )
 
 
 def skipped_cells(tracker: Tracker, sweep_id: str) -> list[str]:

@@ -2,14 +2,30 @@
 
 from __future__ import annotations
 
+from tactile_exp.report.heldout import FEW_OBJECTS, Evidence
 from tactile_exp.report.runs import Group
 
 
-def table1(groups: list[Group]) -> list[dict[str, str]]:
-    """Table I's lines, machine-readable: AUC as fractions, full precision, full run ids."""
+def table1(
+    groups: list[Group], evidence: dict[str, Evidence] | None = None
+) -> list[dict[str, str]]:
+    """Table I's lines, machine-readable: AUC as fractions, full precision, full run ids.
+
+    ``mean_auc`` is the mean over adjectives (then seeds); with ``split=folds`` it is each
+    adjective's AUC over all objects' pooled out-of-fold scores when the scores are there, and
+    ``per_fold_mean_auc`` the mean of the folds' own AUCs. The interval (95%, object bootstrap,
+    ``tactile_exp.stats``) needs the scores; without them its cells are empty and
+    ``intervals`` says why."""
     rows = []
     for g in groups:
+        ev = (evidence or {}).get(g.key) or Evidence(missing="scores not read")
         aucs = g.aucs
+        mean = aucs.mean()
+        low = high = ""
+        if ev.ok:
+            iv = ev.interval()
+            mean, low, high = iv.estimate, f"{iv.low:.6f}", f"{iv.high:.6f}"
+        sizes = ev.sizes()
         rows.append(
             {
                 "row": g.row,
@@ -18,10 +34,17 @@ def table1(groups: list[Group]) -> list[dict[str, str]]:
                 "differences": "; ".join(g.differences),
                 "schedule": f"{g.schedule} ({g.schedule_epochs})",
                 "adjectives": str(g.n_adjectives),
-                "split": g.split,
-                "seeds": " ".join(str(s) for s in sorted(g.runs)),
-                "mean_auc": f"{aucs.mean():.6f}",
+                "split": g.split + (f" ({ev.folds_run} folds pooled)" if ev.folds_run else ""),
+                "seeds": " ".join(str(s) for s in g.seeds),
+                "n_seeds": str(len(g.seeds)),
+                "mean_auc": f"{mean:.6f}",
+                "mean_auc_ci_low": low,
+                "mean_auc_ci_high": high,
+                "per_fold_mean_auc": f"{aucs.mean():.6f}" if g.folds else "",
                 "std_auc": f"{aucs.std(ddof=1):.6f}" if len(aucs) > 1 else "",
+                "test_objects": _sizes(sizes),
+                "few_objects": " ".join(ev.thin()),
+                "intervals": "" if ev.ok else ev.missing,
                 "paper_auc": f"{g.paper_auc / 100:.3f}" if g.paper_auc is not None else "",
                 "data": " ".join(sorted({r.data for r in g.sorted_runs})),
                 "run_ids": " ".join(r.run_id for r in g.sorted_runs),
@@ -30,8 +53,22 @@ def table1(groups: list[Group]) -> list[dict[str, str]]:
     return rows
 
 
+def _sizes(sizes: dict[str, tuple[int, int]]) -> str:
+    """Positive/negative test objects per adjective as a range, e.g. ``3-5/4-9``."""
+    if not sizes:
+        return ""
+    pos = sorted(p for p, _ in sizes.values())
+    neg = sorted(n for _, n in sizes.values())
+
+    def span(v: list[int]) -> str:
+        return f"{v[0]}" if v[0] == v[-1] else f"{v[0]}-{v[-1]}"
+
+    return f"{span(pos)}/{span(neg)}"
+
+
 def table1_markdown(rows: list[dict[str, str]]) -> str:
-    """Table I for people: AUC in %, a row letter in brackets when not at the paper's settings."""
+    """Table I for people: AUC in % with its 95% interval, a row letter in brackets when not at
+    the paper's settings, a warning mark where an adjective rests on few test objects."""
     head = [
         "row",
         "method",
@@ -39,9 +76,11 @@ def table1_markdown(rows: list[dict[str, str]]) -> str:
         "schedule",
         "adj.",
         "split",
-        "seeds",
-        "mean AUC %",
-        "std",
+        "n seeds",
+        "mean AUC % [95% CI]",
+        "per-fold mean %",
+        "std over seeds",
+        "test objects +/- per adj.",
         "paper (real PHAC-2)",
         "data",
         "run ids",
@@ -49,6 +88,15 @@ def table1_markdown(rows: list[dict[str, str]]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         paper_settings = r["at_paper_settings"] == "True"
+        mean = f"{float(r['mean_auc']) * 100:.1f}"
+        if r["mean_auc_ci_low"]:
+            mean += (
+                f" [{float(r['mean_auc_ci_low']) * 100:.1f}, "
+                f"{float(r['mean_auc_ci_high']) * 100:.1f}]"
+            )
+        else:
+            mean += " (no interval: no scores)"
+        few = f" (< {FEW_OBJECTS} on: {r['few_objects']})" if r["few_objects"] else ""
         cells = [
             r["row"] if paper_settings or not r["row"] else f"({r['row']})",
             f"`{r['method']}`",
@@ -56,9 +104,11 @@ def table1_markdown(rows: list[dict[str, str]]) -> str:
             r["schedule"],
             r["adjectives"],
             r["split"],
-            r["seeds"],
-            f"{float(r['mean_auc']) * 100:.1f}",
+            r["n_seeds"],
+            mean,
+            f"{float(r['per_fold_mean_auc']) * 100:.1f}" if r["per_fold_mean_auc"] else "",
             f"{float(r['std_auc']) * 100:.1f}" if r["std_auc"] else "",
+            (r["test_objects"] + few) if r["test_objects"] else "",
             f"{float(r['paper_auc']) * 100:.1f}" if r["paper_auc"] else "",
             r["data"],
             " ".join(f"`{i}`" for i in r["run_ids"].split()),

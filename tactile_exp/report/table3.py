@@ -122,7 +122,8 @@ def table3_markdown(lines: list[dict[str, str]]) -> str:
         first = object_lines[0]
         cells = [
             f"{first['object'] or 'object'} ({object_id})",
-            f"{len(first['tested_adjectives'].split())} adjectives",
+            f"{len(first['tested_adjectives'].split())}: "
+            + ", ".join(first["tested_adjectives"].split()),
             ", ".join(first["ground_truth"].split()) or "(none)",
         ]
         for line in object_lines:
