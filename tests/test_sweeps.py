@@ -402,13 +402,15 @@ def test_a_job_failing_in_training_leaves_its_runs_failed_and_the_rest_run(
     assert "Error executing job" not in done.stdout  # Hydra never saw the failure
     client = MlflowClient(mlflow_uri)
     runs = client.search_runs([client.get_experiment_by_name("tactile_exp").experiment_id])
-    assert sorted((r.info.run_name, r.info.status) for r in runs) == [
-        ("adj=hard", "FAILED"),
-        ("adj=hard", "FINISHED"),
-        ("adj=hard", "FINISHED"),
-        ("random-separate-c1-s1", "FAILED"),
-        ("random-separate-c1-s2", "FINISHED"),
-        ("random-separate-c1-s3", "FINISHED"),
+    assert sorted(
+        (r.data.tags["run_level"], r.data.params["seed"], r.info.status) for r in runs
+    ) == [
+        ("child", "1", "FAILED"),
+        ("child", "2", "FINISHED"),
+        ("child", "3", "FINISHED"),
+        ("parent", "1", "FAILED"),
+        ("parent", "2", "FINISHED"),
+        ("parent", "3", "FINISHED"),
     ]
     failed = [r for r in runs if r.info.status == "FAILED"]
     assert all("planned failure while training with seed 1" in r.data.tags["error"] for r in failed)
