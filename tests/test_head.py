@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ from sklearn.preprocessing import StandardScaler
 
 from tactile_exp.data.layout import Instances
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.sgd import FinetuneWarning
 
 SCHEDULES = Path(__file__).resolve().parents[1] / "conf" / "schedule"
 
@@ -33,10 +35,48 @@ def test_head_reaches_logistic_regression_training_loss(n, d):
     network = MODELS.build("linear", epochs=1, head_schedule=head_schedule, device="cpu")
     head = network.head()
     units = _separable(n, d)
-    history = head.fit(units)
+    with pytest.warns(FinetuneWarning):  # separable: the hinge stage cannot move the layer
+        history = head.fit(units)
 
     Xs = StandardScaler().fit_transform(units.X)  # the head standardises its inputs too
     reference = LogisticRegression(max_iter=5000).fit(Xs, units.y)
     reference_loss = log_loss(units.y, reference.predict_proba(Xs)[:, 1])
     assert history["train_loss"][-1] <= reference_loss + 0.01
     assert roc_auc_score(units.y, head.decision_function(units.X)) == 1.0  # hinge keeps the fit
+
+
+@pytest.mark.parametrize(
+    "n,d,separable",
+    [(120, 2000, True), (2000, 20, False)],  # a combine=1 head's shape; fewer columns than rows
+)
+def test_hinge_finetuning_is_a_no_op_on_separable_units_and_warns(n, d, separable):
+    """Why loss=hinge and loss=logistic heads can score identically: after the logistic stage on
+    separable units every margin is >= 1, hinge's gradient is zero, the layer does not move.
+    Where a margin stays below 1 the hinge stage changes the scores, and nothing warns."""
+    head_schedule = yaml.safe_load((SCHEDULES / "paper.yaml").read_text())["head"]
+    units, test = _separable(n, d), _separable(200, d, seed=1)
+    scores, caught = {}, {}
+    for loss, pretrain in (("hinge", "logistic"), ("logistic", None)):
+        network = MODELS.build(
+            "linear",
+            epochs=1,
+            loss=loss,
+            pretrain_loss=pretrain,
+            head_schedule=head_schedule,
+            device="cpu",
+        )
+        head = network.head()
+        with warnings.catch_warnings(record=True) as caught[loss]:
+            warnings.simplefilter("always")
+            history = head.fit(units)
+        scores[loss] = head.decision_function(test.X)
+    finetune_warnings = [w for w in caught["hinge"] if issubclass(w.category, FinetuneWarning)]
+    assert not [w for w in caught["logistic"] if issubclass(w.category, FinetuneWarning)]
+    if separable:
+        assert history["train_loss"][-1] < 0.05  # the last fit: the logistic head
+        np.testing.assert_array_equal(scores["hinge"], scores["logistic"])
+        assert len(finetune_warnings) == 1
+        assert "scores equal loss=logistic's" in str(finetune_warnings[0].message)
+    else:
+        assert np.abs(scores["hinge"] - scores["logistic"]).max() > 1.0
+        assert not finetune_warnings

@@ -19,10 +19,17 @@ fewer than instances.
 stage 1 of a model without a body) by ``linear_sgd`` and a subclass's body by its own compiled
 kernels, CPU only; ``torch`` runs everything through autograd; ``auto`` is compiled on CPU and
 torch on a GPU. Both give the same numbers to float rounding.
+
+Stage 2 moves the layer only where stage 1 left a training margin below 1 (hinge's gradient is
+zero elsewhere, and T3 has no weight decay). On linearly separable training rows (the T4 heads:
+a few hundred combined units, 24,320 or more columns) logistic loss drives every margin past 1,
+so hinge fine-tuning is a no-op and ``loss=hinge`` scores equal ``loss=logistic``'s bit for bit:
+``fit`` then warns (``FinetuneWarning``).
 """
 
 from __future__ import annotations
 
+import warnings
 from abc import abstractmethod
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -46,6 +53,10 @@ from tactile_exp.train import (
 INFERENCE_BATCH = 4096
 IMPLS = ("auto", "compiled", "torch")
 HEAD_KEYS = ("epochs", "finetune_epochs", "batch_size", "lr", "momentum")  # its own schedule
+
+
+class FinetuneWarning(UserWarning):
+    """Stage 2 left the classification layer as stage 1 made it."""
 
 
 class SGDModel(Model):
@@ -204,6 +215,7 @@ class SGDModel(Model):
             )
         history: History = {"train_loss": train_loss}
         if finetune:
+            before = [p.detach().clone() for p in classifier_.parameters()]
             history["finetune_loss"] = self._layer_epochs(
                 self._features(Xt),
                 yt,
@@ -212,6 +224,15 @@ class SGDModel(Model):
                 report=reporter("finetune_loss"),
                 **common,
             )
+            if all(map(torch.equal, before, classifier_.parameters())):
+                warnings.warn(
+                    f"{type(self).__name__}: {self.loss} fine-tuning left the classification "
+                    f"layer unchanged: its gradient was zero on every training row after the "
+                    f"{self.pretrain_loss} stage (linearly separable rows, every margin >= 1), "
+                    f"so the scores equal loss={self.pretrain_loss}'s",
+                    FinetuneWarning,
+                    stacklevel=2,
+                )
         return history
 
     def _layer_epochs(
