@@ -13,10 +13,17 @@ from sklearn.metrics import log_loss, roc_auc_score
 from sklearn.preprocessing import StandardScaler
 
 from tactile_exp.data.layout import Instances
+from tactile_exp.models import sgd
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.sgd import FinetuneWarning
 
 SCHEDULES = Path(__file__).resolve().parents[1] / "conf" / "schedule"
+
+
+@pytest.fixture(autouse=True)
+def _finetune_warning_not_yet_shown(monkeypatch):
+    """The warning is shown once per process: each test starts as a fresh process would."""
+    monkeypatch.setattr(sgd, "FINETUNE_WARNED", set())
 
 
 def _separable(n: int, d: int, seed: int = 0) -> Instances:
@@ -80,3 +87,14 @@ def test_hinge_finetuning_is_a_no_op_on_separable_units_and_warns(n, d, separabl
     else:
         assert np.abs(scores["hinge"] - scores["logistic"]).max() > 1.0
         assert not finetune_warnings
+
+
+def test_the_finetune_warning_is_shown_once_per_process_not_per_adjective():
+    """A job fits one head per adjective: 24 identical warnings would flood its log."""
+    head_schedule = yaml.safe_load((SCHEDULES / "paper.yaml").read_text())["head"]
+    network = MODELS.build("linear", epochs=1, head_schedule=head_schedule, device="cpu")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for seed in (0, 1, 2):
+            network.head().fit(_separable(60, 500, seed))
+    assert [issubclass(w.category, FinetuneWarning) for w in caught].count(True) == 1

@@ -59,6 +59,11 @@ class FinetuneWarning(UserWarning):
     """Stage 2 left the classification layer as stage 1 made it."""
 
 
+# (model, loss, pretrain loss) already warned about in this process: once, not once per adjective
+# (the warnings module's own "once" forgets after any catch_warnings() block; the engine has some).
+FINETUNE_WARNED: set[tuple[str, str, str | None]] = set()
+
+
 class SGDModel(Model):
     """A body plus a linear classification layer, trained by the two-stage SGD schedule."""
 
@@ -224,7 +229,11 @@ class SGDModel(Model):
                 report=reporter("finetune_loss"),
                 **common,
             )
-            if all(map(torch.equal, before, classifier_.parameters())):
+            noted = (type(self).__name__, self.loss, self.pretrain_loss)
+            if noted not in FINETUNE_WARNED and all(
+                map(torch.equal, before, classifier_.parameters())
+            ):
+                FINETUNE_WARNED.add(noted)
                 warnings.warn(
                     f"{type(self).__name__}: {self.loss} fine-tuning left the classification "
                     f"layer unchanged: its gradient was zero on every training row after the "
