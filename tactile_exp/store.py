@@ -125,12 +125,14 @@ def await_trained(
     host's claim older than ``lease`` seconds, is passed over (taken over by the next oldest)."""
     holder, passed = None, set()
     while True:
+        # Claims first, then finished runs: a claimant that finishes between the two queries is
+        # then seen FINISHED, never missed by both (which would train its model a second time).
+        claim, abandoned = _oldest_live_claim(tracker, key, lease)
         source = find_trained(tracker, key)
         if source is not None:
             if holder is not None:
                 log.info("  training key %s: trained in run %s, loading it", key, source)
             return source
-        claim, abandoned = _oldest_live_claim(tracker, key, lease)
         for stale in set(abandoned) - passed:
             log.info("  training key %s: run %s's claim is abandoned, passed over", key, stale)
         passed.update(abandoned)

@@ -514,6 +514,29 @@ def test_a_live_claim_is_waited_for_and_its_model_then_loaded(mlflow_uri, caplog
     assert len(waiting) == 1 and theirs in waiting[0] and str(live.pid) in waiting[0]
 
 
+def test_a_claimant_finishing_between_the_stores_queries_is_not_missed(mlflow_uri, monkeypatch):
+    """The claimant finishes right after a look for finished runs found none: the waiting job
+    must load its model, not find no claim left and train the model a second time."""
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        theirs = _claim(tracker, host=socket.gethostname(), pid=str(live.pid))
+        mine = _claim(tracker, **process_tags())
+        looked = store.find_trained
+
+        def finishes_after_the_first_look(tracker_: Tracker, key: str) -> str | None:
+            found = looked(tracker_, key)
+            if tracker.client.get_run(theirs).info.status == "RUNNING":
+                tracker.client.set_terminated(theirs, "FINISHED")
+            return found
+
+        monkeypatch.setattr(store, "find_trained", finishes_after_the_first_look)
+        assert store.await_trained(tracker, KEY, mine, lease=3600.0, poll=0.05) == theirs
+    finally:
+        live.kill()
+        live.wait()
+
+
 def test_a_dead_claimants_claim_is_taken_over(mlflow_uri, caplog):
     tracker = Tracker(mlflow_uri, "tactile_exp")
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
