@@ -135,6 +135,7 @@ def published(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
 def _read_split_groups(dataset: PHAC2, f: h5py.File, adjective: str) -> Split | None:
     parts: dict[str, list[str]] = {"train": [], "test": []}
     trials = {t.name: t for t in dataset.trials}
+    labels = dataset.labels()  # once: it copies the label table (per trial it was most of a check)
     for group, label in ((POSITIVE_SPLIT_GROUP, 1), (NEGATIVE_SPLIT_GROUP, 0)):
         for part in parts:
             key = f"/{group}/{adjective}/{part}"
@@ -147,7 +148,7 @@ def _read_split_groups(dataset: PHAC2, f: h5py.File, adjective: str) -> Split | 
                     raise DataError(
                         f"{dataset.path}: {key}/{name} is not one of the file's trial groups"
                     )
-                have = dataset.labels()[trials[name].object_id][adjective]
+                have = labels[trials[name].object_id][adjective]
                 if have != label:
                     raise DataError(
                         f"{dataset.path}: {key} links {name}, whose {adjective} label is {have} "
