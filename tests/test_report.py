@@ -41,10 +41,13 @@ def _hash(key: str) -> str:
     return key.split(":")[0]
 
 
-def _log(tracker: Tracker, key, row, seed, overrides, fail, base, adjectives=ADJECTIVES):
+def _log(
+    tracker: Tracker, key, row, seed, overrides, fail, base, adjectives=ADJECTIVES, search=None
+):
     params = {"choice.schedule": "paper", "schedule.epochs": "200", "split.name": "published"}
     params |= {"schedule.finetune_epochs": "100", "seed": str(seed)} | row
     tags = {"run_level": "parent", "row_hash": key, "config_hash": f"{key}{seed}"}
+    tags |= search or {}
     tags |= {"overrides": overrides, "data.identity": "synthetic-abc", "sweep_id": "s1"}
     aucs = {f"auc.{a}": base + 0.01 * i for i, a in enumerate(adjectives)}
     try:
@@ -85,6 +88,17 @@ def test_groups_count_each_seed_once_and_label_variants(tracker):
     assert groups["i-c10"].differences == ("combine=10",)
     assert groups["a-1adj"].differences == ("1 adjectives",)
     assert [g.row for g in runs.collect(tracker, sweep_id="s1")][:2] == ["A", "A"]
+
+
+def test_search_trials_are_left_out_and_the_final_evaluation_says_it_was_tuned(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "report_search_test")
+    study = {"search.study": "haptic_cnn"}
+    _log(tracker, "t0", ROW_A, 0, "", False, 0.6, search=study | {"search.role": "trial"})
+    _log(tracker, "t1", ROW_A, 0, "", False, 0.9, search=study | {"search.role": "trial"})
+    _log(tracker, "final", ROW_A, 0, "", False, 0.7, search=study | {"search.role": "final"})
+    (group,) = runs.collect(tracker)
+    assert _hash(group.key) == "final"
+    assert group.differences == ("tuned on validation (study haptic_cnn)",)
 
 
 def test_table_numbers_and_labels(tracker):

@@ -125,6 +125,13 @@ def _differences(params: dict[str, str], overrides: str, n_adjectives: int) -> t
     return tuple(out)
 
 
+def _tuned(tags: dict[str, str]) -> tuple[str, ...]:
+    """A study's final evaluation says its values were chosen on validation objects."""
+    if tags.get("search.role") != "final":
+        return ()
+    return (f"tuned on validation (study {tags.get('search.study', '?')})",)
+
+
 def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
     """Every group of FINISHED parent runs (of one sweep, if given), sorted by Table I row."""
     query = "tags.run_level = 'parent' and attributes.status = 'FINISHED'"
@@ -134,7 +141,9 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
     groups: dict[str, Group] = {}
     for run in found:
         params, tags, metrics = run.data.params, run.data.tags, run.data.metrics
-        if "mean_auc" not in metrics:
+        # A search trial's job selects on validation objects; its test AUC is no result of its
+        # own (the study's one final evaluation, tagged "final", is the tuned row's line).
+        if "mean_auc" not in metrics or tags.get("search.role") == "trial":
             continue
         aucs = {k.removeprefix("auc."): v for k, v in metrics.items() if k.startswith("auc.")}
         key = tags.get("row_hash") or tags["config_hash"]  # runs logged before row_hash existed
@@ -159,7 +168,8 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
                 modality=params.get("modality.name", ""),
                 model=params.get("model.name", ""),
                 n_adjectives=len(aucs),
-                differences=_differences(params, tags.get("overrides", ""), len(aucs)),
+                differences=_differences(params, tags.get("overrides", ""), len(aucs))
+                + _tuned(tags),
                 params=dict(params),
                 overrides=dict(
                     item.lstrip("+~").split("=", 1)
