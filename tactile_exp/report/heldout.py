@@ -28,16 +28,26 @@ class Evidence:
     evaluations: list[stats.Evaluation] = field(default_factory=list)
     missing: str = ""
     folds_run: str = ""  # split=folds: "5/5" folds pooled per seed (the fewest of any seed)
+    # The bootstraps, made once: Table I, Fig. 5, the per-adjective CSV and the ablation view
+    # each ask for them.
+    _interval: stats.Interval | None = field(default=None, init=False, repr=False, compare=False)
+    _per_adjective: dict[str, stats.Interval] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
 
     @property
     def ok(self) -> bool:
         return bool(self.evaluations)
 
     def interval(self) -> stats.Interval:
-        return stats.mean_interval(self.evaluations)
+        if self._interval is None:
+            self._interval = stats.mean_interval(self.evaluations)
+        return self._interval
 
     def per_adjective(self) -> dict[str, stats.Interval]:
-        return stats.adjective_intervals(self.evaluations)
+        if self._per_adjective is None:
+            self._per_adjective = stats.adjective_intervals(self.evaluations)
+        return self._per_adjective
 
     def sizes(self) -> dict[str, tuple[int, int]]:
         """Adjective -> (positive, negative) test objects (the fewest over seeds)."""
