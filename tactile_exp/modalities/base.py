@@ -40,6 +40,7 @@ class Modality(ABC):
         """The largest ``combine`` (instances of one object grouped as a unit) and its unit name."""
         return int(max(np.bincount([t.object_id for t in dataset.trials]))), "trials"
 
+    @abstractmethod
     def check(self, dataset: Any) -> None:
         """Read and cache what all adjectives share; raises on bad input before any training."""
 
@@ -80,6 +81,8 @@ class Modality(ABC):
 
     def set_parts(self, parts: dict[str, Model]) -> None:
         """Take stored parts instead of asking the provider (a loaded pipeline)."""
+        if parts:
+            raise ValueError(f"{type(self).__name__} has no parts, got {sorted(parts)}")
 
 
 MODALITIES: Registry[Modality] = Registry(
