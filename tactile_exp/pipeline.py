@@ -78,7 +78,15 @@ class AdjectivePipeline:
         Returns the training curves (model, then ``head_*``)."""
         if provide is not None:
             self.preprocess.use_parts(provide)
-        instances = self.preprocess.fit(train).transform(train)
+        return self.fit_instances(self.preprocess.fit(train).transform(train), model, on_epoch)
+
+    def fit_instances(
+        self,
+        instances: Instances,
+        model: Model | None = None,
+        on_epoch: EpochCallback | None = None,
+    ) -> History:
+        """``fit`` after the preprocessing: the model (unless given trained) and the head."""
         self.n_train_instances_ = len(instances)
         history: History = {}
         if model is None:
@@ -155,6 +163,7 @@ class AdjectivePipeline:
         except (KeyError, TypeError, ValueError) as err:
             raise store.ArtifactError(f"{at(SETTINGS)}: missing or bad entry {err}") from None
         pre = folder / "preprocess"
+        store.check_files(pre, store.STATE_FILES, at("preprocess"))
         state = store.read_json(pre, at("preprocess"))
         try:
             pipeline.preprocess.set_state(state, store.read_arrays(pre, at("preprocess")))

@@ -248,10 +248,15 @@ def download(tracker: Tracker, run_id: str, path: str, files: tuple[str, ...]) -
         local = Path(tracker.client.download_artifacts(run_id, path))
     except Exception as err:
         raise ArtifactError(f"run {run_id}: artifact {path}/ cannot be read ({err})") from None
-    missing = [f for f in files if not (local / f).is_file()]
-    if missing:
-        raise ArtifactError(f"run {run_id}: artifact {path}/ lacks {', '.join(missing)}")
+    check_files(local, files, f"run {run_id}: artifact {path}")
     return local
+
+
+def check_files(folder: Path, files: tuple[str, ...], where: str) -> None:
+    """ArtifactError naming the artifact ``where`` when ``folder`` lacks any of ``files``."""
+    missing = [f for f in files if not (folder / f).is_file()]
+    if missing:
+        raise ArtifactError(f"{where}/ lacks {', '.join(missing)}")
 
 
 def read_json(folder: Path, where: str, name: str = "settings.json") -> dict[str, Any]:
@@ -281,6 +286,7 @@ def read_model(folder: Path, where: str, overrides: Mapping[str, Any] | None = N
 
     from tactile_exp.models.registry import MODELS
 
+    check_files(folder, MODEL_FILES, where)
     settings = read_json(folder, where)
     try:
         name, params = str(settings["model"]), dict(settings["params"])

@@ -58,8 +58,8 @@ def _trials():
     return trials, split
 
 
-def _fit(table, split, leak=False):
-    return dyn.DynamicFeatures("tiny", leak_test_positives=leak, seed=0).fit(table, split)
+def _fit(table, split):
+    return dyn.DynamicFeatures("tiny", seed=0).fit(table, split)
 
 
 def _params(model):
@@ -92,20 +92,6 @@ def test_chains_see_training_positives_only(tiny_grid):
         np.testing.assert_array_equal(a, b)
 
 
-def test_leaky_flag_fits_on_test_positives_too(tiny_grid):
-    trials, split = _trials()
-    table = dyn.SequenceTable.from_trials(trials, (8,))
-    model = _fit(table, split, leak=True)
-    test_pos = [n for n in split.test if split.labels[n]]
-    assert set(test_pos) <= set(model.fit_trials_)
-    before = _params(model)
-    i = table.index(test_pos)
-    for c in range(len(dyn.CHAINS)):
-        table.seqs[8][c][i] = -table.seqs[8][c][i] * 7.0
-    after = _params(_fit(table, split, leak=True))
-    assert any(not np.array_equal(a, b) for a, b in zip(before, after, strict=True))
-
-
 def test_unknown_grid_is_rejected():
     with pytest.raises(KeyError, match="unknown HMM grid 'huge'"):
         dyn.DynamicFeatures("huge")
@@ -130,7 +116,6 @@ def test_feature_builder_on_a_generated_file(tmp_path, tiny_grid, monkeypatch):
     from tactile_exp.baselines import features as feat
 
     data, names, split = _generated(tmp_path)
-    labels = split.labels
     kwargs = dict(features=("static", "dynamic"), faithful=False, dynamic_pool="object")
     with pytest.warns(UserWarning):  # the short synthetic EPs fill some static features
         bf = feat.BaselineFeatures(data, hmm_grid="tiny", cache_dir=tmp_path, **kwargs).fit(split)
@@ -145,10 +130,6 @@ def test_feature_builder_on_a_generated_file(tmp_path, tiny_grid, monkeypatch):
     monkeypatch.setattr(data, "iter_trials", None)
     again = feat.BaselineFeatures(data, hmm_grid="tiny", cache_dir=tmp_path, **kwargs).fit(split)
     np.testing.assert_array_equal(again.transform(names), X)
-    with pytest.raises(ValueError, match="neither side"):
-        feat.BaselineFeatures(data, hmm_grid="tiny", **kwargs).fit(
-            Split("soft", split.train[:-2], split.test, labels)
-        ).transform(names)
 
 
 def test_fitted_chains_are_cached_per_data_split_settings_and_seed(
@@ -174,7 +155,7 @@ def test_fitted_chains_are_cached_per_data_split_settings_and_seed(
     feat._MEMO.clear()  # another job: only the disk cache remembers
     again = features().fit(split)  # a hit: loaded, not refitted, bit-identical features
     np.testing.assert_array_equal(again.transform(names), X)
-    assert again.dynamic_.params_ == first.dynamic_.params_
+    assert again.fitted_.dynamic.params_ == first.fitted_.dynamic.params_
     pooled = features(dynamic_pool="object").fit(split).transform(names)  # row D/F's chains too
     assert not np.array_equal(pooled, X) and np.isfinite(pooled).all()
 
@@ -189,7 +170,6 @@ def test_fitted_chains_are_cached_per_data_split_settings_and_seed(
             (features(), other_split),
             (features(), flipped),
             (features(seed=1), split),
-            (features(leak_test_positives=True), split),
             (features(hmm_grid="tiny2"), split),
         ]
         for model, changed in misses:
@@ -277,7 +257,6 @@ def test_fitted_features_round_trip_their_arrays_and_both_paths_agree(tiny_grid)
         model = _fit(table, split)
     assert model.settings() == {
         "grid": TINY_GRID,
-        "leak_test_positives": False,
         "holdout": 0.2,
         "n_init": 10,
         "seed": 0,

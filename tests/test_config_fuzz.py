@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.data.layout import ADJECTIVES, Instances
-from tactile_exp.experiment import classify, open_data
-from tactile_exp.models.registry import MODELS
+from tactile_exp.experiment import open_data
+from tactile_exp.pipeline import AdjectivePipeline
 
 FUZZ = settings(
     max_examples=10,
@@ -67,9 +67,9 @@ def _check(compose_config, cache_dir, values: dict[str, object]) -> None:
         return
     steps = int(s.modality.params["steps"])
     data = _tiny_instances(steps)
-    scores, units, _ = classify(
-        lambda: MODELS.build(s.model.name, **s.model.params), s.combiner, s.combine, data, data
-    )
+    pipeline = AdjectivePipeline(s.modality, s.model, s.combiner, s.combine)
+    pipeline.fit_instances(data)
+    scores, units = pipeline.score(data)
     assert len(scores) == len(units) and np.isfinite(scores).all()
     event("trained")
 

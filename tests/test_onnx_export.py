@@ -14,22 +14,18 @@ import pytest
 
 from tactile_exp.combine import unit_members
 from tactile_exp.config import settings_from_config
+from tactile_exp.data.layout import Trials
+from tactile_exp.data.photos import PhotoFolder
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.deploy.__main__ import main
 from tactile_exp.deploy.onnx_export import channel_names, export_job
 from tactile_exp.experiment import run
+from tactile_exp.jobs import StoredJob
 from tactile_exp.modalities.multimodal import visual_units
 from tactile_exp.models.googlenet import network_input
-from tactile_exp.predict import (
-    PredictError,
-    _children,
-    _Inputs,
-    _tracker,
-    haptic_instances,
-    predict,
-    read_photographs,
-)
+from tactile_exp.predict import PredictError, predict
 from tactile_exp.preprocess.haptic import trial_signals
+from tactile_exp.preprocess.visual import compute_visual_arrays
 
 SMALL_VISUAL = ["modality.size=32", "modality.batch_size=64"]
 SMALL_MULTIMODAL = ["modality.visual.size=32", "modality.visual.batch_size=128"]
@@ -42,9 +38,9 @@ def _session(path: Path):
 
 def _held_out(uri: str, job: str, dataset) -> tuple[int, list[str]]:
     """A test object of the job's one adjective and its trials (sorted by name)."""
-    tracker = _tracker(uri, "tactile_exp")
-    (child,) = _children(tracker, job, None).values()
-    scores = tracker.client.download_artifacts(child, "scores.csv")
+    stored = StoredJob.open(job, tracking_uri=uri)
+    (child,) = stored.children().values()
+    scores = stored.client.download_artifacts(child, "scores.csv")
     units = [r["unit"] for r in csv.DictReader(io.StringIO(Path(scores).read_text()))]
     by_stem = {t.stem: t.object_id for t in dataset.trials}
     by_name = {t.name: t.object_id for t in dataset.trials}
@@ -106,18 +102,13 @@ def test_onnxruntime_equals_predict_on_a_held_out_object(
     feeds: dict[str, np.ndarray] = {}
     photos = None
     if "haptic" in manifest:
-        tracker = _tracker(mlflow_uri, "tactile_exp")
         haptic = manifest["haptic"]
         assert len(haptic["channels"]) == 32 and haptic["channels"] == channel_names(4)
+        stored = StoredJob.open(job, tracking_uri=mlflow_uri)
+        preprocess = stored.pipelines(["hard"])["hard"].preprocess
         if manifest["modality"] == "multimodal":  # its haptic part's stored preprocessing
-            given = _Inputs(tracker, data=dataset.path, trials=trials, object_id=None, photos=None)
-            stored, arrays, where = given.state(entry["run_id"])
-            part = {k[7:]: v for k, v in arrays.items() if k.startswith("haptic.")}
-            instances = given._haptic(stored["haptic"], part, where)
-        else:
-            instances = haptic_instances(
-                tracker, data=dataset.path, trials=trials, child=entry["run_id"]
-            )
+            preprocess = preprocess.haptic
+        instances = preprocess.transform(Trials(dataset, tuple(trials)))
         reference = _docs_reference()
         trial = next(dataset.iter_trials([trials[0]]))
         x = trial_signals(trial, haptic["pac_downsample"])
@@ -136,7 +127,7 @@ def test_onnxruntime_equals_predict_on_a_held_out_object(
     if "visual" in manifest:
         visual = manifest["visual"]
         photos = _photos(dataset, obj, tmp_path / "photos")
-        _, images = read_photographs(photos, visual["size"])
+        images = compute_visual_arrays(PhotoFolder(photos), visual["size"]).images
         mean = state["hard.visual.channel_mean"]
         trunk = _session(out / visual["trunk"])
         (features,) = trunk.run(None, {"images": network_input(images, mean, visual["layout"])})

@@ -14,12 +14,11 @@ from mlflow.tracking import MlflowClient
 
 from tactile_exp import store
 from tactile_exp.config import settings_from_config
-from tactile_exp.data.layout import TrialName
+from tactile_exp.data.layout import DataError, TrialName
 from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.photos import PhotoFolder
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.experiment import run
-from tactile_exp.data.layout import DataError
-from tactile_exp.data.photos import PhotoFolder
 from tactile_exp.predict import PredictError, predict
 from tactile_exp.predict.__main__ import main
 from tactile_exp.preprocess.visual import compute_visual_arrays

@@ -278,8 +278,9 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
     # The same trials through the job's own path: its modality fits the preprocessing on the
     # training trials; the stored ConvNet's conv3 of each trial's first instance must match.
     result = job.results["metallic"]
-    _, modality, splits = experiment.load(settings)
-    _, test = modality.instances(splits["metallic"])
+    dataset, modality, splits = experiment.load(settings)
+    train = splits["metallic"].trials("train", dataset)
+    test = modality.fit(train).transform(splits["metallic"].trials("test", dataset))
     child = scores.children(tracker, job.run_id)["metallic"]
     net = store.load_model(tracker, child, "model")
     for m in data.maps:

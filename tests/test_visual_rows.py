@@ -47,11 +47,15 @@ def dataset(compose_config, cache_dir) -> PHAC2:
     return DATA_SOURCES.build(settings.data.name, **settings.data.params)
 
 
-def _small_visual(dataset: PHAC2, cache_dir, **kwargs):
+def _small_visual(cache_dir, **kwargs):
     """32x32 crops (5a is 1x1): the modality's logic at a fraction of the 224x224 trunk cost."""
-    return MODALITIES.build(
-        "visual", dataset=dataset, cache_dir=cache_dir, size=32, batch_size=128, **kwargs
-    )
+    return MODALITIES.build("visual", cache_dir=cache_dir, size=32, batch_size=128, **kwargs)
+
+
+def _instances(visual, dataset: PHAC2, split):
+    """Training and test instances of ``split``, the modality fitted on its training trials."""
+    train = split.trials("train", dataset)
+    return visual.fit(train).transform(train), visual.transform(split.trials("test", dataset))
 
 
 def _children(uri: str, parent_id: str):
@@ -104,11 +108,11 @@ def test_combine_is_checked_against_views(visual_config):
 
 
 def test_views_follow_their_objects_trials(dataset, cache_dir):
-    visual = _small_visual(dataset, cache_dir)
-    visual.prepare()
+    visual = _small_visual(cache_dir)
+    visual.check(dataset)
     for adjective in ("hard", "nice"):  # nice: its only positive object is split by trial
         split = SPLITS["published"](dataset, adjective, 0)
-        train, test = visual.instances(split)
+        train, test = _instances(visual, dataset, split)
         assert not set(train.trial) & set(test.trial)
         assert {n.rsplit("_", 1)[1] for n in [*train.trial, *test.trial]} == {"v00", "v01"}
         for part, inst in (("train", train), ("test", test)):
@@ -123,10 +127,10 @@ def test_views_follow_their_objects_trials(dataset, cache_dir):
 
 
 def test_features_are_the_frozen_trunks_and_cached(dataset, cache_dir, monkeypatch):
-    visual = _small_visual(dataset, cache_dir, seed=4)
-    visual.prepare()
-    train, _ = visual.instances(SPLITS["published"](dataset, "hard", 0))
-    arrays = visual.arrays
+    visual = _small_visual(cache_dir, seed=4)
+    visual.check(dataset)
+    train, _ = _instances(visual, dataset, SPLITS["published"](dataset, "hard", 0))
+    arrays = visual.trunk(dataset).arrays
     rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 1))[0])
             for o in train.object_id[:3]]  # fmt: skip
     trunk = xavier_init(GoogLeNet(), seed=4)
@@ -140,30 +144,30 @@ def test_features_are_the_frozen_trunks_and_cached(dataset, cache_dir, monkeypat
         raise AssertionError("the trunk ran again although its features are cached")
 
     monkeypatch.setattr(googlenet, "build_trunk", no_trunk)
-    again = _small_visual(dataset, cache_dir, seed=4)
-    again.prepare()
-    np.testing.assert_array_equal(again.instances(SPLITS["published"](dataset, "hard", 0))[0].X,
-                                  train.X)  # fmt: skip
+    again = _small_visual(cache_dir, seed=4)
+    again.check(dataset)
+    split = SPLITS["published"](dataset, "hard", 0)
+    np.testing.assert_array_equal(_instances(again, dataset, split)[0].X, train.X)
 
 
 def test_weights_file_and_fitted_mean(dataset, cache_dir, tmp_path):
     path = tmp_path / "googlenet.pth"
     torch.save(xavier_init(GoogLeNet(), seed=7).state_dict(), path)
     split = SPLITS["published"](dataset, "thick", 0)
-    from_file = _small_visual(dataset, cache_dir, weights=str(path), seed=0)
-    random7 = _small_visual(dataset, cache_dir, seed=7)
-    fitted = _small_visual(dataset, cache_dir, seed=7, mean="train")
+    from_file = _small_visual(cache_dir, weights=str(path), seed=0)
+    random7 = _small_visual(cache_dir, seed=7)
+    fitted = _small_visual(cache_dir, seed=7, mean="train")
     for m in (from_file, random7, fitted):
-        m.prepare()
-    a, b, c = (m.instances(split)[0].X for m in (from_file, random7, fitted))
+        m.check(dataset)
+    a, b, c = (_instances(m, dataset, split)[0].X for m in (from_file, random7, fitted))
     np.testing.assert_allclose(a, b, atol=1e-5)
     assert np.abs(c - b).max() > 1e-3  # a different mean is subtracted before the trunk
     with pytest.raises(ValueError, match=r"trunk.weights .*missing.pth not found") as missing:
-        _small_visual(dataset, cache_dir, weights=str(tmp_path / "missing.pth"))
+        _small_visual(cache_dir, weights=str(tmp_path / "missing.pth"))
     line = str(param_error("modality", {"weights": None}, missing.value))
     assert line.startswith("modality: modality.weights") and "\n" not in line
     with pytest.raises(ValueError, match="modality.mean must be"):
-        _small_visual(dataset, cache_dir, mean="dataset")
+        _small_visual(cache_dir, mean="dataset")
 
 
 def test_objects_without_photographs_are_left_out(dataset, cache_dir, tmp_path, caplog):
@@ -175,11 +179,11 @@ def test_objects_without_photographs_are_left_out(dataset, cache_dir, tmp_path, 
         for p in paths if obj not in dropped else []:
             shutil.copy(p, folder / p.name)
     partial = PHAC2(dataset.path, photo_dir=folder)
-    visual = _small_visual(partial, cache_dir)
+    visual = _small_visual(cache_dir)
     with caplog.at_level(logging.WARNING, logger="tactile_exp.modalities"):
-        visual.prepare()
+        visual.check(partial)
     assert f"3 of {len(photos)} objects have no photographs" in caplog.text
-    train, test = visual.instances(SPLITS["published"](partial, "hard", 0))
+    train, test = _instances(visual, partial, SPLITS["published"](partial, "hard", 0))
     assert not set(dropped) & {*train.object_id, *test.object_id}
     assert {TrialName.parse(t.name).object_id for t in partial.trials} - set(dropped) == {
         *train.object_id,
@@ -194,10 +198,10 @@ def test_caffe_layout_features_come_from_the_caffe_trunk(dataset, cache_dir, tmp
     googlenet.save_weights(
         path, xavier_init(googlenet.CaffeGoogLeNet(), seed=8).state_dict(), layout="caffe"
     )
-    visual = _small_visual(dataset, cache_dir, weights=str(path), layout="caffe")
-    visual.prepare()
-    train, _ = visual.instances(SPLITS["published"](dataset, "thick", 0))
-    arrays = visual.arrays
+    visual = _small_visual(cache_dir, weights=str(path), layout="caffe")
+    visual.check(dataset)
+    train, _ = _instances(visual, dataset, SPLITS["published"](dataset, "thick", 0))
+    arrays = visual.trunk(dataset).arrays
     rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 0))[0])
             for o in train.object_id[:3]]  # fmt: skip
     images = googlenet.network_input(arrays.images[rows], (123.0, 117.0, 104.0), "caffe")
@@ -205,8 +209,8 @@ def test_caffe_layout_features_come_from_the_caffe_trunk(dataset, cache_dir, tmp
     index = [int(np.flatnonzero((train.object_id == o) & np.char.endswith(
         train.trial.astype(str), "_v00"))[0]) for o in train.object_id[:3]]  # fmt: skip
     np.testing.assert_allclose(train.X[index], expected, atol=1e-5)
-    wrong = _small_visual(dataset, cache_dir, weights=str(path), layout="torchvision")
+    wrong = _small_visual(cache_dir, weights=str(path), layout="torchvision")
     with pytest.raises(ValueError, match="caffe-layout .* set modality.layout=caffe"):
-        wrong.prepare()
+        wrong.check(dataset)
     with pytest.raises(ValueError, match="modality.layout must be"):
-        _small_visual(dataset, cache_dir, layout="bgr")
+        _small_visual(cache_dir, layout="bgr")

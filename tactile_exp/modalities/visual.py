@@ -91,7 +91,7 @@ class Visual(Modality):
         return max((len(p) for p in photos.values()), default=0), "views"
 
     def check(self, dataset: Any) -> None:
-        trunk = self._trunk(dataset)
+        trunk = self.trunk(dataset)
         arrays = trunk.arrays
         if len(arrays.images) == 0:
             raise ValueError(f"{dataset.path}: no photographs found for any object")
@@ -110,7 +110,7 @@ class Visual(Modality):
         if self.mean == "imagenet":
             trunk.features(self._layout_mean())  # one trunk pass for every adjective, up front
 
-    def _trunk(self, dataset: Any) -> Any:
+    def trunk(self, dataset: Any) -> Any:
         """The photographs of ``dataset`` and their trunk features (cached when checked)."""
         from tactile_exp.preprocess.visual import (
             VisualFeatures,
@@ -138,7 +138,7 @@ class Visual(Modality):
 
     def photographs(self, trials: Trials) -> np.ndarray:
         """Rows (of the data set's photograph arrays) of ``trials``' objects, in view order."""
-        arrays = self._trunk(trials.dataset).arrays
+        arrays = self.trunk(trials.dataset).arrays
         rows = []
         for obj in sorted(trials.objects):
             views = np.flatnonzero(arrays.object_id == obj)
@@ -160,14 +160,14 @@ class Visual(Modality):
         if self.mean == "imagenet":
             self.mean_ = self._layout_mean()
         else:
-            arrays = self._trunk(trials.dataset).arrays
+            arrays = self.trunk(trials.dataset).arrays
             self.mean_ = tuple(
                 round(float(m), 4) for m in arrays.channel_mean(self.photographs(trials))
             )
         return self
 
     def transform(self, trials: Trials) -> Instances:
-        trunk = self._trunk(trials.dataset)
+        trunk = self.trunk(trials.dataset)
         arrays = trunk.arrays
         rows = self.photographs(trials)
         obj = arrays.object_id[rows]
