@@ -18,6 +18,8 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.errors import ConfigError
+from tactile_exp.registry import Component
 
 DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
 # Keys that change where results go or what they are compared with, not what they are: left out
@@ -33,18 +35,6 @@ STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best valu
 # of run names and axes.
 UNNAMED = ("tracking", "hydra", "sweep", "cache_dir", "study", "objective")
 ADJECTIVES_SPELLED_OUT = 3  # a run name lists at most this many adjectives, else counts them
-
-
-class ConfigError(ValueError):
-    """An impossible config value, reported before any work starts."""
-
-
-@dataclass(frozen=True)
-class Component:
-    """A config-group choice: registry name plus constructor keyword arguments."""
-
-    name: str
-    params: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -21,11 +21,12 @@ import numpy as np
 
 from tactile_exp import evaluate, stats, store, termination, workers
 from tactile_exp.combine import COMBINERS
-from tactile_exp.config import ConfigError, Settings, component_modules, param_error
+from tactile_exp.config import Settings, component_modules, param_error
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
+from tactile_exp.errors import ConfigError
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model

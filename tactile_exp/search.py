@@ -24,7 +24,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tactile_exp.config import ConfigError
+from tactile_exp.errors import ConfigError
 from tactile_exp.tracking import Tracker, process_alive, resolve_uri
 
 if TYPE_CHECKING:

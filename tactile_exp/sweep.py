@@ -271,7 +271,8 @@ class PrepareSweep(Callback):
 
     def _prepare(self, config: DictConfig) -> None:
         """What ``on_multirun_start`` does; a user error raised here stops the sweep."""
-        from tactile_exp.config import ConfigError, settings_from_config
+        from tactile_exp.config import settings_from_config
+        from tactile_exp.errors import ConfigError
         from tactile_exp.experiment import load
         from tactile_exp.tracking import Tracker
 

@@ -16,8 +16,9 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from tactile_exp.baselines.svm import ObjectCVLinearSVM
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import DataError
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.tracking import Tracker, TrackingError, process_tags
 

@@ -29,7 +29,7 @@ from PIL import Image
 from test_extending import table1_rows
 
 from tactile_exp import sweep
-from tactile_exp.config import ConfigError
+from tactile_exp.errors import ConfigError
 from tactile_exp.report import cli, figures, table3
 from tactile_exp.termination import Terminated
 
@@ -221,7 +221,7 @@ def test_on_invalid_fail_runs_nothing(
     error = "sweep.on_invalid=fail: 1 of 4 jobs have an invalid config (listed above); none run"
     last = capsys.readouterr().err.splitlines()[-1]
     assert last == (
-        f"error: {error}" if full_error == "0" else f"tactile_exp.config.ConfigError: {error}"
+        f"error: {error}" if full_error == "0" else f"tactile_exp.errors.ConfigError: {error}"
     )
     listed = yaml.safe_load((tmp_path / "multirun" / "invalid.yaml").read_text())
     assert listed["on_invalid"] == "fail" and listed["jobs"] == 4

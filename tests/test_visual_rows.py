@@ -14,11 +14,12 @@ from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp.config import ConfigError, param_error, settings_from_config
+from tactile_exp.config import param_error, settings_from_config
 from tactile_exp.data.layout import TrialName, objects
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import SPLITS
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.models import googlenet

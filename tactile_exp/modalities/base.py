@@ -14,11 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, Split, TrialName
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.models.base import Model
-from tactile_exp.registry import Registry
+from tactile_exp.registry import Component, Registry
 
 # provide(part, split, training instances of the part's modality) -> the part's fitted model
 PartProvider = Callable[[str, Split, Instances], Model]

@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from tactile_exp.combine import COMBINERS, unit_members
-from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.splits import split_photographs
@@ -28,6 +27,7 @@ from tactile_exp.modalities.base import MODALITIES, Modality
 from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.modalities.visual import Visual
 from tactile_exp.models.base import Model
+from tactile_exp.registry import Component
 
 log = logging.getLogger(__name__)
 
