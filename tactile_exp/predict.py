@@ -532,7 +532,7 @@ class _Inputs:
 
     def _visual(self, settings: dict[str, Any], arrays: dict[str, np.ndarray], where: str):
         """(n, 832) features of the folder's photographs, in file-name order (views)."""
-        from tactile_exp.models.googlenet import build_trunk, network_input, pooled_features
+        from tactile_exp.preprocess.trunk import build_trunk, network_input, pooled_features
 
         try:
             size, layout, seed = int(settings["size"]), settings["layout"], settings["seed"]

@@ -19,7 +19,6 @@ from tactile_exp.deploy.__main__ import main
 from tactile_exp.deploy.onnx_export import channel_names, export_job
 from tactile_exp.experiment import run
 from tactile_exp.modalities.multimodal import visual_units
-from tactile_exp.models.googlenet import network_input
 from tactile_exp.predict import (
     PredictError,
     _children,
@@ -30,6 +29,7 @@ from tactile_exp.predict import (
     read_photographs,
 )
 from tactile_exp.preprocess.haptic import trial_signals
+from tactile_exp.preprocess.trunk import network_input
 
 SMALL_VISUAL = ["modality.size=32", "modality.batch_size=64"]
 SMALL_MULTIMODAL = ["modality.visual.size=32", "modality.visual.batch_size=128"]

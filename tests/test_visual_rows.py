@@ -22,8 +22,8 @@ from tactile_exp.data.splits import SPLITS
 from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.modalities import MODALITIES
-from tactile_exp.models import googlenet
-from tactile_exp.models.googlenet import GoogLeNet, pooled_features, xavier_init
+from tactile_exp.preprocess import trunk
+from tactile_exp.preprocess.trunk import GoogLeNet, pooled_features, xavier_init
 
 VIEWS = 2  # photographs per object: enough to test grouping and split-by-trial objects
 FAST = ["schedule=tiny"]
@@ -130,8 +130,9 @@ def test_features_are_the_frozen_trunks_and_cached(dataset, cache_dir, monkeypat
     arrays = visual.arrays
     rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 1))[0])
             for o in train.object_id[:3]]  # fmt: skip
-    trunk = xavier_init(GoogLeNet(), seed=4)
-    expected = pooled_features(trunk, arrays.prepared(np.array(rows)) / googlenet.TORCHVISION_SCALE)
+    model = xavier_init(GoogLeNet(), seed=4)
+    images = trunk.network_input(arrays.images[rows], trunk.IMAGENET_MEAN_RGB, "torchvision")
+    expected = pooled_features(model, images)
     index = [int(np.flatnonzero((train.object_id == o) & np.char.endswith(
         train.trial.astype(str), "_v01"))[0]) for o in train.object_id[:3]]  # fmt: skip
     np.testing.assert_allclose(train.X[index], expected, atol=1e-5)
@@ -140,7 +141,7 @@ def test_features_are_the_frozen_trunks_and_cached(dataset, cache_dir, monkeypat
     def no_trunk(*args, **kwargs):
         raise AssertionError("the trunk ran again although its features are cached")
 
-    monkeypatch.setattr(googlenet, "build_trunk", no_trunk)
+    monkeypatch.setattr(trunk, "build_trunk", no_trunk)
     again = _small_visual(dataset, cache_dir, seed=4)
     again.prepare()
     np.testing.assert_array_equal(again.instances(SPLITS["published"](dataset, "hard", 0))[0].X,
@@ -192,8 +193,8 @@ def test_caffe_layout_features_come_from_the_caffe_trunk(dataset, cache_dir, tmp
     """modality.layout=caffe: BGR minus Caffe's mean through the Caffe trunk of the weights
     file; the same file with the torchvision layout fails before any trunk pass."""
     path = tmp_path / "caffe.pth"
-    googlenet.save_weights(
-        path, xavier_init(googlenet.CaffeGoogLeNet(), seed=8).state_dict(), layout="caffe"
+    trunk.save_weights(
+        path, xavier_init(trunk.CaffeGoogLeNet(), seed=8).state_dict(), layout="caffe"
     )
     visual = _small_visual(dataset, cache_dir, weights=str(path), layout="caffe")
     visual.prepare()
@@ -201,8 +202,8 @@ def test_caffe_layout_features_come_from_the_caffe_trunk(dataset, cache_dir, tmp
     arrays = visual.arrays
     rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 0))[0])
             for o in train.object_id[:3]]  # fmt: skip
-    images = googlenet.network_input(arrays.images[rows], (123.0, 117.0, 104.0), "caffe")
-    expected = pooled_features(googlenet.build_trunk(path, layout="caffe"), images)
+    images = trunk.network_input(arrays.images[rows], (123.0, 117.0, 104.0), "caffe")
+    expected = pooled_features(trunk.build_trunk(path, layout="caffe"), images)
     index = [int(np.flatnonzero((train.object_id == o) & np.char.endswith(
         train.trial.astype(str), "_v00"))[0]) for o in train.object_id[:3]]  # fmt: skip
     np.testing.assert_allclose(train.X[index], expected, atol=1e-5)
