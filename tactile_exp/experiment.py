@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, stats, store, termination, workers
+from tactile_exp import evaluate, stats, store
 from tactile_exp.combine import COMBINERS
 from tactile_exp.config import Settings, component_modules, param_error
 from tactile_exp.data.layout import Instances, Split
@@ -31,6 +31,7 @@ from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
+from tactile_exp.runtime import termination, workers
 from tactile_exp.tracking import MAX_PARAM_LENGTH, Tracker, canonical_column, flatten
 from tactile_exp.train import device_name
 from tactile_exp.validation import take_trials, validation_split

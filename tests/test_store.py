@@ -27,7 +27,8 @@ from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import HapticCNN
-from tactile_exp.tracking import Tracker, process_tags
+from tactile_exp.runtime.processes import process_tags
+from tactile_exp.tracking import Tracker
 
 ONE = "[hard]"
 REPEAT = ["tracking.skip_finished=false"]  # run a config again (the engine would skip it)
