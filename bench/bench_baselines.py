@@ -1,18 +1,18 @@
 """Bench: static features of every trial and dynamic HMM chains per adjective, first run vs cache.
 
-``--rows`` instead times Table I rows A-F as one sweep per adjective, the plain path and the
+``--rows`` instead times Table I rows A-F as one sweep per adjective, the plain code and the
 fast one side by side (interleaved per adjective, in one process): each row fits its features on
 the adjective's split, transforms the training and test trials and fits the object-CV linear SVM
 on the training side; rows B and D pool each object's trial features (mean, as the engine's
-``combine_instances=mean`` with all of an object's trials). "Before" is today's code path: no
-chain cache (rows C, D, E, F each fit the 16 chains), `shortcuts.disabled()` (per-trial
-static PCA one trial-EP at a time, one pipeline per (C, draw), per-call HMM scoring, chains fitted
-one after the other) and liblinear's SVM. "After" shares a fresh chain cache across the six rows
-(row C fits, D, E, F reuse) with the shortcuts on and the Newton SVM (`SquaredHingeSVM`, the
-optimum of liblinear's objective). Prints the seconds of each row, both sweep totals and their
-ratio, the rows where the chosen C differs (liblinear stops short of the optimum at large C) and
-the largest test-AUC difference. Target (issue 14): the sweep at least 3x faster after than
-before.
+``combine_instances=mean`` with all of an object's trials). "Before": no chain cache (rows C, D,
+E, F each fit the 16 chains), the plain code the tests keep as oracles (``plain_paths`` of
+``tests/baselines_oracles.py``: per-trial static PCA one trial-EP at a time, one pipeline per
+(C, draw), per-call HMM scoring, chains fitted one after the other) and liblinear's SVM. "After"
+shares a fresh chain cache across the six rows (row C fits, D, E, F reuse) with the package's
+shortcuts and the Newton SVM (``SquaredHingeSVM``, the optimum of liblinear's objective). Prints
+the seconds of each row, both sweep totals and their ratio, the rows where the chosen C differs
+(liblinear stops short of the optimum at large C) and the largest test-AUC difference. Target
+(issue 14): the sweep at least 3x faster after than before.
 
 Targets (full default synthetic file, 600 trials): static features < 2 min (first run, reading
 the file included); dynamic chains for 24 adjectives < 10 min. ``--adjectives N`` times N
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import sys
 import tempfile
 import time
 import warnings
@@ -39,7 +40,6 @@ from sklearn.metrics import roc_auc_score
 
 from tactile_exp.baselines import dynamic as dyn
 from tactile_exp.baselines import features as feat
-from tactile_exp.baselines import shortcuts
 from tactile_exp.baselines.dynamic import DynamicFeatures
 from tactile_exp.baselines.features import FEATURE_KINDS, BaselineFeatures
 from tactile_exp.baselines.svm import ObjectCVLinearSVM
@@ -47,6 +47,9 @@ from tactile_exp.data.layout import ADJECTIVES, Split, TrialName
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.splits import make_split
 from tactile_exp.data.synthetic import default_file
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from baselines_oracles import plain_paths  # noqa: E402 (the oracles live beside the tests)
 
 
 def main() -> None:
@@ -93,7 +96,7 @@ def rows(args: argparse.Namespace, feature_cache: Path) -> None:
             ("before", None, "liblinear"),
             ("after", feature_cache / adj, "newton"),
         ):
-            switch = shortcuts.disabled() if when == "before" else contextlib.nullcontext()
+            switch = plain_paths() if when == "before" else contextlib.nullcontext()
             with switch:
                 seconds, results[when] = {}, {}
                 for row, (settings, pool) in ROWS.items():

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from tactile_exp.models.googlenet import (
+from tactile_exp.preprocess.trunk import (
     CaffeGoogLeNet,
     GoogLeNet,
     Trunk,

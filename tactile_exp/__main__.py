@@ -12,7 +12,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from tactile_exp import termination
+from tactile_exp.runtime import termination
 
 log = logging.getLogger("tactile_exp")
 
@@ -24,7 +24,7 @@ def main(cfg: DictConfig) -> float:
     from tactile_exp.errors import reported
     from tactile_exp.experiment import run
     from tactile_exp.objective import value
-    from tactile_exp.sweep import SweepJob
+    from tactile_exp.runtime.sweep import SweepJob
 
     hc = HydraConfig.get()
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}

@@ -16,13 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, store, termination
-from tactile_exp.config import Component, Settings
+from tactile_exp import evaluate, store
+from tactile_exp.config import Settings
 from tactile_exp.data.layout import Instances, Split, Trials
 from tactile_exp.modalities.base import Modality, PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
 from tactile_exp.pipeline import AdjectivePipeline
+from tactile_exp.registry import Component
+from tactile_exp.runtime import termination
 from tactile_exp.tracking import MAX_PARAM_LENGTH, Tracker
 from tactile_exp.validation import validation_split
 

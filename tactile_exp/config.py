@@ -18,6 +18,8 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.errors import ConfigError
+from tactile_exp.registry import Component
 
 DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
 # Keys that change where results go or what they are compared with, not what they are: left out
@@ -33,18 +35,6 @@ STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best valu
 # of run names and axes.
 UNNAMED = ("tracking", "hydra", "sweep", "cache_dir", "study", "objective")
 ADJECTIVES_SPELLED_OUT = 3  # a run name lists at most this many adjectives, else counts them
-
-
-class ConfigError(ValueError):
-    """An impossible config value, reported before any work starts."""
-
-
-@dataclass(frozen=True)
-class Component:
-    """A config-group choice: registry name plus constructor keyword arguments."""
-
-    name: str
-    params: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -78,7 +68,7 @@ class Settings:
         0.0  # training objects held out for val_auc (tactile_exp.validation)
     )
     overrides: tuple[str, ...] = ()  # the job's command-line overrides (Hydra's task overrides)
-    workers: int = 1  # processes that train adjectives side by side (tactile_exp.workers)
+    workers: int = 1  # processes that train adjectives side by side (tactile_exp.runtime.workers)
     objective: str = "mean_val_auc"  # what the job returns to Hydra (tactile_exp.objective)
     study_tags: dict[str, str] = field(default_factory=dict)  # search.study, search.role, ...
     axes: dict[str, str] = field(default_factory=dict)  # the job's overrides: see ``axes``
@@ -157,7 +147,7 @@ def _component(node: Any, group: str) -> Component:
 
 def component_modules(resolved: dict[str, Any]) -> list[str]:
     """The ``_module_`` of each component (what registers it): a spawned worker process
-    (``tactile_exp.workers``) imports them again, as ``_component`` did here."""
+    (``tactile_exp.runtime.workers``) imports them again, as ``_component`` did here."""
     nodes = (resolved.get(group) for group in ("data", "modality", "model"))
     return [str(n["_module_"]) for n in nodes if isinstance(n, dict) and n.get("_module_")]
 

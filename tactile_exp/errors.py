@@ -1,5 +1,8 @@
-"""One line per user error at the edges (the CLI job and the sweep callback): ``error: ...``
-and exit status 2, with no traceback unless ``HYDRA_FULL_ERROR=1``."""
+"""User errors: one line at the edges (the CLI job and the sweep callback), ``error: ...``
+and exit status 2, with no traceback unless ``HYDRA_FULL_ERROR=1``.
+
+``ConfigError`` lives here, below the config edge, so that a component (a store, a modality, the
+sweep) can raise it without importing ``config``, which imports the registries of components."""
 
 from __future__ import annotations
 
@@ -8,9 +11,13 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from tactile_exp.config import ConfigError
 from tactile_exp.data.layout import DataError
 from tactile_exp.tracking import TrackingError
+
+
+class ConfigError(ValueError):
+    """An impossible config value, reported before any work starts."""
+
 
 USER_ERRORS = (ConfigError, DataError, TrackingError)
 EXIT_USER_ERROR = 2

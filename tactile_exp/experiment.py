@@ -16,13 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, stats, store, workers
+from tactile_exp import evaluate, stats, store
 from tactile_exp.adjective import AdjectiveResult, key_params, log_data, run_adjective
-from tactile_exp.config import ConfigError, Settings, component_modules, param_error
+from tactile_exp.config import Settings, component_modules, param_error
 from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
+from tactile_exp.errors import ConfigError
 from tactile_exp.modalities import MODALITIES, Modality
+from tactile_exp.runtime import workers
 from tactile_exp.tracking import Tracker, canonical_column, flatten
 from tactile_exp.train import device_name
 
@@ -181,7 +183,7 @@ def _adjectives(
     splits: Mapping[str, Split],
 ) -> Iterator[AdjectiveResult]:
     """Each adjective's result, in order: here, or ``settings.workers`` at a time in worker
-    processes (``tactile_exp.workers``) that open the data and the tracking store once each."""
+    processes (``runtime.workers``) that open the data and the tracking store once each."""
     n = len(settings.adjectives)
     processes = min(settings.workers, n)
     if processes == 1:

@@ -18,12 +18,12 @@ import numpy as np
 
 from tactile_exp import store
 from tactile_exp.combine import COMBINERS
-from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, Trials
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
+from tactile_exp.registry import Component
 
 SETTINGS = "pipeline.json"
 

@@ -13,9 +13,18 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
 T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Component:
+    """A config-group choice: registry name plus constructor keyword arguments."""
+
+    name: str
+    params: dict[str, Any] = field(default_factory=dict)
 
 
 class Registry(Generic[T]):

@@ -24,8 +24,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tactile_exp.config import ConfigError
-from tactile_exp.tracking import Tracker, process_alive, resolve_uri
+from tactile_exp.errors import ConfigError
+from tactile_exp.runtime.processes import process_alive
+from tactile_exp.tracking import Tracker, resolve_uri
 
 if TYPE_CHECKING:
     import optuna

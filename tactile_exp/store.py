@@ -30,9 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import termination
-from tactile_exp.config import Component, ConfigError
-from tactile_exp.tracking import Tracker, process_alive
+from tactile_exp.errors import ConfigError
+from tactile_exp.registry import Component
+from tactile_exp.runtime import termination
+from tactile_exp.runtime.processes import process_alive
+from tactile_exp.tracking import Tracker
 
 log = logging.getLogger(__name__)
 

@@ -33,7 +33,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from tactile_exp.termination import shielded
+from tactile_exp.runtime.processes import process_alive, process_tags
+from tactile_exp.runtime.termination import shielded
 
 os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")  # no calls home; the network is closed
 # Where tqdm is installed, MLflow draws a progress bar for every artifact download: one per stored
@@ -127,42 +128,6 @@ def check_server(uri: str, timeout: float = 5.0) -> None:
             f"tracking.uri: no MLflow server answers at {uri} ({reason}); start one "
             "(`mlflow server`) or use tracking=local"
         ) from err
-
-
-def _stat(pid: int) -> list[str]:
-    """The fields of ``/proc/<pid>/stat`` after the command name; [] where unreadable."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return []
-
-
-def _process_start(pid: int) -> str:
-    """The process's start time in clock ticks since boot (/proc), "" where unknown: a PID
-    reused by a later process has a different start time."""
-    fields = _stat(pid)
-    return fields[19] if fields else ""
-
-
-def process_alive(pid: int, started: str = "") -> bool:
-    """Whether process ``pid`` (started at ``started``, when given) still runs. A zombie has
-    ended: a killed worker that its parent has not reaped yet must not keep its runs RUNNING."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    fields = _stat(pid)
-    if fields and fields[0] == "Z":
-        return False
-    return not started or not fields or fields[19] == started
-
-
-def process_tags() -> dict[str, str]:
-    """Who runs this run: stale RUNNING runs are told apart from live ones by these."""
-    pid = os.getpid()
-    return {"host": socket.gethostname(), "pid": str(pid), "pid_start": _process_start(pid)}
 
 
 def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, str]:

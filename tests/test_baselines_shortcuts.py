@@ -1,4 +1,5 @@
-"""The baselines' shortcuts give the plain path's numbers (`tactile_exp.baselines.shortcuts`)."""
+"""The baselines' shortcuts give the plain code's numbers (`tactile_exp.baselines.shortcuts`; the
+plain code is the oracles in `tests/baselines_oracles.py`)."""
 
 from __future__ import annotations
 
@@ -7,12 +8,12 @@ import warnings
 import numpy as np
 import pytest
 from baselines_fixture import make_trial
+from baselines_oracles import plain_paths, static_per_trial
 from sklearn.metrics import roc_auc_score
 from test_baselines_dynamic import TINY_GRID, _generated
 
 from tactile_exp.baselines import dynamic as dyn
 from tactile_exp.baselines import features as feat
-from tactile_exp.baselines import shortcuts
 from tactile_exp.baselines import static as st
 from tactile_exp.baselines.svm import ObjectCVLinearSVM
 from tactile_exp.data.layout import TrialName
@@ -37,8 +38,7 @@ def test_static_matrix_equals_the_per_trial_loop(per_trial_pca, interleave):
     features = st.StaticFeatures(per_trial_pca=per_trial_pca, interleave=interleave)
     features.fit(table, table.trials[:3])
     order = [table.trials[i] for i in (4, 0, 2, 2)]  # any order, repeats included
-    with shortcuts.disabled():
-        plain = features.transform(table, order)
+    plain = static_per_trial(features, table, order)
     fast = features.transform(table, order)
     np.testing.assert_allclose(fast, plain, rtol=1e-12, atol=1e-12)
     assert fast.shape == (4, 188) and (fast[2:] != 0).any()
@@ -73,7 +73,7 @@ def test_svm_c_search_with_one_scaler_per_draw_equals_the_per_c_pipelines(n_obje
     X, y, groups = _svm_data(n_objects)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        with shortcuts.disabled():
+        with plain_paths():
             plain = ObjectCVLinearSVM(n_draws=6, p_out=p_out, seed=4).fit(X, y, groups)
         fast = ObjectCVLinearSVM(n_draws=6, p_out=p_out, seed=4).fit(X, y, groups)
     assert len(set(plain.cv_scores_)) > 1  # the grid is really compared
@@ -89,7 +89,7 @@ def tiny_grid():
     del dyn.GRIDS["tiny"]
 
 
-def test_rows_a_to_f_give_the_plain_paths_c_and_auc(tmp_path, tiny_grid):
+def test_rows_a_to_f_give_the_plain_codes_c_and_auc(tmp_path, tiny_grid):
     """Each row on a generated file: same features (to float rounding), chosen C and test AUC."""
     data, _, split = _generated(tmp_path)
     rows = [
@@ -113,7 +113,7 @@ def test_rows_a_to_f_give_the_plain_paths_c_and_auc(tmp_path, tiny_grid):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # short generated EPs: static fills
         for settings in rows:
-            with shortcuts.disabled():
+            with plain_paths():
                 X0, c0, auc0 = row(settings)
             X1, c1, auc1 = row(settings)
             np.testing.assert_allclose(X1, X0, rtol=1e-10, atol=1e-10)

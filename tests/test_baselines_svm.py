@@ -163,13 +163,13 @@ def test_float32_features_give_the_float64_numbers():
     )
 
 
-def test_plain_path_gives_the_shortcut_scores():
-    from tactile_exp.baselines import shortcuts
+def test_one_scaler_per_draw_gives_the_per_c_pipelines_scores():
+    from baselines_oracles import plain_paths
 
     X, y, groups = _objects_data(shift=0.7)
     svm = ObjectCVLinearSVM(Cs=[0.01, 1.0, 10.0], n_draws=6, seed=3)
     fast = svm.cv_scores(X, y, groups)
-    with shortcuts.disabled():
+    with plain_paths():
         plain = svm.cv_scores(X, y, groups)
     np.testing.assert_allclose(plain, fast, rtol=1e-9)
 

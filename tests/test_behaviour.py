@@ -19,11 +19,12 @@ from mlflow.tracking import MlflowClient
 from phac2_fixture import OBJECTS, write_file
 
 from tactile_exp import evaluate, tracking
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 from tactile_exp.preprocess.cache import load_arrays, save_arrays

@@ -21,7 +21,7 @@ from caffemodel_fixture import (
     net,
 )
 
-from tactile_exp.models.googlenet import (
+from tactile_exp.preprocess.trunk import (
     CAFFE_MEAN_BGR,
     CaffeGoogLeNet,
     GoogLeNet,

@@ -11,9 +11,10 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from tactile_exp.combine import COMBINERS
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import SPLITS
+from tactile_exp.errors import ConfigError
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.models import MODELS
 from tactile_exp.models.losses import LOSSES

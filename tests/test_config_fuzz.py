@@ -10,8 +10,9 @@ from conftest import TINY_DATA
 from hypothesis import HealthCheck, Phase, event, given, settings
 from hypothesis import strategies as st
 
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES, Instances
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import open_data
 from tactile_exp.pipeline import AdjectivePipeline
 

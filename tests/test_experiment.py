@@ -13,7 +13,8 @@ from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import load, run
 from tactile_exp.models import MODELS
 from tactile_exp.train import device_name

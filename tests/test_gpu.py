@@ -10,7 +10,7 @@ from sklearn.metrics import roc_auc_score
 from test_models import FAST, easy_case
 
 from tactile_exp.models import MODELS
-from tactile_exp.models.googlenet import build_trunk, pooled_features
+from tactile_exp.preprocess.trunk import build_trunk, pooled_features
 from tactile_exp.store import read_model, write_model
 from tactile_exp.train import device_name
 

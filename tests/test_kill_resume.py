@@ -15,7 +15,7 @@ import pytest
 from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 
-from tactile_exp.sweep import _children, _gone
+from tactile_exp.runtime import processes
 
 pytestmark = pytest.mark.slow
 
@@ -133,13 +133,13 @@ def test_sigterm_to_a_parallel_sweep_stops_its_workers(cache_dir, mlflow_uri, tm
             time.sleep(0.5)
         else:
             pytest.fail("the sweep never had two jobs training")
-        workers = _children(sweep.pid)
+        workers = processes.children(sweep.pid)
         sweep.send_signal(signal.SIGTERM)
         assert sweep.wait(timeout=120) != 0
     finally:
         sweep.kill()
     time.sleep(1.0)
-    assert [pid for pid in workers if not _gone(pid)] == []  # no orphaned worker
+    assert [pid for pid in workers if processes.process_alive(pid)] == []  # no orphaned worker
     runs = _runs(mlflow_uri)
     assert not [r.info.run_name for r in runs if r.info.status == "RUNNING"]
     parents = [r for r in runs if r.data.tags.get("run_level") == "parent"]
@@ -165,16 +165,16 @@ def test_a_stopped_job_stops_its_adjective_workers(sig, cache_dir, mlflow_uri, t
             pytest.fail("the job ended before two adjectives were training")
         # Keep reading: a job whose stdout pipe fills up blocks, its workers' log relay with it.
         threading.Thread(target=job.stdout.read, daemon=True).start()  # type: ignore[union-attr]
-        workers = _children(job.pid)
+        workers = processes.children(job.pid)
         assert len(workers) >= 2
         job.send_signal(sig)
         assert job.wait(timeout=120) != 0
     finally:
         job.kill()
     deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and not all(_gone(pid) for pid in workers):
+    while time.monotonic() < deadline and any(processes.process_alive(pid) for pid in workers):
         time.sleep(0.2)
-    assert [pid for pid in workers if not _gone(pid)] == []  # no orphaned worker
+    assert [pid for pid in workers if processes.process_alive(pid)] == []  # no orphaned worker
     runs = {r.info.run_name: r for r in _runs(mlflow_uri)}
     children = [runs[f"adj={a}"] for a in sorted(started)]
     assert all(r.info.status == "FAILED" for r in children)

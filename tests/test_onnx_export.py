@@ -22,9 +22,9 @@ from tactile_exp.deploy.onnx_export import channel_names, export_job
 from tactile_exp.experiment import run
 from tactile_exp.jobs import StoredJob
 from tactile_exp.modalities.multimodal import visual_units
-from tactile_exp.models.googlenet import network_input
 from tactile_exp.predict import PredictError, predict
 from tactile_exp.preprocess.haptic import trial_signals
+from tactile_exp.preprocess.trunk import network_input
 from tactile_exp.preprocess.visual import compute_visual_arrays
 
 SMALL_VISUAL = ["modality.size=32", "modality.batch_size=64"]

@@ -13,12 +13,11 @@ from tactile_exp.data.layout import TrialName
 from tactile_exp.data.synthetic import SyntheticSpec, object_properties
 from tactile_exp.preprocess import visual
 from tactile_exp.preprocess.visual import (
-    IMAGENET_MEAN_RGB,
     Plate,
     crop_plate,
     find_plate,
     load_visual_arrays,
-    prepare_image,
+    resize_square,
 )
 
 GREY = (175, 178, 182)  # brushed aluminium: light grey, low saturation
@@ -107,21 +106,20 @@ def test_no_plate_raises_clear_error():
         find_plate(np.zeros((20, 30), np.uint8))
 
 
-def test_prepare_image_shape_and_mean():
+def test_resize_square_keeps_colours_and_orientation():
+    """V2's resize: enlarging (linear) and shrinking (area) keep a flat colour exactly and the
+    image's left-right order (no transposed axes); the mean is subtracted later, in the trunk's
+    input (``preprocess.trunk.network_input``)."""
     image = np.empty((90, 130, 3), np.uint8)
     image[:] = (200, 100, 50)
-    out = prepare_image(image)
-    assert out.shape == (3, 224, 224) and out.dtype == np.float32
-    expected = np.array((200, 100, 50)) - IMAGENET_MEAN_RGB
-    np.testing.assert_allclose(out[:, 0, 0], expected, atol=1e-4)
-    np.testing.assert_allclose(out.mean(axis=(1, 2)), out[:, 5, 7], atol=1e-4)  # flat image
-    fitted = prepare_image(image, size=32, mean=(200, 100, 50))
-    assert fitted.shape == (3, 32, 32) and np.abs(fitted).max() == 0
+    out = resize_square(image)
+    assert out.shape == (224, 224, 3) and out.dtype == np.uint8
+    assert (out == (200, 100, 50)).all()
     gradient = np.tile(np.arange(256, dtype=np.uint8)[None, :, None], (64, 1, 3))
-    small = prepare_image(gradient, size=16, mean=(0, 0, 0))
-    assert np.all(np.diff(small[0, 0]) > 0)  # left-right order kept (no transposed axes)
-    with pytest.raises(ValueError, match="3 values"):
-        prepare_image(image, mean=(1, 2))
+    small = resize_square(gradient, size=16)
+    assert small.shape == (16, 16, 3) and np.all(np.diff(small[0, :, 0].astype(int)) > 0)
+    with pytest.raises(ValueError, match=r"\(H, W, 3\) uint8"):
+        resize_square(np.zeros((20, 30), np.uint8))
 
 
 class PhotoDataset:
@@ -165,9 +163,9 @@ def test_visual_arrays_cached_and_missing_listed(tmp_path, monkeypatch):
 
     mean = second.channel_mean(np.array([0, 1]))
     assert mean.shape == (3,)
-    batch = second.prepared(np.array([0, 1]), mean=mean)
-    assert batch.shape == (2, 3, 32, 32) and batch.dtype == np.float32
-    np.testing.assert_allclose(batch.mean(axis=(0, 2, 3)), 0, atol=1e-3)
+    centred = second.images[:2].astype(np.float64) - mean.reshape(1, 3, 1, 1)
+    np.testing.assert_allclose(centred.mean(axis=(0, 2, 3)), 0, atol=1e-9)
+    assert np.ptp(mean) > 1  # the channels differ: a per-channel mean, not one number
 
 
 def test_visual_arrays_on_synthetic_file(tmp_path):

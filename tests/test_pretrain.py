@@ -7,7 +7,7 @@ import os
 import pytest
 import torch
 
-from tactile_exp.models.googlenet import CaffeGoogLeNet, build_trunk, read_state_dict, xavier_init
+from tactile_exp.preprocess.trunk import CaffeGoogLeNet, build_trunk, read_state_dict, xavier_init
 from tactile_exp.weights import __main__ as cli
 from tactile_exp.weights import pretrain as pretrain_module
 from tactile_exp.weights.pretrain import PretrainSettings, pretrain

@@ -16,10 +16,12 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from tactile_exp.baselines.svm import ObjectCVLinearSVM
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import DataError
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
-from tactile_exp.tracking import Tracker, TrackingError, process_tags
+from tactile_exp.runtime.processes import process_tags
+from tactile_exp.tracking import Tracker, TrackingError
 
 # 5 objects x 3 trials: absorbent 2 positive objects, squishy 3, cool none.
 FIVE_OBJECTS = (101, 116, 214, 316, 501)
@@ -222,7 +224,7 @@ def test_adjective_without_positive_objects_is_refused_before_a_run(
 TERMINATE = """
 import os, subprocess, sys
 from multiprocessing import resource_tracker
-from tactile_exp import sweep
+from tactile_exp.runtime import processes, sweep
 
 class NoRuns:
     def end_runs_of(self, pids, *, error):
@@ -231,14 +233,14 @@ class NoRuns:
 sweep.WORKER_GRACE_S = 5.0
 resource_tracker.ensure_running()  # a child that ignores SIGTERM, as loky's does
 worker = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
-before = sweep._children(os.getpid())
-trackers = sorted(p for p in before if sweep._resource_tracker(p))
+before = processes.children(os.getpid())
+trackers = sorted(p for p in before if processes.is_resource_tracker(p))
 try:
     sweep.terminate_workers(15, None, tracker=NoRuns())
 except SystemExit as stop:
     print("exit", stop.code)
 print("before", *sorted(before))
-print("alive", *sorted(p for p in before if not sweep._gone(p)))
+print("alive", *sorted(p for p in before if processes.process_alive(p)))
 print("worker", worker.pid)
 print("trackers", *trackers)
 """

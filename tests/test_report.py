@@ -10,11 +10,12 @@ from mlflow.tracking import MlflowClient
 from PIL import Image
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp import experiment, stats, store, sweep
+from tactile_exp import experiment, stats, store
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.report import activations, cli, figures, heldout, runs, scores, table1
 from tactile_exp.report import table3 as t3
+from tactile_exp.runtime import sweep
 from tactile_exp.tracking import Tracker
 
 ROW_A = {"choice.experiment": "table1_a_haptic_static_1trial", "paper.row": "A"}

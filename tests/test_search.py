@@ -17,8 +17,9 @@ from hydra.core.global_hydra import GlobalHydra
 from mlflow.tracking import MlflowClient
 
 from tactile_exp import evaluate, experiment, search
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances
+from tactile_exp.errors import ConfigError
 from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.objective import value
 

@@ -327,7 +327,8 @@ def test_folds_refuse_a_class_smaller_than_k(full: PHAC2) -> None:
 def test_folds_parameters_checked_before_a_job(
     compose_config, overrides: list[str], message: str
 ) -> None:
-    from tactile_exp.config import ConfigError, settings_from_config
+    from tactile_exp.config import settings_from_config
+    from tactile_exp.errors import ConfigError
 
     with pytest.raises(ConfigError, match=message):
         settings_from_config(compose_config(overrides))

@@ -21,12 +21,14 @@ from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 
 from tactile_exp import store
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import HapticCNN
-from tactile_exp.tracking import Tracker, process_tags
+from tactile_exp.runtime.processes import process_tags
+from tactile_exp.tracking import Tracker
 
 ONE = "[hard]"
 REPEAT = ["tracking.skip_finished=false"]  # run a config again (the engine would skip it)
@@ -198,7 +200,7 @@ KNOWN_KEY = "24dfe35e9f0f5088575a"  # training_key of `_key()`'s settings at FOR
 
 
 def _key(**change) -> str:
-    from tactile_exp.config import Component
+    from tactile_exp.registry import Component
 
     base = {
         "dataset": "phac2-abc",
@@ -214,7 +216,7 @@ def _key(**change) -> str:
 
 def test_training_key_changes_with_what_trains_the_model_and_nothing_else():
     """Reuse is by equal key: every trained-on setting must change it, machine settings not."""
-    from tactile_exp.config import Component
+    from tactile_exp.registry import Component
 
     key = _key()
     # Pinned: a key that changes for the same settings orphans every stored model (bump FORMAT).
@@ -248,7 +250,7 @@ def test_reuse_switch(value, expected):
 
 
 def test_reuse_switch_rejects_non_booleans():
-    from tactile_exp.config import ConfigError
+    from tactile_exp.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"^tracking.reuse: must be true or false, got 'yes'$"):
         store.reuse_enabled({"tracking": {"reuse": "yes"}})

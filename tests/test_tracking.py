@@ -179,55 +179,6 @@ def test_stale_running_runs_of_dead_processes_are_killed_live_ones_kept(mlflow_u
     assert tracker.finished_run("h1", data_identity="any") is None  # RUNNING or KILLED: rerun
 
 
-def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
-    mlflow_uri, monkeypatch
-):
-    """Once one loky worker exits, loky SIGKILLs the others, some before they closed their runs
-    (seen in CI); workers that ignore SIGTERM are killed after the grace period. Either way the
-    launcher marks their runs FAILED, and only theirs."""
-    import os
-    import signal
-    import sys
-
-    from tactile_exp import sweep
-
-    stubborn = "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print(); "
-    workers = [
-        subprocess.Popen(
-            [sys.executable, "-c", stubborn + "time.sleep(60)"], stdout=subprocess.PIPE
-        )
-        for _ in range(2)
-    ]
-    for w in workers:
-        w.stdout.readline()  # SIGTERM ignored from here on
-    monkeypatch.setattr(sweep, "_children", lambda pid: [w.pid for w in workers])
-    monkeypatch.setattr(sweep, "WORKER_GRACE_S", 0.5)
-    tracker = Tracker(mlflow_uri, "tactile_exp")
-    host = socket.gethostname()
-
-    def make(name, pid):
-        tags = {"host": host, "pid": str(pid), "pid_start": ""}
-        return tracker.client.create_run(tracker.experiment_id, run_name=name, tags=tags)
-
-    orphans = [make("job", workers[0].pid), make("adj=hard", workers[0].pid)]
-    orphans.append(make("job", workers[1].pid))
-    live = make("elsewhere", os.getpid())  # another job of this experiment, still running
-    done = make("done", workers[1].pid)
-    tracker.client.set_terminated(done.info.run_id, status="FINISHED")
-
-    with pytest.raises(SystemExit) as exit_:
-        sweep.terminate_workers(signal.SIGTERM, None, tracker=tracker)
-    assert exit_.value.code == 128 + signal.SIGTERM
-    assert all(sweep._gone(w.pid) for w in workers)
-    client = MlflowClient(mlflow_uri)
-    for r in orphans:
-        closed = client.get_run(r.info.run_id)
-        assert closed.info.status == "FAILED" and closed.info.end_time is not None
-        assert "terminated by signal 15" in closed.data.tags["error"]
-    assert client.get_run(live.info.run_id).info.status == "RUNNING"
-    assert client.get_run(done.info.run_id).info.status == "FINISHED"
-
-
 def test_a_dataset_row_inserted_by_a_parallel_job_is_reused_not_an_error(mlflow_uri, monkeypatch):
     """Seen in a sweep: two jobs insert the data file's dataset row at once; the loser's
     UNIQUE-constraint error failed its job. It retries and links the row the winner made."""
@@ -492,45 +443,24 @@ def test_check_server_waits_only_its_timeout(monkeypatch):
     ]
 
 
-def test_alive_only_probes_and_trusts_what_it_cannot_check(monkeypatch):
-    from tactile_exp import tracking
-
-    child = subprocess.Popen(["sleep", "30"])
-    try:
-        start = tracking._process_start(child.pid)
-        assert tracking.process_alive(child.pid, start) and tracking.process_alive(child.pid)
-        assert not tracking.process_alive(child.pid, str(int(start) + 1))  # a reused pid
-        assert child.poll() is None  # probing sent no signal that ends it
-        monkeypatch.setattr(tracking, "_stat", lambda pid: [])
-        assert tracking.process_alive(child.pid, "123")  # /proc unreadable: assume alive
-    finally:
-        child.kill()
-        child.wait()
-
-    def not_ours(pid, signal):
-        raise PermissionError(pid)
-
-    monkeypatch.setattr(tracking.os, "kill", not_ours)
-    assert tracking.process_alive(child.pid)  # another user's live process
-
-
 def test_a_killed_worker_not_yet_reaped_has_its_runs_closed(mlflow_uri):
     """A zombie (ended, its parent has not waited for it) counts as ended: a terminated sweep
     closes the runs of a worker that loky killed and nobody reaped yet (a CI failure)."""
     from tactile_exp import tracking
+    from tactile_exp.runtime import processes
 
     child = subprocess.Popen(["sleep", "30"])
     tracker = tracking.Tracker(mlflow_uri, "tactile_exp")
     tags = {"host": socket.gethostname(), "pid": str(child.pid)}
-    tags["pid_start"] = tracking._process_start(child.pid)
+    tags["pid_start"] = processes.process_start(child.pid)
     run = tracker.client.create_run(tracker.experiment_id, run_name="adj=hard", tags=tags)
     child.kill()
     deadline = time.monotonic() + 10
-    while tracking._stat(child.pid)[:1] != ["Z"] and time.monotonic() < deadline:
+    while processes.stat_fields(child.pid)[:1] != ["Z"] and time.monotonic() < deadline:
         time.sleep(0.01)
     try:
-        assert tracking._stat(child.pid)[0] == "Z"  # not reaped: the PID still exists
-        assert not tracking.process_alive(child.pid, tags["pid_start"])
+        assert processes.stat_fields(child.pid)[0] == "Z"  # not reaped: the PID still exists
+        assert not processes.process_alive(child.pid, tags["pid_start"])
         assert tracker.end_runs_of([child.pid], error="killed") == [run.info.run_id]
     finally:
         child.wait()
@@ -556,23 +486,6 @@ def test_source_tags_name_the_commit_of_the_checkout_when_there_is_one(monkeypat
     assert asked == [ROOT]  # the checkout holding the package, not the cwd's repository
     monkeypatch.setattr(tracking, "git_commit", lambda root: None)
     assert "mlflow.source.git.commit" not in tracking.source_tags("python -m x")
-
-
-def test_process_start_survives_parentheses_in_the_process_name(tmp_path):
-    from tactile_exp import tracking
-
-    odd = tmp_path / "a) b c"  # /proc/<pid>/stat: "<pid> (a) b c) S ...": split at the last ")"
-    odd.symlink_to("/bin/sleep")
-    child = subprocess.Popen([str(odd), "30"])
-    try:
-        stat = Path(f"/proc/{child.pid}/stat").read_text()
-        assert "(a) b c)" in stat
-        start = tracking._process_start(child.pid)
-        assert start == stat[stat.rindex(")") + 1 :].split()[19] and start.isdigit()
-    finally:
-        child.kill()
-        child.wait()
-    assert tracking._process_start(child.pid) == ""  # gone: unknown
 
 
 def test_a_tracking_server_is_checked_before_mlflow_is_asked(mlflow_uri, monkeypatch):

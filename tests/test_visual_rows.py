@@ -14,15 +14,16 @@ from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 from sklearn.metrics import roc_auc_score
 
-from tactile_exp.config import ConfigError, param_error, settings_from_config
+from tactile_exp.config import param_error, settings_from_config
 from tactile_exp.data.layout import TrialName, objects
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import SPLITS
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.modalities import MODALITIES
-from tactile_exp.models import googlenet
-from tactile_exp.models.googlenet import GoogLeNet, pooled_features, xavier_init
+from tactile_exp.preprocess import trunk
+from tactile_exp.preprocess.trunk import GoogLeNet, pooled_features, xavier_init
 
 VIEWS = 2  # photographs per object: enough to test grouping and split-by-trial objects
 FAST = ["schedule=tiny"]
@@ -133,8 +134,9 @@ def test_features_are_the_frozen_trunks_and_cached(dataset, cache_dir, monkeypat
     arrays = visual.trunk(dataset).arrays
     rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 1))[0])
             for o in train.object_id[:3]]  # fmt: skip
-    trunk = xavier_init(GoogLeNet(), seed=4)
-    expected = pooled_features(trunk, arrays.prepared(np.array(rows)) / googlenet.TORCHVISION_SCALE)
+    model = xavier_init(GoogLeNet(), seed=4)
+    images = trunk.network_input(arrays.images[rows], trunk.IMAGENET_MEAN_RGB, "torchvision")
+    expected = pooled_features(model, images)
     index = [int(np.flatnonzero((train.object_id == o) & np.char.endswith(
         train.trial.astype(str), "_v01"))[0]) for o in train.object_id[:3]]  # fmt: skip
     np.testing.assert_allclose(train.X[index], expected, atol=1e-5)
@@ -143,7 +145,7 @@ def test_features_are_the_frozen_trunks_and_cached(dataset, cache_dir, monkeypat
     def no_trunk(*args, **kwargs):
         raise AssertionError("the trunk ran again although its features are cached")
 
-    monkeypatch.setattr(googlenet, "build_trunk", no_trunk)
+    monkeypatch.setattr(trunk, "build_trunk", no_trunk)
     again = _small_visual(cache_dir, seed=4)
     again.check(dataset)
     split = SPLITS["published"](dataset, "hard", 0)
@@ -195,8 +197,8 @@ def test_caffe_layout_features_come_from_the_caffe_trunk(dataset, cache_dir, tmp
     """modality.layout=caffe: BGR minus Caffe's mean through the Caffe trunk of the weights
     file; the same file with the torchvision layout fails before any trunk pass."""
     path = tmp_path / "caffe.pth"
-    googlenet.save_weights(
-        path, xavier_init(googlenet.CaffeGoogLeNet(), seed=8).state_dict(), layout="caffe"
+    trunk.save_weights(
+        path, xavier_init(trunk.CaffeGoogLeNet(), seed=8).state_dict(), layout="caffe"
     )
     visual = _small_visual(cache_dir, weights=str(path), layout="caffe")
     visual.check(dataset)
@@ -204,8 +206,8 @@ def test_caffe_layout_features_come_from_the_caffe_trunk(dataset, cache_dir, tmp
     arrays = visual.trunk(dataset).arrays
     rows = [int(np.flatnonzero((arrays.object_id == o) & (arrays.view == 0))[0])
             for o in train.object_id[:3]]  # fmt: skip
-    images = googlenet.network_input(arrays.images[rows], (123.0, 117.0, 104.0), "caffe")
-    expected = pooled_features(googlenet.build_trunk(path, layout="caffe"), images)
+    images = trunk.network_input(arrays.images[rows], (123.0, 117.0, 104.0), "caffe")
+    expected = pooled_features(trunk.build_trunk(path, layout="caffe"), images)
     index = [int(np.flatnonzero((train.object_id == o) & np.char.endswith(
         train.trial.astype(str), "_v00"))[0]) for o in train.object_id[:3]]  # fmt: skip
     np.testing.assert_allclose(train.X[index], expected, atol=1e-5)

@@ -441,19 +441,16 @@ class DynamicFeatures:
                 best = candidates[int(np.argmax(scores))]
             return best, self._chain(table, c, final_idx, best)
 
-        if shortcuts.enabled():
-            # Each chain's fit is single-threaded (k-means under a 1-thread limit, the E-step
-            # compiled without the GIL): the 16 chains run on threads, one per core. The outer
-            # limit holds the BLAS and OpenMP pools at 1 thread however the chains' own limits
-            # interleave, so every chain computes what it computes alone.
-            # Likewise the outer filter: warnings filters are process-wide in Python 3.11, and
-            # each chain's own catch_warnings restores what it saw when it entered.
-            with warnings.catch_warnings(), threadpool_limits(1):
-                _quiet_kmeans()
-                with ThreadPoolExecutor(shortcuts.threads(len(CHAINS))) as pool:
-                    fitted = list(pool.map(fit_chain, range(len(CHAINS))))
-        else:
-            fitted = [fit_chain(c) for c in range(len(CHAINS))]
+        # Each chain's fit is single-threaded (k-means under a 1-thread limit, the E-step
+        # compiled without the GIL): the 16 chains run on threads, one per core. The outer
+        # limit holds the BLAS and OpenMP pools at 1 thread however the chains' own limits
+        # interleave, so every chain computes what it computes alone.
+        # Likewise the outer filter: warnings filters are process-wide in Python 3.11, and
+        # each chain's own catch_warnings restores what it saw when it entered.
+        with warnings.catch_warnings(), threadpool_limits(1):
+            _quiet_kmeans()
+            with ThreadPoolExecutor(shortcuts.threads(len(CHAINS))) as pool:
+                fitted = list(pool.map(fit_chain, range(len(CHAINS))))
         self.params_ = [best for best, _ in fitted]
         self.chains_ = [chain for _, chain in fitted]
         return self
@@ -462,8 +459,6 @@ class DynamicFeatures:
         """(n, 16) log-likelihoods; every trial of ``table`` is scored once per fitted chains and
         indexed after (rows C-F and the object pooling of row F share it; see `shortcuts`)."""
         idx = table.index(trials)
-        if not shortcuts.enabled():
-            return self._score(table, idx)
         if self._scored is None or self._scored[0] is not table:
             self._scored = (table, self._score(table, np.arange(len(table.trials))))
         return self._scored[1][idx]

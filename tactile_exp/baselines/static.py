@@ -30,7 +30,6 @@ from numpy.polynomial import polynomial as npoly
 from scipy import optimize, signal
 from threadpoolctl import ThreadpoolController
 
-from tactile_exp.baselines import shortcuts
 from tactile_exp.data.layout import BASELINE_STATE, EPS, PAC_RATE_HZ, TrialData
 
 PHASES: tuple[str, ...] = tuple(EPS)  # squeeze, hold, slow_slide, fast_slide (concat order)
@@ -203,13 +202,6 @@ def pool_moments(
     pooled = (count[:, None] * mean).sum(axis=0) / total
     dev = mean - pooled
     return pooled, scatter.sum(axis=0) + np.einsum("n,ni,nj->ij", count, dev, dev)
-
-
-def pc_polyfit(poly: np.ndarray, mean: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """(k, deg+1) polyfit of each PC series (x - mean) @ axes, from the raw columns' fits."""
-    coef = poly @ axes  # a fit is linear in the signal
-    coef[0] -= mean @ axes  # the constant term absorbs the centring
-    return coef.T
 
 
 def order_polyfit(coef: np.ndarray, interleave: bool) -> np.ndarray:
@@ -477,8 +469,6 @@ class StaticFeatures:
         if not self.per_trial_pca and self.axes_ is None:
             raise RuntimeError("StaticFeatures(per_trial_pca=False): call fit before transform")
         idx = table.index(trials)
-        if not shortcuts.enabled():
-            return self._transform_plain(table, idx)
         if not self.per_trial_pca:
             return static_matrix(table, idx, self.interleave, self.axes_)
         key = f"per_trial_pca/interleave={self.interleave}"  # the same for every split
@@ -486,24 +476,6 @@ class StaticFeatures:
             every = np.arange(len(table.trials))
             table.derived[key] = static_matrix(table, every, self.interleave)
         return table.derived[key][idx]
-
-    def _transform_plain(self, table: StaticTable, idx: np.ndarray) -> np.ndarray:
-        """One trial-EP at a time (the reference for `static_matrix`; see `shortcuts`)."""
-        out = []
-        for i in idx:
-            parts = []
-            for e in range(len(PHASES)):
-                if self.per_trial_pca:
-                    mean = table.mean[i, e]
-                    axes = principal_axes(table.scatter[i, e], N_ELECTRODE_PCS)
-                else:
-                    mean, axes = self.axes_[e]  # type: ignore[index]
-                coef = pc_polyfit(table.poly[i, e], mean, axes)
-                if table.count[i, e] < POLY_DEGREE + 1:  # too short: the fit was filled
-                    coef = np.full_like(coef, FILL)
-                parts += [table.base[i, e], order_polyfit(coef, self.interleave)]
-            out.append(np.concatenate(parts))
-        return np.asarray(out, dtype=float).reshape(len(out), -1)
 
 
 def static_matrix(
@@ -529,7 +501,7 @@ def static_matrix(
             coef = table.poly[idx, e] @ axes  # (n, 6, 4): a fit is linear in the signal
             coef[:, 0] -= (mean @ axes).reshape(-1, N_ELECTRODE_PCS)  # the centring
             coef[table.count[idx, e] < POLY_DEGREE + 1] = FILL  # too short: the fit was filled
-            coef = coef.transpose(0, 2, 1)  # (n, PC, degree) as `pc_polyfit`
+            coef = coef.transpose(0, 2, 1)  # (n, PC, degree)
             if interleave:  # as `order_polyfit`: (PC1, PC2) and (PC3, PC4) blocks interleaved
                 coef = coef.reshape(n, 2, -1).transpose(0, 2, 1)
             parts += [table.base[idx, e], coef.reshape(n, -1)]

@@ -28,9 +28,9 @@ from tactile_exp import store
 from tactile_exp.combine import COMBINERS
 from tactile_exp.data.layout import EPS
 from tactile_exp.jobs import PredictError, StoredJob
-from tactile_exp.models.googlenet import INCEPTION5A_CHANNELS as FEATURES
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.preprocess.haptic import N_SCALAR, SIGNALS
+from tactile_exp.preprocess.trunk import INCEPTION5A_CHANNELS as FEATURES
 
 MANIFEST_FORMAT = 1
 TRUNK_FILE = "googlenet.onnx"
@@ -260,7 +260,7 @@ def export_job(
 
 def _export_trunk(visual: dict[str, Any], path: Path) -> None:
     """The frozen GoogLeNet trunk the job used (its weights file, or its seeded random init)."""
-    from tactile_exp.models.googlenet import build_trunk
+    from tactile_exp.preprocess.trunk import build_trunk
 
     weights = visual["weights"]
     if weights is not None and not Path(weights).is_file():

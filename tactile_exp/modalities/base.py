@@ -16,10 +16,9 @@ from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, TrialName, Trials
 from tactile_exp.models.base import Model
-from tactile_exp.registry import Registry
+from tactile_exp.registry import Component, Registry
 
 # provide(part, training instances of the part's modality, their trials) -> the part's fitted model
 PartProvider = Callable[[str, Instances, Trials], Model]

@@ -21,12 +21,12 @@ from typing import Any, Self
 import numpy as np
 
 from tactile_exp.combine import COMBINERS, unit_members
-from tactile_exp.config import Component
 from tactile_exp.data.layout import Instances, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality
 from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.modalities.visual import Visual, view_name
 from tactile_exp.models.base import Model
+from tactile_exp.registry import Component
 
 log = logging.getLogger(__name__)
 

@@ -132,7 +132,7 @@ class Visual(Modality):
         return _TRUNKS[key]
 
     def _layout_mean(self) -> tuple[float, ...]:
-        from tactile_exp.models.googlenet import LAYOUT_MEAN_RGB
+        from tactile_exp.preprocess.trunk import LAYOUT_MEAN_RGB
 
         return tuple(round(float(m), 4) for m in LAYOUT_MEAN_RGB[self.layout])
 

@@ -13,7 +13,6 @@ from tactile_exp.preprocess.visual import (
     crop_plate,
     find_plate,
     load_visual_arrays,
-    prepare_image,
 )
 
 __all__ = [
@@ -26,6 +25,5 @@ __all__ = [
     "find_plate",
     "load_haptic_arrays",
     "load_visual_arrays",
-    "prepare_image",
     "resample",
 ]

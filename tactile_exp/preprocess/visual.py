@@ -8,7 +8,6 @@ colour: light grey (low saturation, mid-high value in HSV), which excludes a whi
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple, Protocol
@@ -22,7 +21,6 @@ from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
 
 CODE_VERSION = 3  # bump when the cached arrays' meaning changes (2: crops padded, not clipped;
 # 3: the plate fit ignores the outline above its far half, where a grey object can join it)
-IMAGENET_MEAN_RGB = (123.675, 116.28, 103.53)  # per-channel mean, RGB, 0-255 scale
 _ARRAY_KEYS = ("object_id", "view", "name", "plate", "images", "missing")
 
 
@@ -179,27 +177,6 @@ def resize_square(image: np.ndarray, size: int = 224) -> np.ndarray:
     return cv2.resize(image, (size, size), interpolation=interp)
 
 
-def prepare_image(
-    image: np.ndarray, size: int = 224, mean: Sequence[float] = IMAGENET_MEAN_RGB
-) -> np.ndarray:
-    """V2: resize to size x size, subtract the per-channel RGB mean -> (3, size, size) float32.
-
-    ``mean`` defaults to the ImageNet mean (the GoogLeNet weights expect it); pass
-    ``VisualArrays.channel_mean`` of the training images to use a fitted one.
-    """
-    if size < 1:
-        raise ValueError(f"size must be >= 1, got {size}")
-    resized = resize_square(image, size).astype(np.float32)
-    return (resized - _rgb_mean(mean)).transpose(2, 0, 1).copy()
-
-
-def _rgb_mean(mean: Sequence[float]) -> np.ndarray:
-    mean_arr = np.asarray(mean, dtype=np.float32)
-    if mean_arr.shape != (3,):
-        raise ValueError(f"mean must hold 3 values (R, G, B), got shape {mean_arr.shape}")
-    return mean_arr
-
-
 class PhotoSource(Protocol):
     """What visual preprocessing needs from a data set (``tactile_exp.data.phac2.PHAC2`` fits)."""
 
@@ -212,7 +189,8 @@ class PhotoSource(Protocol):
 
 @dataclass
 class VisualArrays:
-    """Every photograph cropped and resized, uint8 (4x smaller than float; see ``prepared``)."""
+    """Every photograph cropped and resized, uint8: 4x smaller than the float network input
+    (``preprocess.trunk.network_input``) made from it when the trunk runs."""
 
     object_id: np.ndarray  # (n,) int
     view: np.ndarray  # (n,) int: index of the photograph among its object's (sorted by name)
@@ -227,13 +205,6 @@ class VisualArrays:
         if len(images) == 0:
             raise ValueError("channel_mean needs at least one image")
         return images.mean(axis=(0, 2, 3), dtype=np.float64)
-
-    def prepared(
-        self, index: np.ndarray | None = None, mean: Sequence[float] = IMAGENET_MEAN_RGB
-    ) -> np.ndarray:
-        """Mean-subtracted float32 network input (V2): (n, 3, size, size)."""
-        images = self.images if index is None else self.images[index]
-        return images.astype(np.float32) - _rgb_mean(mean).reshape(1, 3, 1, 1)
 
 
 def _photo_list(dataset: PhotoSource) -> list[tuple[int, int, Path]]:
@@ -332,7 +303,7 @@ class VisualFeatures:
         disk by the images' bytes, the weights file's bytes (or seed) and the mean."""
         import hashlib
 
-        from tactile_exp.models.googlenet import (
+        from tactile_exp.preprocess.trunk import (
             build_trunk,
             file_digest,
             network_input,

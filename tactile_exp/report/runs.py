@@ -199,7 +199,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
 
 def skipped_cells(tracker: Tracker, sweep_id: str) -> list[str]:
     """The cells sweep ``sweep_id`` listed invalid and skipped, one line each (``#num cell:
-    reason``): the ``invalid`` tag of its ``run_level=sweep`` run (``tactile_exp.sweep``)."""
+    reason``): the ``invalid`` tag of its ``run_level=sweep`` run (``runtime.sweep``)."""
     query = f"tags.run_level = 'sweep' and tags.sweep_id = '{sweep_id}'"
     found = tracker.client.search_runs([tracker.experiment_id], query)
     return [line for run in found for line in run.data.tags.get("invalid", "").splitlines()]

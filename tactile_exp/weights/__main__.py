@@ -16,7 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from tactile_exp.models.googlenet import save_weights
+from tactile_exp.preprocess.trunk import save_weights
 from tactile_exp.weights.caffe import CaffeModelError, convert_googlenet, read_caffemodel
 from tactile_exp.weights.pretrain import TRAINABLE, PretrainError, PretrainSettings, pretrain
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from tactile_exp.models.googlenet import CaffeGoogLeNet, caffe_layer_map
+from tactile_exp.preprocess.trunk import CaffeGoogLeNet, caffe_layer_map
 
 VARINT, FIXED64, BYTES, FIXED32 = 0, 1, 2, 5
 V1_CONVOLUTION = 4

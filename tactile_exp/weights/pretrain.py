@@ -34,7 +34,7 @@ from torch import nn
 
 from tactile_exp.data.render import render_object
 from tactile_exp.data.synthetic import MATERIALS, draw_object_properties
-from tactile_exp.models.googlenet import (
+from tactile_exp.preprocess.trunk import (
     INCEPTION5A_CHANNELS,
     CaffeGoogLeNet,
     network_input,

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from tactile_exp import termination
+from tactile_exp.runtime import termination
 from tactile_exp.tracking import Tracker
 
 

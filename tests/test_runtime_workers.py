@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
+from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 

@@ -1,8 +1,9 @@
 """The named grids: `sweep=table1` is every table1_* file and takes seed/split lists; `sweep=smoke`
 runs every row end to end, and the report built from it matches the runs. A sweep survives its
-invalid cells and failed jobs (issue 33, ``tactile_exp.sweep``): every job's config is checked
-before the first starts, invalid cells are listed and skipped (or nothing runs), a job that fails
-while training leaves its runs FAILED and the jobs after it run, and one line sums it up."""
+invalid cells and failed jobs (issue 33, ``tactile_exp.runtime.sweep``): every job's config is
+checked before the first starts, invalid cells are listed and skipped (or nothing runs), a job
+that fails while training leaves its runs FAILED and the jobs after it run, and one line sums it
+up; SIGTERM to the launcher stops its workers and closes the runs killed ones left RUNNING."""
 
 import csv
 import logging
@@ -28,10 +29,10 @@ from omegaconf import OmegaConf
 from PIL import Image
 from test_extending import table1_rows
 
-from tactile_exp import sweep
-from tactile_exp.config import ConfigError
+from tactile_exp.errors import ConfigError
 from tactile_exp.report import cli, figures, table3
-from tactile_exp.termination import Terminated
+from tactile_exp.runtime import processes, sweep
+from tactile_exp.runtime.termination import Terminated
 
 
 def _jobs(sweep: str, *arguments: str) -> list[list[str]]:
@@ -221,7 +222,7 @@ def test_on_invalid_fail_runs_nothing(
     error = "sweep.on_invalid=fail: 1 of 4 jobs have an invalid config (listed above); none run"
     last = capsys.readouterr().err.splitlines()[-1]
     assert last == (
-        f"error: {error}" if full_error == "0" else f"tactile_exp.config.ConfigError: {error}"
+        f"error: {error}" if full_error == "0" else f"tactile_exp.errors.ConfigError: {error}"
     )
     listed = yaml.safe_load((tmp_path / "multirun" / "invalid.yaml").read_text())
     assert listed["on_invalid"] == "fail" and listed["jobs"] == 4
@@ -241,7 +242,7 @@ def test_skipped_cells_are_listed_for_the_report_before_any_job(
 ):
     restore = _restore_sigterm()
     try:
-        with caplog.at_level(logging.WARNING, logger="tactile_exp.sweep"):
+        with caplog.at_level(logging.WARNING, logger="tactile_exp.runtime.sweep"):
             sweep.PrepareSweep().on_multirun_start(multirun(*GRID))
     finally:
         restore()
@@ -309,7 +310,7 @@ def test_the_summary_line_counts_every_job(tmp_path, caplog):
     folder = tmp_path / "m"
     for num, status in enumerate(["FINISHED", "skipped", "FINISHED"]):  # job #3 never recorded
         sweep.SweepJob(folder, num, callback.jobs[num]).record(status)
-    caplog.set_level(logging.INFO, logger="tactile_exp.sweep")
+    caplog.set_level(logging.INFO, logger="tactile_exp.runtime.sweep")
     with pytest.raises(SystemExit) as stop:
         callback.on_multirun_end(config)
     assert stop.value.code == 1
@@ -414,3 +415,50 @@ def test_a_job_failing_in_training_leaves_its_runs_failed_and_the_rest_run(
     ]
     failed = [r for r in runs if r.info.status == "FAILED"]
     assert all("planned failure while training with seed 1" in r.data.tags["error"] for r in failed)
+
+
+def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
+    mlflow_uri, monkeypatch
+):
+    """Once one loky worker exits, loky SIGKILLs the others, some before they closed their runs
+    (seen in CI); workers that ignore SIGTERM are killed after the grace period. Either way the
+    launcher marks their runs FAILED, and only theirs."""
+    import socket
+
+    from tactile_exp.tracking import Tracker
+
+    stubborn = "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print(); "
+    workers = [
+        subprocess.Popen(
+            [sys.executable, "-c", stubborn + "time.sleep(60)"], stdout=subprocess.PIPE
+        )
+        for _ in range(2)
+    ]
+    for w in workers:
+        w.stdout.readline()  # SIGTERM ignored from here on
+    monkeypatch.setattr(processes, "children", lambda pid: [w.pid for w in workers])
+    monkeypatch.setattr(sweep, "WORKER_GRACE_S", 0.5)
+    tracker = Tracker(mlflow_uri, "tactile_exp")
+    host = socket.gethostname()
+
+    def make(name, pid):
+        tags = {"host": host, "pid": str(pid), "pid_start": ""}
+        return tracker.client.create_run(tracker.experiment_id, run_name=name, tags=tags)
+
+    orphans = [make("job", workers[0].pid), make("adj=hard", workers[0].pid)]
+    orphans.append(make("job", workers[1].pid))
+    live = make("elsewhere", os.getpid())  # another job of this experiment, still running
+    done = make("done", workers[1].pid)
+    tracker.client.set_terminated(done.info.run_id, status="FINISHED")
+
+    with pytest.raises(SystemExit) as exit_:
+        sweep.terminate_workers(signal.SIGTERM, None, tracker=tracker)
+    assert exit_.value.code == 128 + signal.SIGTERM
+    assert not any(processes.process_alive(w.pid) for w in workers)
+    client = MlflowClient(mlflow_uri)
+    for r in orphans:
+        closed = client.get_run(r.info.run_id)
+        assert closed.info.status == "FAILED" and closed.info.end_time is not None
+        assert "terminated by signal 15" in closed.data.tags["error"]
+    assert client.get_run(live.info.run_id).info.status == "RUNNING"
+    assert client.get_run(done.info.run_id).info.status == "FINISHED"

@@ -21,12 +21,11 @@ import multiprocessing
 import os
 import signal
 import sys
-import time
 from collections.abc import Callable, Iterable, Iterator
 from types import TracebackType
 from typing import Any
 
-from tactile_exp import termination
+from tactile_exp.runtime import processes, termination
 
 log = logging.getLogger(__name__)
 
@@ -86,21 +85,8 @@ class Pool:
     def _stop(self) -> None:
         """SIGTERM to every worker, SIGKILL to those still there after ``GRACE_S``."""
         self._executor.shutdown(wait=False, cancel_futures=True)
-        for pid in self.pids:
-            try:
-                os.kill(pid, signal.SIGTERM)
-            except ProcessLookupError:
-                continue
-        deadline = time.monotonic() + GRACE_S
-        with termination.shielded():  # a second SIGTERM must not cut the wait short
-            while time.monotonic() < deadline and self._alive():
-                time.sleep(0.1)
-            for process in self._alive():
-                process.kill()
-                process.join(5.0)
-
-    def _alive(self) -> list[multiprocessing.process.BaseProcess]:
-        return [p for p in multiprocessing.active_children() if p.pid in self.pids]
+        processes.stop(self.pids, GRACE_S)
+        multiprocessing.active_children()  # reaps the ended workers
 
 
 class _Relay(logging.Handler):
