@@ -16,11 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
-from phac2_fixture import OBJECTS, write_file
 
 from tactile_exp import tracking
 from tactile_exp.config import ConfigError, settings_from_config
-from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
@@ -67,29 +65,6 @@ def test_job_fits_the_preprocessing_on_what_fit_on_says(tiny_config, monkeypatch
         assert sorted(fitted) == sorted(expected)
         if fit_on == "train":
             assert not set(fitted) & set(split.test)
-
-
-# ---------------------------------------------------------------- splits
-@pytest.fixture(scope="module")
-def sixty_objects(tmp_path_factory: pytest.TempPathFactory) -> PHAC2:
-    path = tmp_path_factory.mktemp("sixty") / "labels.h5"
-    return PHAC2(write_file(path, tuple(OBJECTS), 4, signals=False, adjective_links=False))
-
-
-@pytest.mark.parametrize("rule,seed", [("published", 0), ("random", 0), ("random", 7)])
-def test_no_object_on_both_sides_of_any_split(sixty_objects, rule, seed):
-    """Every adjective, both rules: trials disjoint, and an object on both sides only when it is
-    the single object of its class (the authors then split it by trial)."""
-    labels = sixty_objects.labels()
-    for adjective in ADJECTIVES:
-        split = make_split(sixty_objects, adjective, rule, seed)
-        assert not set(split.train) & set(split.test)
-        assert len(split.train) + len(split.test) == 4 * len(OBJECTS)
-        for obj in split.objects("train") & split.objects("test"):
-            label = labels[obj][adjective]
-            assert sum(v[adjective] == label for v in labels.values()) == 1, (adjective, obj)
-        for side in (split.train, split.test):
-            assert {split.labels[t] for t in side} == {0, 1}
 
 
 # ---------------------------------------------------------------- resume
