@@ -7,7 +7,6 @@ resume semantics, impossible values stopping before any run, the MLflow store, c
 
 from __future__ import annotations
 
-import os
 import shutil
 import threading
 from collections import defaultdict
@@ -24,7 +23,6 @@ from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
-from tactile_exp.preprocess.cache import load_arrays, save_arrays
 from tactile_exp.preprocess.haptic import HapticPreprocessor
 
 FAST = ["model=random", "combine_instances=separate"]  # a job with no training to speak of
@@ -175,36 +173,6 @@ def test_haptic_cache_is_invalidated_by_a_changed_data_file(tmp_path):
     coarser = load_haptic_arrays(PHAC2(path), steps=6, offsets=1, cache_dir=cache)
     assert coarser.steps == 6  # changed settings: a new entry, not the steps=8 one
     assert len(list(cache.glob("haptic-*.npz"))) == 3
-
-
-class _Unwritable:
-    """An array-like that fails when numpy converts it: a crash in the middle of a cache write."""
-
-    def __array__(self, dtype=None, copy=None):
-        raise RuntimeError("disk gone")
-
-
-@pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt])
-def test_a_crash_while_writing_a_cache_entry_leaves_the_old_entry_and_no_debris(tmp_path, error):
-    path = tmp_path / "entry.npz"
-    save_arrays(path, {"a": np.arange(3)})
-    big = np.ones((256, 1024))  # written to the file before the crash
-    with pytest.raises(error):
-        if error is KeyboardInterrupt:
-            save_arrays(path, {"a": big, "b": _Interrupting()})
-        else:
-            save_arrays(path, {"a": big, "b": _Unwritable()})
-    np.testing.assert_array_equal(load_arrays(path, ("a",))["a"], np.arange(3))
-    assert os.listdir(tmp_path) == ["entry.npz"]
-    fresh = tmp_path / "new" / "entry.npz"
-    with pytest.raises(RuntimeError):
-        save_arrays(fresh, {"a": big, "b": _Unwritable()})
-    assert load_arrays(fresh, ("a",)) is None and os.listdir(fresh.parent) == []
-
-
-class _Interrupting:
-    def __array__(self, dtype=None, copy=None):
-        raise KeyboardInterrupt
 
 
 # ---------------------------------------------------------------- baselines: HMM grid, CV
