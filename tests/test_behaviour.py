@@ -7,7 +7,6 @@ resume semantics, impossible values stopping before any run, the MLflow store, c
 
 from __future__ import annotations
 
-import shutil
 import threading
 from collections import defaultdict
 from pathlib import Path
@@ -148,31 +147,6 @@ def test_job_without_tracking_uri_logs_to_mlflow_tracking_uri(
     assert result.run_id in {r.info.run_id for r in runs}
     artifacts = Path(mlflow_uri.removeprefix("sqlite:///")).parent / "mlartifacts"
     assert list(artifacts.rglob("auc_per_adjective.csv"))  # artifacts beside the database
-
-
-# ---------------------------------------------------------------- caches
-def _tiny_file(path: Path, seed: int) -> Path:
-    from tactile_exp.data.synthetic import SyntheticSpec, generate
-
-    spec = SyntheticSpec(seed=seed, object_ids=(101, 201), trials=1, duration_scale=0.05, views=0)
-    return generate(path, spec)
-
-
-def test_haptic_cache_is_invalidated_by_a_changed_data_file(tmp_path):
-    from tactile_exp.preprocess.haptic import compute_haptic_arrays, load_haptic_arrays
-
-    path, cache = tmp_path / "data.h5", tmp_path / "cache"
-    first = load_haptic_arrays(PHAC2(_tiny_file(path, 0)), steps=8, offsets=1, cache_dir=cache)
-    other = tmp_path / "other.h5"
-    _tiny_file(other, 1)
-    shutil.copyfile(other, path)  # same name, new content
-    again = load_haptic_arrays(PHAC2(path), steps=8, offsets=1, cache_dir=cache)
-    fresh = compute_haptic_arrays(PHAC2(path), steps=8, offsets=1)
-    np.testing.assert_array_equal(again.signals, fresh.signals)
-    assert not np.array_equal(again.signals, first.signals)
-    coarser = load_haptic_arrays(PHAC2(path), steps=6, offsets=1, cache_dir=cache)
-    assert coarser.steps == 6  # changed settings: a new entry, not the steps=8 one
-    assert len(list(cache.glob("haptic-*.npz"))) == 3
 
 
 # ---------------------------------------------------------------- baselines: HMM grid, CV
