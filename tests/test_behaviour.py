@@ -7,8 +7,6 @@ resume semantics, impossible values stopping before any run, the MLflow store, c
 
 from __future__ import annotations
 
-import threading
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -150,89 +148,6 @@ def test_job_without_tracking_uri_logs_to_mlflow_tracking_uri(
 
 
 # ---------------------------------------------------------------- baselines: HMM grid, CV
-@pytest.fixture
-def small_grid():
-    from tactile_exp.baselines import dynamic
-
-    dynamic.GRIDS["behaviour"] = {"n_states": (2, 4), "length": (6, 10), "symbols": (3,)}
-    yield "behaviour"
-    del dynamic.GRIDS["behaviour"]
-
-
-def _hmm_data():
-    """Positives 101-105 (105 in test) ramp up in every channel; negatives 201-203."""
-    from baselines_fixture import make_trial
-
-    from tactile_exp.data.layout import Split
-
-    objects = (101, 102, 103, 104, 105, 201, 202, 203)
-    names = [f"o_{o}_{t:02d}" for o in objects for t in (1, 2)]
-    trials = [make_trial(n, lengths=(30, 40, 30, 20), seed=i) for i, n in enumerate(names)]
-    for t in trials:
-        if t.name.object_id < 200:
-            ramp = np.linspace(0, 800 * (t.name.object_id % 3 + 1), t.n_rows).astype(np.int64)
-            for f in t.fingers:
-                f.pdc += ramp
-                f.electrodes += ramp[:, None]
-    labels = {n: int(n.split("_")[1] < "200") for n in names}
-    test = tuple(n for n in names if "_105_" in n or "_203_" in n)
-    return trials, Split("hard", tuple(n for n in names if n not in test), test, labels)
-
-
-def _rows(table_seqs: np.ndarray, seqs: np.ndarray) -> list[int]:
-    return [int(np.flatnonzero((table_seqs == s).all(axis=(1, 2)))[0]) for s in seqs]
-
-
-def test_hmm_settings_are_chosen_by_held_out_likelihood(small_grid, monkeypatch):
-    """Each chain's (N, T, K) maximises the mean log-likelihood of held-out training positives:
-    whole objects, never in the candidates' fit, never a test or negative trial."""
-    from tactile_exp.baselines import dynamic
-
-    trials, split = _hmm_data()
-    lengths = dynamic.GRIDS[small_grid]["length"]
-    table = dynamic.SequenceTable.from_trials(trials, lengths)
-    # Chains are fitted on threads: each call is filed under the chain its thread is fitting.
-    current = threading.local()
-    fitted: dict[int, list] = defaultdict(list)
-    scored: dict[int, list] = defaultdict(list)
-    chain, fit, score = dynamic.DynamicFeatures._chain, dynamic.HMMChain.fit, dynamic.HMMChain.score
-
-    def chain_spy(self, table, c, idx, cand):
-        current.c = c
-        return chain(self, table, c, idx, cand)
-
-    def fit_spy(self, count, mean, scatter, seqs):
-        fitted[current.c].append(seqs)
-        return fit(self, count, mean, scatter, seqs)
-
-    def score_spy(self, seqs):
-        out = score(self, seqs)
-        scored[current.c].append(((self.n_states, seqs.shape[1], self.n_symbols), seqs, out.mean()))
-        return out
-
-    monkeypatch.setattr(dynamic.DynamicFeatures, "_chain", chain_spy)
-    monkeypatch.setattr(dynamic.HMMChain, "fit", fit_spy)
-    monkeypatch.setattr(dynamic.HMMChain, "score", score_spy)
-    model = dynamic.DynamicFeatures(small_grid, seed=0).fit(table, split)
-
-    n_cand = 4
-    assert sorted(scored) == list(range(len(dynamic.CHAINS)))
-    chosen = []
-    for c in range(len(dynamic.CHAINS)):
-        calls = scored[c]
-        assert len(calls) == n_cand and len(fitted[c]) == n_cand + 1
-        best = max(calls, key=lambda call: call[2])[0]
-        assert model.params_[c] == best
-        chosen.append(best)
-        for j, ((_, T, _), seqs, _) in enumerate(calls):
-            held = {table.trials[i] for i in _rows(table.seqs[T][c], seqs)}
-            fit_rows = fitted[c][j]  # each candidate's fit, then the final refit
-            fit_set = {table.trials[i] for i in _rows(table.seqs[T][c], fit_rows)}
-            assert held and not held & fit_set
-            assert held <= {t for t in split.train if split.labels[t] == 1}
-            objects = {t.split("_")[1] for t in held}
-            assert {t for t in split.train if t.split("_")[1] in objects} == held
-    assert len(set(chosen)) > 1  # the likelihood picked different settings for different chains
 
 
 def test_svm_cross_validation_never_splits_an_object(monkeypatch):
