@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 
@@ -145,35 +144,3 @@ def test_job_without_tracking_uri_logs_to_mlflow_tracking_uri(
     assert result.run_id in {r.info.run_id for r in runs}
     artifacts = Path(mlflow_uri.removeprefix("sqlite:///")).parent / "mlartifacts"
     assert list(artifacts.rglob("auc_per_adjective.csv"))  # artifacts beside the database
-
-
-# ---------------------------------------------------------------- baselines: HMM grid, CV
-
-
-def test_svm_cross_validation_never_splits_an_object(monkeypatch):
-    """C is chosen on folds that hold out whole objects (groups = the instances' object ids)."""
-    from tactile_exp.baselines import svm
-    from tactile_exp.data.layout import Instances
-
-    rng = np.random.default_rng(0)
-    objects = np.repeat(np.arange(12), 5)
-    y = (objects % 2).astype(np.int64)
-    X = rng.normal(size=(60, 4)) + y[:, None] * 0.7 + objects[:, None] * 0.05
-    trials = np.array([f"o_{o}_{i}" for i, o in enumerate(objects)], dtype=object)
-    folds = []
-    split = svm.LeavePObjectsOut.split
-
-    def spy(self, X, y, groups):
-        for tr, te in split(self, X, y, groups):
-            folds.append((tr, te))
-            yield tr, te
-
-    monkeypatch.setattr(svm.LeavePObjectsOut, "split", spy)
-    model = MODELS.build("linear_svm", n_draws=8, p_out=3)
-    model.fit(Instances(X, y, trials, objects))
-    assert folds
-    for tr, te in folds:
-        assert len(set(objects[te])) == 3 and not set(objects[tr]) & set(objects[te])
-        assert set(y[tr]) == {0, 1}
-    cv = model.svm.cv_scores_
-    assert model.svm.Cs[int(np.argmax(cv))] == model.svm.C_

@@ -11,11 +11,9 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 
-from tactile_exp.baselines.svm import ObjectCVLinearSVM
 from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.data.layout import DataError
 from tactile_exp.experiment import run
@@ -157,29 +155,6 @@ def test_tracking_server_down_is_one_line_naming_the_uri():
         Tracker(uri, "tactile_exp")
     assert time.monotonic() - start < 10
     assert str(err.value).startswith(f"tracking.uri: no MLflow server answers at {uri}")
-
-
-def test_svm_on_few_objects_holds_out_fewer_objects_and_still_chooses_c():
-    """A lab's small file: with 4 objects (2 per class) no leave-3-out draw keeps both classes
-    in training, so C is chosen by leave-2-out (a CV score per C), with a warning; 5 objects
-    (3 + 2) still allow the default leave-3-out, silently; 3 objects allow no CV at all."""
-    rng = np.random.default_rng(0)
-    groups = np.repeat([1, 2, 3, 4, 5], 6)
-    y = (groups <= 3).astype(int)
-    X = rng.normal(size=(30, 4)) + y[:, None]
-    four = groups >= 2
-    svm = ObjectCVLinearSVM(n_draws=20)
-    with pytest.warns(UserWarning, match="only 4 training objects: C chosen by leave-2-objects"):
-        svm.fit(X[four], y[four], groups[four])
-    assert svm.cv_scores_ is not None and len(svm.cv_scores_) == len(svm.Cs)
-    assert svm.Cs[int(np.argmax(svm.cv_scores_))] == svm.C_
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # 5 objects: leave-3-out works, nothing to warn about
-        assert ObjectCVLinearSVM(n_draws=20).cv_scores(X, y, groups) is not None
-    three = groups >= 3  # 1 positive object, 2 negative: no draw scores C
-    with pytest.warns(UserWarning, match="middle C"):
-        svm.fit(X[three], y[three], groups[three])
-    assert svm.cv_scores_ is None and svm.Cs[len(svm.Cs) // 2] == svm.C_
 
 
 @pytest.mark.parametrize(
