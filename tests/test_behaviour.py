@@ -7,8 +7,6 @@ resume semantics, impossible values stopping before any run, the MLflow store, c
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 from mlflow.tracking import MlflowClient
 
@@ -114,33 +112,3 @@ def test_combine_beyond_the_trials_stops_before_any_run_is_created(tiny_config, 
     with pytest.raises(ConfigError, match="combine: 3 trials per unit.*allowed 1..2"):
         run(settings)
     assert _all_runs(mlflow_uri) == []
-
-
-# ---------------------------------------------------------------- MLflow store
-def test_tracking_uri_is_config_then_environment_then_the_checkout(monkeypatch, tmp_path):
-    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    root = Path(tracking.__file__).resolve().parents[1]
-    assert (root / "pyproject.toml").exists()
-    assert tracking.resolve_uri(None) == f"sqlite:///{root / 'mlflow.db'}"
-    env = f"sqlite:///{tmp_path / 'env.db'}"
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", env)
-    assert tracking.resolve_uri(None) == env
-    assert tracking.resolve_uri("") == env
-    assert tracking.resolve_uri("sqlite:///given.db") == "sqlite:///given.db"
-
-
-@pytest.mark.job
-def test_job_without_tracking_uri_logs_to_mlflow_tracking_uri(
-    compose_config, cache_dir, mlflow_uri, monkeypatch
-):
-    from conftest import TINY_DATA
-
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", mlflow_uri)
-    cfg = compose_config([*TINY_DATA, f"cache_dir={cache_dir}", "adjectives=[hard]", *FAST])
-    settings = settings_from_config(cfg)
-    assert settings.tracking.uri in (None, "")
-    result = run(settings)
-    runs = _all_runs(mlflow_uri)
-    assert result.run_id in {r.info.run_id for r in runs}
-    artifacts = Path(mlflow_uri.removeprefix("sqlite:///")).parent / "mlartifacts"
-    assert list(artifacts.rglob("auc_per_adjective.csv"))  # artifacts beside the database

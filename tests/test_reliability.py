@@ -4,10 +4,8 @@ start, an unreachable tracking server named at once, and small data sets (5 obje
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -17,7 +15,6 @@ from mlflow.tracking import MlflowClient
 from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.data.layout import DataError
 from tactile_exp.experiment import run
-from tactile_exp.tracking import Tracker, TrackingError, process_tags
 
 # 5 objects x 3 trials: absorbent 2 positive objects, squishy 3, cool none.
 FIVE_OBJECTS = (101, 116, 214, 316, 501)
@@ -100,61 +97,6 @@ def test_combine_beyond_the_file_fails_before_a_run_is_created(tiny_config, mlfl
     with pytest.raises(ConfigError, match="^combine: 3 trials per unit"):
         run(settings)
     assert _all_runs(mlflow_uri) == []
-
-
-def _dead_pid() -> int:
-    child = subprocess.Popen([sys.executable, "-c", "pass"])
-    child.wait()
-    return child.pid
-
-
-def test_stale_running_runs_of_the_config_are_ended_at_start(mlflow_uri):
-    tracker = Tracker(mlflow_uri, "tactile_exp")
-    client = tracker.client
-    here = process_tags()
-    cases = {
-        "dead": {**here, "pid": str(_dead_pid()), "pid_start": ""},
-        "reused_pid": {**here, "pid_start": "1"},  # our PID, but started at another time
-        "alive": here,
-        "other_host": {**here, "host": "elsewhere", "pid": str(_dead_pid())},
-    }
-    ids = {}
-    for name, tags in cases.items():
-        ids[name] = client.create_run(
-            tracker.experiment_id, run_name=name, tags={**tags, "config_hash": "abc"}
-        ).info.run_id
-    other = client.create_run(
-        tracker.experiment_id, tags={**cases["dead"], "config_hash": "zzz"}
-    ).info.run_id
-
-    ended = tracker.end_stale_runs("abc")
-
-    assert sorted(ended) == sorted([ids["dead"], ids["reused_pid"]])
-    status = {name: client.get_run(i).info for name, i in ids.items()}
-    assert status["dead"].status == status["reused_pid"].status == "KILLED"
-    assert status["dead"].end_time is not None
-    assert "stale: process" in client.get_run(ids["dead"]).data.tags["error"]
-    assert status["alive"].status == status["other_host"].status == "RUNNING"
-    assert client.get_run(other).info.status == "RUNNING"  # another config: not this job's
-
-
-def test_runs_record_host_and_process(tiny_config, mlflow_uri):
-    run(settings_from_config(tiny_config(["model=random", "combine_instances=separate"])))
-    runs = _all_runs(mlflow_uri)
-    assert runs and all(r.data.tags["host"] == socket.gethostname() for r in runs)
-    assert all(r.data.tags["pid"] == str(os.getpid()) for r in runs)
-
-
-def test_tracking_server_down_is_one_line_naming_the_uri():
-    with socket.socket() as s:  # a port nobody listens on
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    uri = f"http://127.0.0.1:{port}"
-    start = time.monotonic()
-    with pytest.raises(TrackingError) as err:
-        Tracker(uri, "tactile_exp")
-    assert time.monotonic() - start < 10
-    assert str(err.value).startswith(f"tracking.uri: no MLflow server answers at {uri}")
 
 
 @pytest.mark.parametrize(
