@@ -3,7 +3,6 @@ start, an unreachable tracking server named at once, and small data sets (5 obje
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import warnings
@@ -39,32 +38,6 @@ def _all_runs(uri: str):
     client = MlflowClient(uri)
     exp = client.get_experiment_by_name("tactile_exp")
     return [] if exp is None else client.search_runs([exp.experiment_id], max_results=1000)
-
-
-def test_config_error_is_one_line_and_exit_2_before_any_run(tmp_path, mlflow_uri):
-    """The CLI: no traceback, exit 2, and no MLflow run for a typo found only in the data."""
-    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "tactile_exp",
-            "data=phac2",
-            f"data.path={tmp_path / 'missing.h5'}",
-            f"tracking.uri={mlflow_uri}",
-            f"hydra.run.dir={tmp_path / 'run'}",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=180,
-        env=env,
-    )
-    assert done.returncode == 2
-    errors = [line for line in done.stderr.splitlines() if "Warning" not in line]
-    assert errors == [
-        f"error: data.path: {tmp_path / 'missing.h5'}: no such file; expected the PHAC-2 HDF5 file"
-    ]
-    assert _all_runs(mlflow_uri) == []
 
 
 def test_combine_beyond_the_file_fails_before_a_run_is_created(tiny_config, mlflow_uri):
