@@ -1,3 +1,5 @@
+# The tests of tactile_exp/__main__.py (issue 26: one test file per module), named for what a
+# user calls it: the command line, run as a subprocess the way a user runs it.
 """The command line works the way Hydra users expect."""
 
 import subprocess
