@@ -416,10 +416,12 @@ def test_hmm_em_rejects_symbols_outside_the_alphabet():
 
 # moved from test_behaviour.py / test_reliability.py (issue 26)
 @pytest.fixture
-def small_grid():
-    dyn.GRIDS["small"] = {"n_states": (2, 4), "length": (6, 10), "symbols": (3,)}
-    yield "small"
-    del dyn.GRIDS["small"]
+def small_grid(monkeypatch):
+    """A grid of 4 candidates, registered for one test (the real "small" grid is left alone)."""
+    monkeypatch.setitem(
+        dyn.GRIDS, "selection", {"n_states": (2, 4), "length": (6, 10), "symbols": (3,)}
+    )
+    return "selection"
 
 
 def _hmm_data():
