@@ -390,3 +390,86 @@ def test_hmm_em_equals_hmmlearn_categorical_hmm(m, T, n_states, n_symbols, seed)
 def test_hmm_em_rejects_symbols_outside_the_alphabet():
     with pytest.raises(ValueError, match=r"symbols must lie in \[0, 3\), got 0..3"):
         dyn.fit_categorical_hmm(np.array([[0, 1, 3]]), 2, 3, seed=0)
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+@pytest.fixture
+def small_grid(monkeypatch):
+    """A grid of 4 candidates, registered for one test (the real "small" grid is left alone)."""
+    monkeypatch.setitem(
+        dyn.GRIDS, "selection", {"n_states": (2, 4), "length": (6, 10), "symbols": (3,)}
+    )
+    return "selection"
+
+
+def _hmm_data():
+    """Positives 101-105 (105 in test) ramp up in every channel; negatives 201-203."""
+    objects = (101, 102, 103, 104, 105, 201, 202, 203)
+    names = [f"o_{o}_{t:02d}" for o in objects for t in (1, 2)]
+    trials = [make_trial(n, lengths=(30, 40, 30, 20), seed=i) for i, n in enumerate(names)]
+    for t in trials:
+        if t.name.object_id < 200:
+            ramp = np.linspace(0, 800 * (t.name.object_id % 3 + 1), t.n_rows).astype(np.int64)
+            for f in t.fingers:
+                f.pdc += ramp
+                f.electrodes += ramp[:, None]
+    labels = {n: int(n.split("_")[1] < "200") for n in names}
+    test = tuple(n for n in names if "_105_" in n or "_203_" in n)
+    return trials, Split("hard", tuple(n for n in names if n not in test), test, labels)
+
+
+def _rows(table_seqs: np.ndarray, seqs: np.ndarray) -> list[int]:
+    return [int(np.flatnonzero((table_seqs == s).all(axis=(1, 2)))[0]) for s in seqs]
+
+
+def test_hmm_settings_are_chosen_by_held_out_likelihood(small_grid, monkeypatch):
+    """Each chain's (N, T, K) maximises the mean log-likelihood of held-out training positives:
+    whole objects, never in the candidates' fit, never a test or negative trial."""
+    import threading
+    from collections import defaultdict
+
+    trials, split = _hmm_data()
+    lengths = dyn.GRIDS[small_grid]["length"]
+    table = dyn.SequenceTable.from_trials(trials, lengths)
+    # Chains are fitted on threads: each call is filed under the chain its thread is fitting.
+    current = threading.local()
+    fitted: dict[int, list] = defaultdict(list)
+    scored: dict[int, list] = defaultdict(list)
+    chain, fit, score = dyn.DynamicFeatures._chain, dyn.HMMChain.fit, dyn.HMMChain.score
+
+    def chain_spy(self, table, c, idx, cand):
+        current.c = c
+        return chain(self, table, c, idx, cand)
+
+    def fit_spy(self, count, mean, scatter, seqs):
+        fitted[current.c].append(seqs)
+        return fit(self, count, mean, scatter, seqs)
+
+    def score_spy(self, seqs):
+        out = score(self, seqs)
+        scored[current.c].append(((self.n_states, seqs.shape[1], self.n_symbols), seqs, out.mean()))
+        return out
+
+    monkeypatch.setattr(dyn.DynamicFeatures, "_chain", chain_spy)
+    monkeypatch.setattr(dyn.HMMChain, "fit", fit_spy)
+    monkeypatch.setattr(dyn.HMMChain, "score", score_spy)
+    model = dyn.DynamicFeatures(small_grid, seed=0).fit(table, split)
+
+    n_cand = 4
+    assert sorted(scored) == list(range(len(dyn.CHAINS)))
+    chosen = []
+    for c in range(len(dyn.CHAINS)):
+        calls = scored[c]
+        assert len(calls) == n_cand and len(fitted[c]) == n_cand + 1
+        best = max(calls, key=lambda call: call[2])[0]
+        assert model.params_[c] == best
+        chosen.append(best)
+        for j, ((_, T, _), seqs, _) in enumerate(calls):
+            held = {table.trials[i] for i in _rows(table.seqs[T][c], seqs)}
+            fit_rows = fitted[c][j]  # each candidate's fit, then the final refit
+            fit_set = {table.trials[i] for i in _rows(table.seqs[T][c], fit_rows)}
+            assert held and not held & fit_set
+            assert held <= {t for t in split.train if split.labels[t] == 1}
+            objects = {t.split("_")[1] for t in held}
+            assert {t for t in split.train if t.split("_")[1] in objects} == held
+    assert len(set(chosen)) > 1  # the likelihood picked different settings for different chains

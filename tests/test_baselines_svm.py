@@ -280,3 +280,53 @@ def test_defaults_are_the_authors_protocol_and_classes_are_balanced():
     fitted = ObjectCVLinearSVM(Cs=[1e-2]).fit(X, y, groups)
     decisions = fitted.decision_function(X)
     assert (decisions[y == 1] > 0).mean() >= 0.5  # unweighted: every trial scores negative
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+def test_svm_cross_validation_never_splits_an_object(monkeypatch):
+    """C is chosen on folds that hold out whole objects (groups = the instances' object ids)."""
+    rng = np.random.default_rng(0)
+    objects = np.repeat(np.arange(12), 5)
+    y = (objects % 2).astype(np.int64)
+    X = rng.normal(size=(60, 4)) + y[:, None] * 0.7 + objects[:, None] * 0.05
+    trials = np.array([f"o_{o}_{i}" for i, o in enumerate(objects)], dtype=object)
+    folds = []
+    split = LeavePObjectsOut.split
+
+    def spy(self, X, y, groups):
+        for tr, te in split(self, X, y, groups):
+            folds.append((tr, te))
+            yield tr, te
+
+    monkeypatch.setattr(LeavePObjectsOut, "split", spy)
+    model = MODELS.build("linear_svm", n_draws=8, p_out=3)
+    model.fit(Instances(X, y, trials, objects))
+    assert folds
+    for tr, te in folds:
+        assert len(set(objects[te])) == 3 and not set(objects[tr]) & set(objects[te])
+        assert set(y[tr]) == {0, 1}
+    cv = model.svm.cv_scores_
+    assert model.svm.Cs[int(np.argmax(cv))] == model.svm.C_
+
+
+def test_svm_on_few_objects_holds_out_fewer_objects_and_still_chooses_c():
+    """A lab's small file: with 4 objects (2 per class) no leave-3-out draw keeps both classes
+    in training, so C is chosen by leave-2-out (a CV score per C), with a warning; 5 objects
+    (3 + 2) still allow the default leave-3-out, silently; 3 objects allow no CV at all."""
+    rng = np.random.default_rng(0)
+    groups = np.repeat([1, 2, 3, 4, 5], 6)
+    y = (groups <= 3).astype(int)
+    X = rng.normal(size=(30, 4)) + y[:, None]
+    four = groups >= 2
+    svm = ObjectCVLinearSVM(n_draws=20)
+    with pytest.warns(UserWarning, match="only 4 training objects: C chosen by leave-2-objects"):
+        svm.fit(X[four], y[four], groups[four])
+    assert svm.cv_scores_ is not None and len(svm.cv_scores_) == len(svm.Cs)
+    assert svm.Cs[int(np.argmax(svm.cv_scores_))] == svm.C_
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 5 objects: leave-3-out works, nothing to warn about
+        assert ObjectCVLinearSVM(n_draws=20).cv_scores(X, y, groups) is not None
+    three = groups >= 3  # 1 positive object, 2 negative: no draw scores C
+    with pytest.warns(UserWarning, match="middle C"):
+        svm.fit(X[three], y[three], groups[three])
+    assert svm.cv_scores_ is None and svm.Cs[len(svm.Cs) // 2] == svm.C_

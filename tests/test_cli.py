@@ -1,3 +1,5 @@
+# The tests of tactile_exp/__main__.py (issue 26: one test file per module), named for what a
+# user calls it: the command line, run as a subprocess the way a user runs it.
 """The command line works the way Hydra users expect."""
 
 import subprocess
@@ -31,3 +33,35 @@ def test_cfg_job_prints_the_resolved_choices():
 
 def test_info_defaults_tree():
     assert "experiment: null" in _run("--info", "defaults-tree")
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+def test_config_error_is_one_line_and_exit_2_before_any_run(tmp_path, mlflow_uri):
+    """The CLI: no traceback, exit 2, and no MLflow run for a typo found only in the data."""
+    import os
+
+    from mlflow.tracking import MlflowClient
+
+    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tactile_exp",
+            "data=phac2",
+            f"data.path={tmp_path / 'missing.h5'}",
+            f"tracking.uri={mlflow_uri}",
+            f"hydra.run.dir={tmp_path / 'run'}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        env=env,
+    )
+    assert done.returncode == 2
+    errors = [line for line in done.stderr.splitlines() if "Warning" not in line]
+    assert errors == [
+        f"error: data.path: {tmp_path / 'missing.h5'}: no such file; expected the PHAC-2 HDF5 file"
+    ]
+    client = MlflowClient(mlflow_uri)
+    assert client.search_runs([e.experiment_id for e in client.search_experiments()]) == []

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 from hydra import compose, initialize_config_dir
+from hydra.errors import MissingConfigException
 from omegaconf import OmegaConf
 
 from tactile_exp.combine import COMBINERS
@@ -162,23 +163,32 @@ def test_config_hash_ignores_tracking_only(compose_config):
 @pytest.mark.parametrize(
     "override,message",
     [
-        ("model=nope", "Could not find 'model/nope'"),
         ("combine=0", "combine: must be a whole number of trials >= 1"),
         ("combine=1.5", "combine: must be a whole number"),
         ("adjectives=[]", "adjectives: must list at least one"),
         ("adjectives=[hard,fluffy]", "adjectives: unknown ['fluffy']"),
         ("device=tpu", "device: must be auto, cpu, cuda or cuda:N"),
-        ("model.lr=0", "model.lr: "),
-        ("model.lr=-1", "lr"),
-        ("model.epochs=0", "epochs"),
-        ("schedule.head.lr=0", "head_schedule.lr must be > 0"),
+        ("model.lr=0", "model.lr: lr must be > 0 and finite, got 0"),
+        ("model.lr=-1", "model.lr: lr must be > 0 and finite, got -1"),
+        ("model.epochs=0", "model.epochs: epochs must be an int >= 1, got 0"),
+        ("schedule.head.lr=0", "model: head_schedule.lr must be > 0"),
         ("modality=visual", "modality: model=haptic_cnn takes modality haptic, got 'visual'"),
+        ("seed=-1", "seed: must be a whole number in 0..2**32-1, got -1"),
+        ("model.kernel_sizes=[5,0,5]", "model.kernel_sizes: kernel_sizes must be >= 1"),
+        ("data=phac2", "data.path: missing; set it on the command line"),
+        ("data=phac2 data.path=/no/such.h5", "data.path: /no/such.h5: no such file"),
     ],
 )
 def test_impossible_values_fail_naming_the_key(compose_config, override, message):
-    with pytest.raises(Exception) as err:
-        settings_from_config(compose_config([override]))
-    assert message in str(err.value)
+    """A ConfigError of one line that starts with the key, not any error mentioning it."""
+    with pytest.raises(ConfigError) as err:
+        settings_from_config(compose_config(override.split()))
+    assert str(err.value).startswith(message) and "\n" not in str(err.value)
+
+
+def test_an_unknown_group_option_is_hydras_own_error(compose_config):
+    with pytest.raises(MissingConfigException, match="Could not find 'model/nope'"):
+        compose_config(["model=nope"])
 
 
 def test_separate_takes_one_trial(compose_config):
@@ -261,3 +271,10 @@ def test_run_name_short_forms():
     assert s.run_name.startswith("table1_i_haptic_cnn_1trial-lr=0.001-4adj-")
     assert s.run_name.endswith("-phac2-path=test_config-s3")
     assert s.axes["model.lr"] == "0.001" and "cache_dir" not in s.axes
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+def test_seed_is_checked_the_same_for_every_row(compose_config):
+    for row in ("table1_i_haptic_cnn_1trial", "table1_o_random", "table1_a_haptic_static_1trial"):
+        with pytest.raises(ConfigError, match="^seed: "):
+            settings_from_config(compose_config([f"experiment={row}", "seed=-1"]))

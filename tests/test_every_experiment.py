@@ -1,9 +1,13 @@
+# Cross-cutting, so not tests/test_<module>.py (issue 26): every experiment file through config,
+# data, modality, model, store and tracking at once; the per-module files test each part alone.
 """Slow: every experiment file (every Table I row) runs end to end on tiny data."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
+from mlflow.tracking import MlflowClient
+from sklearn.metrics import roc_auc_score
 
 from tactile_exp.config import settings_from_config
 from tactile_exp.experiment import run
@@ -19,10 +23,15 @@ SHRINK = {"table1_j_haptic_cnn_10trials": ["combine=2"], "table1_b_haptic_static
 
 @pytest.mark.slow
 @pytest.mark.parametrize("experiment", EXPERIMENTS)
-def test_experiment_runs_end_to_end(tiny_config, experiment):
+def test_experiment_runs_end_to_end(tiny_config, mlflow_uri, experiment):
     overrides = [f"experiment={experiment}", "data.views=2"]
     overrides += SHRINK.get(experiment, [])
     result = run(settings_from_config(tiny_config(overrides, adjectives="[hard,thick]")))
     assert set(result.results) == {"hard", "thick"}
-    for r in result.results.values():
-        assert 0.0 <= r.auc <= 1.0 and np.all(np.isfinite(r.scores))
+    for r in result.results.values():  # both classes scored, the AUC that of these scores
+        assert set(r.y) == {0, 1} and len(r.scores) == len(r.y) and np.all(np.isfinite(r.scores))
+        assert r.auc == pytest.approx(roc_auc_score(r.y, r.scores), abs=1e-12)
+    parent = MlflowClient(mlflow_uri).get_run(result.run_id)
+    assert parent.info.status == "FINISHED"
+    mean = np.mean([r.auc for r in result.results.values()])
+    assert parent.data.metrics["mean_auc"] == pytest.approx(mean, abs=1e-12)

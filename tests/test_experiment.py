@@ -125,10 +125,11 @@ def test_bad_data_fails_before_a_run_is_created(tiny_config, mlflow_uri, tmp_pat
     assert runs == []
 
 
-def test_combine_more_trials_than_objects_have_is_rejected(tiny_config):
+def test_combine_more_trials_than_objects_have_is_rejected(tiny_config, mlflow_uri):
     settings = settings_from_config(tiny_config(["combine=3", "model=random"]))
-    with pytest.raises(ConfigError, match="combine: 3 trials per unit"):
+    with pytest.raises(ConfigError, match="^combine: 3 trials per unit.*allowed 1..2"):
         run(settings)
+    assert _runs(mlflow_uri)[1] == []  # refused before any run is created
 
 
 def test_ten_trial_units_are_objects(tiny_config):
@@ -238,7 +239,7 @@ def test_children_log_train_and_validation_auc_without_test_objects(tiny_config,
     children = {r.data.tags["adjective"]: r for r in runs if r.data.tags["run_level"] == "child"}
     for adjective, child in children.items():
         metrics = child.data.metrics
-        assert 0 <= metrics["train_auc"] <= 1 and 0 <= metrics["val_auc"] <= 1
+        assert np.isfinite([metrics["train_auc"], metrics["val_auc"]]).all()  # both logged
         assert metrics["n_val_objects"] >= 2 and metrics["n_val_positive_objects"] >= 1
         res = result.results[adjective]
         assert res.diagnostics == {k: metrics[k] for k in ("train_auc", "val_auc")}
@@ -250,3 +251,145 @@ def test_children_log_train_and_validation_auc_without_test_objects(tiny_config,
     assert parent.data.metrics["mean_val_auc"] == pytest.approx(
         np.mean([c.data.metrics["val_auc"] for c in children.values()])
     )
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+FAST = ["model=random", "combine_instances=separate"]  # a job with no training to speak of
+# 5 objects x 3 trials: absorbent 2 positive objects, squishy 3, cool none.
+FIVE_OBJECTS = (101, 116, 214, 316, 501)
+
+
+@pytest.mark.job
+@pytest.mark.parametrize("fit_on", ["train", "all"])
+def test_job_fits_the_preprocessing_on_what_fit_on_says(tiny_config, monkeypatch, fit_on):
+    """A job's normaliser and PCA see the adjective's training trials only, unless fit_on=all."""
+    from tactile_exp.data.sources import DATA_SOURCES
+    from tactile_exp.data.splits import make_split
+    from tactile_exp.preprocess.haptic import HapticPreprocessor
+
+    seen: list[list[str]] = []
+    original = HapticPreprocessor.fit
+
+    def spy(self, trials):
+        seen.append([str(getattr(t, "name", t)) for t in trials])
+        return original(self, trials)
+
+    monkeypatch.setattr(HapticPreprocessor, "fit", spy)
+    settings = settings_from_config(
+        tiny_config([*FAST, f"modality.fit_on={fit_on}", "seed=41"], adjectives="[hard,soft]")
+    )
+    run(settings)
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+    assert len(seen) == 2
+    for adjective, fitted in zip(["hard", "soft"], seen, strict=True):
+        split = make_split(dataset, adjective, settings.split, settings.seed)
+        expected = split.train if fit_on == "train" else [t.name for t in dataset.trials]
+        assert sorted(fitted) == sorted(expected)
+        if fit_on == "train":
+            assert not set(fitted) & set(split.test)
+
+
+@pytest.mark.job
+def test_a_crashed_job_runs_again_and_then_is_skipped(tiny_config, mlflow_uri, monkeypatch):
+    """FAILED (here after one adjective's child FINISHED) is rerun; FINISHED is then skipped."""
+    original = MODELS["random"]
+
+    class Exploding(original):  # type: ignore[misc, valid-type]
+        def fit(self, train, on_epoch=None):
+            fits.append(len(train))
+            if crash and len(fits) == 2:
+                raise RuntimeError("crash in soft")
+            return super().fit(train, on_epoch)
+
+    fits: list[int] = []
+    crash = {"soft"}
+    monkeypatch.setitem(MODELS._entries, "random", Exploding)
+    cfg = tiny_config([*FAST, "seed=43"], adjectives="[hard,soft]")
+    with pytest.raises(RuntimeError, match="crash in soft"):
+        run(settings_from_config(cfg))
+    crash.clear()
+    again = run(settings_from_config(cfg))
+    assert not again.skipped and set(again.results) == {"hard", "soft"}
+    assert run(settings_from_config(cfg)).skipped
+    parents = [r for r in _runs(mlflow_uri)[1] if r.data.tags.get("run_level") == "parent"]
+    assert sorted(r.info.status for r in parents) == ["FAILED", "FINISHED"]
+
+
+@pytest.mark.job
+def test_a_job_left_running_by_a_killed_process_runs_again(tiny_config, mlflow_uri):
+    """A parent run still RUNNING (its process was killed -9) is not a finished job."""
+    from tactile_exp.tracking import Tracker
+
+    settings = settings_from_config(tiny_config([*FAST, "seed=44"], adjectives="[hard]"))
+    tracker = Tracker(mlflow_uri, settings.tracking.experiment)
+    tags = {"config_hash": settings.config_hash, "run_level": "parent"}
+    stale = tracker.client.create_run(tracker.experiment_id, run_name="killed", tags=tags)
+    result = run(settings)
+    assert not result.skipped and result.run_id != stale.info.run_id
+    assert MlflowClient(mlflow_uri).get_run(result.run_id).info.status == "FINISHED"
+
+
+@pytest.mark.job
+def test_a_finished_run_of_another_config_does_not_skip(tiny_config):
+    first = run(settings_from_config(tiny_config([*FAST, "seed=45"], adjectives="[hard]")))
+    other = run(settings_from_config(tiny_config([*FAST, "seed=46"], adjectives="[hard]")))
+    assert not other.skipped and other.run_id != first.run_id
+
+
+@pytest.fixture(scope="module")
+def five_objects(tmp_path_factory: pytest.TempPathFactory):
+    from tactile_exp.data.synthetic import SyntheticSpec, generate
+
+    spec = SyntheticSpec(
+        object_ids=FIVE_OBJECTS,
+        trials=3,
+        duration_scale=0.1,
+        views=1,
+        image_width=96,
+        image_height=64,
+    )
+    return generate(tmp_path_factory.mktemp("five") / "five.h5", spec)
+
+
+@pytest.mark.job
+@pytest.mark.parametrize(
+    "row,adjectives",
+    [
+        ("table1_a_haptic_static_1trial", "[absorbent,squishy]"),
+        ("table1_i_haptic_cnn_1trial", "[absorbent,squishy]"),
+    ],
+)
+def test_rows_a_and_i_run_on_five_objects(tiny_config, five_objects, row, adjectives):
+    import warnings
+
+    settings = settings_from_config(
+        tiny_config(
+            [f"experiment={row}", "data=phac2", f"data.path={five_objects}"],
+            adjectives=adjectives,
+        )
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = run(settings)
+    assert set(result.results) == {"absorbent", "squishy"}
+    for r in result.results.values():  # a test side of both classes, and the AUC of its scores
+        assert set(r.y) == {0, 1} and set(r.objects) <= set(FIVE_OBJECTS)
+        assert r.auc == pytest.approx(roc_auc_score(r.y, r.scores), abs=1e-12)
+    messages = " ".join(str(w.message) for w in caught)
+    assert "falling back to the random split" in messages  # published test objects are absent
+
+
+def test_adjective_without_positive_objects_is_refused_before_a_run(
+    tiny_config, five_objects, mlflow_uri
+):
+    from tactile_exp.data.layout import DataError
+
+    settings = settings_from_config(
+        tiny_config(
+            ["experiment=table1_a_haptic_static_1trial", "data=phac2", f"data.path={five_objects}"],
+            adjectives="[absorbent,cool]",
+        )
+    )
+    with pytest.raises(DataError, match="'cool'"):
+        run(settings)
+    assert _runs(mlflow_uri)[1] == []

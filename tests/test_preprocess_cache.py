@@ -49,3 +49,34 @@ def test_load_refuses_pickles_and_names_missing_arrays(tmp_path) -> None:
     np.savez(path, x=np.array([{"a": 1}], dtype=object))
     with pytest.raises(ValueError, match="allow_pickle"):
         load_arrays(path, ("x",))
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+class _Unwritable:
+    """An array-like that fails when numpy converts it: a crash in the middle of a cache write."""
+
+    def __array__(self, dtype=None, copy=None):
+        raise RuntimeError("disk gone")
+
+
+class _Interrupting:
+    def __array__(self, dtype=None, copy=None):
+        raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt])
+def test_a_crash_while_writing_a_cache_entry_leaves_the_old_entry_and_no_debris(tmp_path, error):
+    path = tmp_path / "entry.npz"
+    save_arrays(path, {"a": np.arange(3)})
+    big = np.ones((256, 1024))  # written to the file before the crash
+    with pytest.raises(error):
+        if error is KeyboardInterrupt:
+            save_arrays(path, {"a": big, "b": _Interrupting()})
+        else:
+            save_arrays(path, {"a": big, "b": _Unwritable()})
+    np.testing.assert_array_equal(load_arrays(path, ("a",))["a"], np.arange(3))
+    assert os.listdir(tmp_path) == ["entry.npz"]
+    fresh = tmp_path / "new" / "entry.npz"
+    with pytest.raises(RuntimeError):
+        save_arrays(fresh, {"a": big, "b": _Unwritable()})
+    assert load_arrays(fresh, ("a",)) is None and os.listdir(fresh.parent) == []

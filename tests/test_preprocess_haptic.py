@@ -461,3 +461,30 @@ def test_trial_signals_default_to_subsampled_pac():
     x = trial_signals(trial)
     np.testing.assert_array_equal(x[1, :, 0], trial.fingers[1].pac[::PAC_PER_ROW])
     np.testing.assert_array_equal(x[0, :, 1], trial.fingers[0].pdc)
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+def _tiny_file(path, seed: int):
+    from tactile_exp.data.synthetic import SyntheticSpec, generate
+
+    spec = SyntheticSpec(seed=seed, object_ids=(101, 201), trials=1, duration_scale=0.05, views=0)
+    return generate(path, spec)
+
+
+def test_haptic_cache_is_invalidated_by_a_changed_data_file(tmp_path):
+    import shutil
+
+    from tactile_exp.data.phac2 import PHAC2
+
+    path, cache = tmp_path / "data.h5", tmp_path / "cache"
+    first = load_haptic_arrays(PHAC2(_tiny_file(path, 0)), steps=8, offsets=1, cache_dir=cache)
+    other = tmp_path / "other.h5"
+    _tiny_file(other, 1)
+    shutil.copyfile(other, path)  # same name, new content
+    again = load_haptic_arrays(PHAC2(path), steps=8, offsets=1, cache_dir=cache)
+    fresh = compute_haptic_arrays(PHAC2(path), steps=8, offsets=1)
+    np.testing.assert_array_equal(again.signals, fresh.signals)
+    assert not np.array_equal(again.signals, first.signals)
+    coarser = load_haptic_arrays(PHAC2(path), steps=6, offsets=1, cache_dir=cache)
+    assert coarser.steps == 6  # changed settings: a new entry, not the steps=8 one
+    assert len(list(cache.glob("haptic-*.npz"))) == 3

@@ -462,3 +462,44 @@ def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
         assert "terminated by signal 15" in closed.data.tags["error"]
     assert client.get_run(live.info.run_id).info.status == "RUNNING"
     assert client.get_run(done.info.run_id).info.status == "FINISHED"
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+TERMINATE = """
+import os, subprocess, sys
+from multiprocessing import resource_tracker
+from tactile_exp.runtime import sweep
+
+class NoRuns:
+    def end_runs_of(self, pids, *, error):
+        return []
+
+sweep.WORKER_GRACE_S = 5.0
+resource_tracker.ensure_running()  # a child that ignores SIGTERM, as loky's does
+worker = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+before = sweep._children(os.getpid())
+trackers = sorted(p for p in before if sweep._resource_tracker(p))
+try:
+    sweep.terminate_workers(15, None, tracker=NoRuns())
+except SystemExit as stop:
+    print("exit", stop.code)
+print("before", *sorted(before))
+print("alive", *sorted(p for p in before if not sweep._gone(p)))
+print("worker", worker.pid)
+print("trackers", *trackers)
+"""
+
+
+def test_a_terminated_sweep_stops_its_workers_and_leaves_resource_trackers_alone():
+    """Resource trackers ignore SIGTERM and end with the launcher: waiting for them cost a
+    terminated sweep the whole grace period, then SIGKILLed them."""
+    done = subprocess.run(
+        [sys.executable, "-c", TERMINATE], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    lines = {key: value for key, _, value in (s.partition(" ") for s in done.stdout.splitlines())}
+    assert lines["exit"] == "143"
+    before, alive = lines["before"].split(), lines["alive"].split()
+    assert lines["worker"] in before and len(before) == 2
+    assert len(lines["trackers"].split()) == 1
+    assert alive == lines["trackers"].split()  # the tracker neither killed nor waited for

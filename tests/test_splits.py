@@ -343,3 +343,26 @@ def test_folds_of_one_seed_share_a_row_and_keep_their_own_models(compose_config)
     assert a.row_hash == b.row_hash and a.config_hash != b.config_hash
     assert a.split_key == "folds(fold=0,folds=5)" != b.split_key  # no model reused across folds
     assert settings_from_config(compose_config([])).split_key == "published"
+
+
+# moved from test_behaviour.py / test_reliability.py (issue 26)
+@pytest.fixture(scope="module")
+def sixty_objects(tmp_path_factory: pytest.TempPathFactory) -> PHAC2:
+    path = tmp_path_factory.mktemp("sixty") / "labels.h5"
+    return PHAC2(write_file(path, tuple(OBJECTS), 4, signals=False, adjective_links=False))
+
+
+@pytest.mark.parametrize("rule,seed", [("published", 0), ("random", 0), ("random", 7)])
+def test_no_object_on_both_sides_of_any_split(sixty_objects, rule, seed):
+    """Every adjective, both rules: trials disjoint, and an object on both sides only when it is
+    the single object of its class (the authors then split it by trial)."""
+    labels = sixty_objects.labels()
+    for adjective in ADJECTIVES:
+        split = make_split(sixty_objects, adjective, rule, seed)
+        assert not set(split.train) & set(split.test)
+        assert len(split.train) + len(split.test) == 4 * len(OBJECTS)
+        for obj in split.objects("train") & split.objects("test"):
+            label = labels[obj][adjective]
+            assert sum(v[adjective] == label for v in labels.values()) == 1, (adjective, obj)
+        for side in (split.train, split.test):
+            assert {split.labels[t] for t in side} == {0, 1}

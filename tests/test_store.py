@@ -126,7 +126,7 @@ def test_missing_artifact_of_a_found_run_is_a_clear_error(tiny_config, mlflow_ur
     first = run(settings_from_config(tiny_config(REPEAT, ONE)))
     trained = _children(mlflow_uri, first.run_id)["hard"]
     tracker = Tracker(mlflow_uri, "tactile_exp")
-    assert store.load_model(tracker, trained.info.run_id, "model") is not None
+    assert isinstance(store.load_model(tracker, trained.info.run_id, "model"), HapticCNN)
     # the local artifact store is a folder: remove the stored weights behind MLflow's back
     Path(trained.info.artifact_uri.removeprefix("file://"), "model", "weights.pt").unlink()
     with pytest.raises(store.ArtifactError, match=rf"run {trained.info.run_id}.*weights.pt"):
