@@ -336,38 +336,19 @@ def _labels(data: str | Path | None, objects: list[int | None]) -> dict[int, lis
 
 
 def _tracker(uri: str | None, experiment: str) -> Any:
-    from mlflow.tracking import MlflowClient
+    from tactile_exp.tracking import ExperimentNotFound, Tracker, TrackingError
 
-    from tactile_exp.tracking import resolve_uri
-
-    uri = resolve_uri(uri)
-    client = MlflowClient(tracking_uri=uri)
-    found = client.get_experiment_by_name(experiment)
-    if found is None:
-        raise PredictError(f"no experiment {experiment!r} in the tracking store {uri}")
-    tracker = object.__new__(_Store)
-    tracker.client, tracker.uri, tracker.experiment_id = client, uri, found.experiment_id
-    return tracker
-
-
-class _Store:
-    """What ``store.load_model`` needs of a ``Tracker``, without creating any experiment."""
-
-    client: Any
-    uri: str
-    experiment_id: str
+    try:
+        return Tracker.open(uri, experiment)
+    except (ExperimentNotFound, TrackingError) as err:
+        raise PredictError(str(err)) from None
 
 
 def _job(tracker: Any, run_id: str | None) -> Any:
     from mlflow.exceptions import MlflowException
 
     if run_id is None:
-        runs = tracker.client.search_runs(
-            [tracker.experiment_id],
-            "tags.run_level = 'parent' and attributes.status = 'FINISHED'",
-            order_by=["attributes.start_time DESC"],
-            max_results=1,
-        )
+        runs = tracker.jobs(limit=1)
         if not runs:
             raise PredictError(f"no FINISHED job in the tracking store {tracker.uri}")
         return runs[0]
@@ -400,13 +381,7 @@ def _config(tracker: Any, run_id: str) -> dict[str, Any]:
 
 
 def _children(tracker: Any, run_id: str, adjectives: Sequence[str] | None) -> dict[str, str]:
-    runs = tracker.client.search_runs(
-        [tracker.experiment_id],
-        f"tags.mlflow.parentRunId = '{run_id}' and tags.run_level = 'child' "
-        "and attributes.status = 'FINISHED'",
-        max_results=1000,
-    )
-    found = {r.data.tags["adjective"]: r.info.run_id for r in runs}
+    found = tracker.children(run_id)
     wanted = sorted(found) if adjectives is None else list(adjectives)
     missing = [a for a in wanted if a not in found]
     if missing or not wanted:

@@ -21,7 +21,7 @@ from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 
 from tactile_exp import store
-from tactile_exp.config import ConfigError, settings_from_config
+from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
@@ -239,19 +239,6 @@ def test_training_key_changes_with_what_trains_the_model_and_nothing_else():
     assert same == [key] * 3
     odd = Component("haptic_cnn", {"weights": Path("w.pt")})  # not JSON: hashed as its text
     assert _key(model=odd) == _key(model=Component("haptic_cnn", {"weights": "w.pt"}))
-
-
-@pytest.mark.parametrize("value,expected", [(None, True), (True, True), (False, False)])
-def test_reuse_switch(value, expected):
-    resolved = {} if value is None else {"tracking": {"reuse": value}}
-    assert store.reuse_enabled(resolved) is expected
-
-
-def test_reuse_switch_rejects_non_booleans():
-    from tactile_exp.config import ConfigError
-
-    with pytest.raises(ConfigError, match=r"^tracking.reuse: must be true or false, got 'yes'$"):
-        store.reuse_enabled({"tracking": {"reuse": "yes"}})
 
 
 @pytest.mark.job
@@ -566,14 +553,6 @@ def test_another_hosts_claim_holds_for_its_lease(mlflow_uri, lease, waits):
     tracker.client.set_terminated(theirs, "FAILED")
     thread.join(10)
     assert found == [None]
-
-
-@pytest.mark.parametrize("value", [0, -5, "long", True])
-def test_claim_lease_must_be_positive_seconds(value):
-    assert store.claim_lease({"tracking": {}}) == store.CLAIM_LEASE
-    assert store.claim_lease({"tracking": {"claim_lease": 60}}) == 60.0
-    with pytest.raises(ConfigError, match="tracking.claim_lease: must be a number of seconds"):
-        store.claim_lease({"tracking": {"claim_lease": value}})
 
 
 def _job(overrides: list[str], log: Path) -> subprocess.Popen:
