@@ -172,6 +172,7 @@ def test_tracking_values_fail_at_the_config_edge(compose_config, override, line)
     assert str(err.value).startswith(line) and "\n" not in str(err.value)
 
 
+@pytest.mark.slow  # a `python -m tactile_exp` process: Hydra's start, ~5 s
 def test_a_bad_reuse_value_is_refused_before_any_run(tmp_path, mlflow_uri):
     """``tracking.reuse`` is read per adjective inside a job: a typo must stop the command with
     one error line before any run exists, not fail the job's runs one by one."""

@@ -542,6 +542,21 @@ def test_a_dead_claimants_claim_is_taken_over(mlflow_uri, caplog):
     assert found == [None]
 
 
+@pytest.mark.job
+def test_a_job_claims_with_the_configured_lease(tiny_config, monkeypatch):
+    """``tracking.claim_lease`` (a typed setting) is the lease the job's claims hold for."""
+    leases = []
+    waited = store.await_trained
+
+    def spy(tracker: Tracker, key: str, run_id: str, *, lease: float) -> str | None:
+        leases.append(lease)
+        return waited(tracker, key, run_id, lease=lease)
+
+    monkeypatch.setattr(store, "await_trained", spy)
+    run(settings_from_config(tiny_config([*REPEAT, "tracking.claim_lease=42"], ONE)))
+    assert leases == [42.0]
+
+
 @pytest.mark.parametrize(("lease", "waits"), [(3600.0, True), (0.001, False)])
 def test_another_hosts_claim_holds_for_its_lease(mlflow_uri, lease, waits):
     tracker = Tracker(mlflow_uri, "tactile_exp")
