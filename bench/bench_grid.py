@@ -46,12 +46,7 @@ def row_of(experiment: str) -> str:
 
 def parent_runs(tracker: Tracker, sweep_id: str | None) -> tuple[str, list[Any]]:
     """The sweep's id (``sweep_id``, else the newest job's) and its jobs' parent runs."""
-    runs = tracker.client.search_runs(
-        [tracker.experiment_id],
-        filter_string="tags.run_level = 'parent'",
-        order_by=["attributes.start_time DESC"],
-        max_results=5000,
-    )
+    runs = tracker.jobs(finished_only=False)
     if sweep_id is None:
         if not runs:
             raise SystemExit(f"error: experiment {tracker.experiment_id} holds no job runs")
@@ -94,7 +89,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
     try:
-        tracker = Tracker(args.tracking_uri, args.experiment, create=False)
+        tracker = Tracker.open(args.tracking_uri, args.experiment)
     except ExperimentNotFound as err:
         raise SystemExit(f"error: {err}") from None
     sweep_id, runs = parent_runs(tracker, args.sweep_id)

@@ -114,7 +114,7 @@ def run_adjective(
         settings.modality, settings.model, settings.combiner, settings.combine,
         label=adjective, cache_dir=settings.cache_dir / "preprocessed",
     )  # fmt: skip
-    reuse = store.reuse_enabled(settings.resolved)
+    reuse = settings.tracking.reuse
     stores_model = pipeline.trains_model and MODELS[settings.model.name].storable
     key = _key(settings, dataset, settings.modality, settings.model, adjective)
     tags = {
@@ -133,7 +133,7 @@ def run_adjective(
         sides = _sides(settings, dataset, split)
         found = None
         if reuse and stores_model:
-            lease = store.claim_lease(settings.resolved)
+            lease = settings.tracking.claim_lease
             found = store.reusable(
                 tracker, key, run_id, lease=lease, overrides=_unkeyed(settings.model.params)
             )
@@ -231,7 +231,7 @@ def _part_provider(
         part_modality, part_model = modality.parts()[part]
         key = _key(settings, dataset, part_modality, part_model, trials.label)
         name = f"{trials.label}/{part}"
-        reuse = store.reuse_enabled(settings.resolved)
+        reuse = settings.tracking.reuse
         overrides = _unkeyed(part_model.params)
         source = store.find_trained(tracker, key) if reuse else None
         found = None if source is None else (None, source)
@@ -245,7 +245,7 @@ def _part_provider(
             }
             with tracker.run(f"adj={name}", {"adjective": trials.label}, tags, parent_id) as rid:
                 # This run is the key's claim: wait while an older live job trains the part.
-                lease = store.claim_lease(settings.resolved)
+                lease = settings.tracking.claim_lease
                 found = (
                     store.reusable(tracker, key, rid, lease=lease, overrides=overrides)
                     if reuse

@@ -39,9 +39,13 @@ ADJECTIVES_SPELLED_OUT = 3  # a run name lists at most this many adjectives, els
 
 @dataclass(frozen=True)
 class Tracking:
+    """Where runs go and how a job uses the runs already there (``conf/tracking/*.yaml``)."""
+
     uri: str | None
     experiment: str
-    skip_finished: bool
+    skip_finished: bool  # a job already FINISHED on this data file is skipped
+    reuse: bool = True  # load a FINISHED run's model of the same training key instead of training
+    claim_lease: float = 3600.0  # seconds before another host's training claim counts as abandoned
 
 
 @dataclass(frozen=True)
@@ -58,7 +62,7 @@ class Settings:
     cache_dir: Path
     tracking: Tracking
     choices: dict[str, str]  # config-group choices, e.g. {"model": "haptic_cnn", ...}
-    resolved: dict[str, Any]  # the whole resolved config, logged as params
+    resolved: dict[str, Any]  # the whole resolved config: only logged (params, config.yaml)
     config_hash: str
     row_hash: str  # config_hash with the seed blanked: what the report groups by
     run_name: str
@@ -73,6 +77,7 @@ class Settings:
     study_tags: dict[str, str] = field(default_factory=dict)  # search.study, search.role, ...
     axes: dict[str, str] = field(default_factory=dict)  # the job's overrides: see ``axes``
     split_params: dict[str, Any] = field(default_factory=dict)  # e.g. folds=5, fold=0
+    modules: tuple[str, ...] = ()  # the components' ``_module_``s: see ``component_modules``
 
     @property
     def split_key(self) -> str:
@@ -145,11 +150,37 @@ def _component(node: Any, group: str) -> Component:
     return Component(str(node["name"]), params)
 
 
-def component_modules(resolved: dict[str, Any]) -> list[str]:
+def component_modules(resolved: dict[str, Any]) -> tuple[str, ...]:
     """The ``_module_`` of each component (what registers it): a spawned worker process
     (``tactile_exp.runtime.workers``) imports them again, as ``_component`` did here."""
     nodes = (resolved.get(group) for group in ("data", "modality", "model"))
-    return [str(n["_module_"]) for n in nodes if isinstance(n, dict) and n.get("_module_")]
+    return tuple(str(n["_module_"]) for n in nodes if isinstance(n, dict) and n.get("_module_"))
+
+
+def _check_tracking(tracking: Any) -> Tracking:
+    """The tracking group, checked before any run: a value a running job would only read
+    later (``reuse`` per adjective, ``claim_lease`` while waiting) fails here, not there."""
+    if not isinstance(tracking, dict):
+        raise ConfigError(f"tracking: expected a mapping (conf/tracking/*.yaml), got {tracking!r}")
+    experiment = tracking.get("experiment")
+    if isinstance(experiment, bool) or not isinstance(experiment, str | int) or experiment == "":
+        raise ConfigError(
+            f"tracking.experiment: must name an MLflow experiment, got {experiment!r}"
+        )
+    for key in ("skip_finished", "reuse"):
+        if not isinstance(tracking.get(key, True), bool):
+            raise ConfigError(f"tracking.{key}: must be true or false, got {tracking[key]!r}")
+    lease = tracking.get("claim_lease", Tracking.claim_lease)
+    if isinstance(lease, bool) or not isinstance(lease, int | float) or not lease > 0:
+        raise ConfigError(f"tracking.claim_lease: must be a number of seconds > 0, got {lease!r}")
+    uri = tracking.get("uri")
+    return Tracking(
+        uri=None if uri is None else str(uri),
+        experiment=str(experiment),
+        skip_finished=tracking.get("skip_finished", True),
+        reuse=tracking.get("reuse", True),
+        claim_lease=float(lease),
+    )
 
 
 def _check_missing(node: Any, prefix: str = "") -> None:
@@ -241,7 +272,7 @@ def settings_from_config(
     objective = _check_objective(resolved.get("objective", "mean_val_auc"))
     study_tags = _check_study(resolved.get("study") or {}, float(fraction))
 
-    tracking = resolved["tracking"]
+    tracking = _check_tracking(resolved.get("tracking"))
     job_axes = axes(overrides)
     settings = Settings(
         data=_component(resolved["data"], "data"),
@@ -254,11 +285,7 @@ def settings_from_config(
         seed=seed,
         device=device,
         cache_dir=Path(str(resolved["cache_dir"])).expanduser(),
-        tracking=Tracking(
-            uri=tracking.get("uri"),
-            experiment=str(tracking["experiment"]),
-            skip_finished=bool(tracking.get("skip_finished", True)),
-        ),
+        tracking=tracking,
         choices=choices,
         resolved=resolved,
         config_hash=config_hash(resolved),
@@ -273,6 +300,7 @@ def settings_from_config(
         study_tags=study_tags,
         axes=job_axes,
         split_params={k: v for k, v in resolved["split"].items() if k != "name"},
+        modules=component_modules(resolved),
     )
     check_components(settings)
     return settings

@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, stats, store
+from tactile_exp import evaluate, stats
 from tactile_exp.adjective import AdjectiveResult, key_params, log_data, run_adjective
-from tactile_exp.config import Settings, component_modules, param_error
+from tactile_exp.config import Settings, param_error
 from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
@@ -90,7 +90,6 @@ def run(settings: Settings) -> JobResult:
                 done, float("nan"), {}, skipped=True, val_aucs=_val_aucs(tracker, done)
             )
     tracker.end_stale_runs(settings.config_hash)
-    store.claim_lease(settings.resolved)  # a bad value is an error before any run is created
     dataset, modality, splits = open_data(settings)
 
     params = {**flatten(settings.resolved), **key_params(settings)}
@@ -100,7 +99,7 @@ def run(settings: Settings) -> JobResult:
         "run_level": "parent",
         "sweep_id": settings.sweep_id,
         "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
-        "device": device_name(settings.resolved["device"]),  # what device=auto picked here
+        "device": device_name(settings.device),  # what device=auto picked here
         **settings.study_tags,  # search.study, search.role, search.trial (issue 28)
     }
     with tracker.run(settings.run_name, params, tags) as parent_id:
@@ -146,16 +145,7 @@ def run(settings: Settings) -> JobResult:
 
 def _val_aucs(tracker: Tracker, parent_id: str) -> dict[str, float]:
     """A finished job's per-adjective validation AUCs, from its adjectives' runs."""
-    runs = tracker.client.search_runs(
-        [tracker.experiment_id],
-        filter_string=f"tags.mlflow.parentRunId = '{parent_id}' and tags.run_level = 'child'",
-        max_results=1000,
-    )
-    return {
-        r.data.tags["adjective"]: r.data.metrics["val_auc"]
-        for r in runs
-        if "val_auc" in r.data.metrics
-    }
+    return tracker.child_metrics(parent_id, "val_auc")
 
 
 def _log_view(tracker: Tracker, settings: Settings) -> None:
@@ -164,11 +154,7 @@ def _log_view(tracker: Tracker, settings: Settings) -> None:
     columns += [canonical_column("params", f"axis.{k}") for k in settings.axes]
     if not settings.axes:
         columns += [canonical_column("params", k) for k in ("choice.model", "combine")]
-    url = tracker.runs_view(
-        columns,
-        order_by=canonical_column("metrics", "mean_auc"),
-        filter_string="tags.run_level = 'parent'",
-    )
+    url = tracker.runs_view(columns, order_by=canonical_column("metrics", "mean_auc"))
     log.info("runs table (jobs by mean AUC, with what each sets): %s", url)
     if not tracker.uri.startswith(("http://", "https://")):
         log.info("  serve it first: mlflow ui --backend-store-uri %s", tracker.uri)
@@ -207,7 +193,7 @@ _WORKER: dict[str, Any] = {}  # what a worker process opened once: see _open_in_
 
 
 def _open_in_worker(settings: Settings, parent_id: str) -> None:
-    for module in component_modules(settings.resolved):
+    for module in settings.modules:
         importlib.import_module(module)
     with warnings.catch_warnings():  # the job's own load() has already shown them
         warnings.simplefilter("ignore")

@@ -12,6 +12,7 @@ from typing import Any
 from tactile_exp import store
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.pipeline import AdjectivePipeline
+from tactile_exp.tracking import ExperimentNotFound, Tracker, TrackingError
 
 
 class PredictError(ValueError):
@@ -22,9 +23,7 @@ class PredictError(ValueError):
 class StoredJob:
     """A FINISHED job (parent run) of an MLflow experiment."""
 
-    client: Any  # MlflowClient
-    uri: str
-    experiment_id: str
+    tracker: Tracker  # of the job's experiment
     run: Any  # the parent run
     config: dict[str, Any]
 
@@ -35,22 +34,14 @@ class StoredJob:
         """Job ``run_id``, default the newest FINISHED job of ``experiment``."""
         import yaml
         from mlflow.exceptions import MlflowException
-        from mlflow.tracking import MlflowClient
 
-        from tactile_exp.tracking import resolve_uri
-
-        uri = resolve_uri(tracking_uri)
-        client = MlflowClient(tracking_uri=uri)
-        found = client.get_experiment_by_name(experiment)
-        if found is None:
-            raise PredictError(f"no experiment {experiment!r} in the tracking store {uri}")
+        try:
+            tracker = Tracker.open(tracking_uri, experiment)
+        except (ExperimentNotFound, TrackingError) as err:
+            raise PredictError(str(err)) from None
+        client, uri = tracker.client, tracker.uri
         if run_id is None:
-            runs = client.search_runs(
-                [found.experiment_id],
-                "tags.run_level = 'parent' and attributes.status = 'FINISHED'",
-                order_by=["attributes.start_time DESC"],
-                max_results=1,
-            )
+            runs = tracker.jobs(limit=1)
             if not runs:
                 raise PredictError(f"no FINISHED job in the tracking store {uri}")
             run = runs[0]
@@ -74,7 +65,7 @@ class StoredJob:
             raise store.ArtifactError(error) from None
         if not isinstance(config, dict) or "modality" not in config:
             raise store.ArtifactError(f"run {job_id}: artifact config.yaml is not a job's config")
-        return cls(client, uri, found.experiment_id, run, config)
+        return cls(tracker, run, config)
 
     @property
     def id(self) -> str:
@@ -120,13 +111,7 @@ class StoredJob:
 
     def children(self, adjectives: Sequence[str] | None = None) -> dict[str, str]:
         """Adjective -> its FINISHED child run's id (all, or ``adjectives``, in that order)."""
-        runs = self.client.search_runs(
-            [self.experiment_id],
-            f"tags.mlflow.parentRunId = '{self.id}' and tags.run_level = 'child' "
-            "and attributes.status = 'FINISHED'",
-            max_results=1000,
-        )
-        found = {r.data.tags["adjective"]: r.info.run_id for r in runs}
+        found = self.tracker.children(self.id)
         wanted = sorted(found) if adjectives is None else list(adjectives)
         missing = [a for a in wanted if a not in found]
         if missing or not wanted:
@@ -138,7 +123,7 @@ class StoredJob:
     def folder(self, child: str) -> Path:
         """Child run ``child``'s artifacts (its saved pipeline), as a local folder."""
         try:
-            return Path(self.client.download_artifacts(child, ""))
+            return Path(self.tracker.client.download_artifacts(child, ""))
         except Exception as err:
             raise store.ArtifactError(f"run {child}: artifacts cannot be read ({err})") from None
 

@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.errors import ConfigError
 from tactile_exp.registry import Component
 from tactile_exp.runtime import termination
 from tactile_exp.runtime.processes import process_alive
@@ -45,7 +44,6 @@ MODEL_UNKEYED = ("head_schedule", "impl", "device")
 MODALITY_UNKEYED = ("device", "batch_size")
 MODEL_FILES = ("settings.json", "weights.pt", "arrays.npz")
 STATE_FILES = ("settings.json", "arrays.npz")
-CLAIM_LEASE = 3600.0  # seconds: tracking.claim_lease when the config has none
 POLL_SECONDS = 2.0  # how often a job waiting for another job's model looks again
 
 
@@ -85,34 +83,12 @@ def _without(params: Mapping[str, Any], dropped: tuple[str, ...]) -> dict[str, A
     return {k: v for k, v in params.items() if k not in dropped}
 
 
-def reuse_enabled(resolved: Mapping[str, Any]) -> bool:
-    """``tracking.reuse`` (default true): look up trained models before training."""
-    value = resolved.get("tracking", {}).get("reuse", True)
-    if not isinstance(value, bool):
-        raise ConfigError(f"tracking.reuse: must be true or false, got {value!r}")
-    return value
-
-
 def find_trained(tracker: Tracker, key: str) -> str | None:
     """The run that trained the model with training key ``key`` in this experiment: the newest
     FINISHED run with the key, or, when that run reused it, the run it names in ``reused_from``
     (every copy holds the same weights; provenance points at the training)."""
-    runs = tracker.client.search_runs(
-        [tracker.experiment_id],
-        filter_string=f"tags.training_key = '{key}' and attributes.status = 'FINISHED'",
-        order_by=["attributes.start_time DESC"],
-        max_results=1,
-    )
-    return runs[0].data.tags.get("reused_from", runs[0].info.run_id) if runs else None
-
-
-def claim_lease(resolved: Mapping[str, Any]) -> float:
-    """``tracking.claim_lease``: seconds after its start that another host's claim on a training
-    key counts as abandoned (this host's claims end with their process instead)."""
-    value = resolved.get("tracking", {}).get("claim_lease", CLAIM_LEASE)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
-        raise ConfigError(f"tracking.claim_lease: must be a number of seconds > 0, got {value!r}")
-    return float(value)
+    run = tracker.trained_run(key)
+    return None if run is None else run.data.tags.get("reused_from", run.info.run_id)
 
 
 def await_trained(
@@ -124,7 +100,8 @@ def await_trained(
 
     A claim is a RUNNING run tagged with the key; the oldest live one trains, so two jobs that
     start together agree on one. A claim whose process on this host has ended, or another
-    host's claim older than ``lease`` seconds, is passed over (taken over by the next oldest)."""
+    host's claim older than ``lease`` seconds (``tracking.claim_lease``), is passed over (taken
+    over by the next oldest)."""
     holder, passed = None, set()
     while True:
         # Claims first, then finished runs: a claimant that finishes between the two queries is
@@ -174,14 +151,9 @@ def reusable(
 def _oldest_live_claim(tracker: Tracker, key: str, lease: float) -> tuple[Any, list[str]]:
     """The oldest RUNNING run tagged ``training_key = key`` whose process may still run it
     (None when there is none), and the ids of the older abandoned ones passed over."""
-    runs = tracker.client.search_runs(
-        [tracker.experiment_id],
-        filter_string=f"tags.training_key = '{key}' and attributes.status = 'RUNNING'",
-        max_results=1000,
-    )
     host, now = socket.gethostname(), time.time() * 1000
     abandoned = []
-    for run in sorted(runs, key=lambda r: (r.info.start_time, r.info.run_id)):
+    for run in tracker.claims(key):
         tags = run.data.tags
         pid = tags.get("pid", "")
         if tags.get("host") == host and pid.isdigit():

@@ -31,10 +31,13 @@ import urllib.request
 from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tactile_exp.runtime.processes import process_alive, process_tags
 from tactile_exp.runtime.termination import shielded
+
+if TYPE_CHECKING:
+    from mlflow.entities import Run
 
 os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")  # no calls home; the network is closed
 # Where tqdm is installed, MLflow draws a progress bar for every artifact download: one per stored
@@ -51,6 +54,12 @@ EXPERIMENT_TAGS = {"mlflow.experimentKind": "custom_model_development"}
 WORKFLOW = "workflowType=machine_learning"  # URL parameter: the UI's "Model training" views
 SHARED_VIEW_TAG = "mlflow.sharedViewState."  # + key: a runs-table state the UI's URL can name
 UI_DEFAULT = "http://127.0.0.1:5000"  # where ``mlflow ui`` serves by default
+MAX_RESULTS = 50000  # the most runs MLflow returns for one search
+# Conditions of MLflow's filter syntax that the run queries below combine.
+_JOB = "tags.run_level = 'parent'"
+_FINISHED = "attributes.status = 'FINISHED'"
+_RUNNING = "attributes.status = 'RUNNING'"
+_NEWEST_FIRST = "attributes.start_time DESC"
 
 
 def project_root() -> Path:
@@ -147,16 +156,38 @@ class ExperimentNotFound(LookupError):
 
 
 class Tracker:
-    """Thin wrapper over ``MlflowClient`` with the run tree this project uses."""
+    """Thin wrapper over ``MlflowClient`` with the run tree this project uses.
+
+    Every query of the store is a method here, named after what it returns, so the MLflow filter
+    syntax (and the tags it filters on) is written in this module only."""
 
     def __init__(
-        self,
-        uri: str | None,
-        experiment: str,
-        *,
-        entry_point: str = "python -m tactile_exp",
-        create: bool = True,
+        self, uri: str | None, experiment: str, *, entry_point: str = "python -m tactile_exp"
     ) -> None:
+        """The tracker a job logs with: ``experiment`` is created when the store lacks it."""
+        self._connect(uri, entry_point)
+        self.experiment_id = self._experiment(experiment)
+
+    @classmethod
+    def open(
+        cls, uri: str | None, experiment: str, *, entry_point: str = "python -m tactile_exp"
+    ) -> Tracker:
+        """The tracker of an experiment the store already holds, for what only reads it
+        (predict, the report): a misspelt name raises ``ExperimentNotFound`` naming the
+        experiments there instead of creating an empty one."""
+        tracker = cls.__new__(cls)
+        tracker._connect(uri, entry_point)
+        found = tracker.client.get_experiment_by_name(experiment)
+        if found is None:
+            names = sorted(e.name for e in tracker.client.search_experiments())
+            raise ExperimentNotFound(
+                f"no MLflow experiment {experiment!r} in {tracker.uri}; "
+                f"experiments there: {', '.join(names) or 'none'}"
+            )
+        tracker.experiment_id = found.experiment_id
+        return tracker
+
+    def _connect(self, uri: str | None, entry_point: str) -> None:
         from mlflow.tracking import MlflowClient
 
         self.uri = resolve_uri(uri)
@@ -164,17 +195,6 @@ class Tracker:
             check_server(self.uri)
         self.client = MlflowClient(tracking_uri=self.uri)
         self.source_tags = source_tags(entry_point)
-        if create:
-            self.experiment_id = self._experiment(experiment)
-            return
-        found = self.client.get_experiment_by_name(experiment)
-        if found is None:
-            names = sorted(e.name for e in self.client.search_experiments())
-            raise ExperimentNotFound(
-                f"no MLflow experiment {experiment!r} in {self.uri}; "
-                f"experiments there: {', '.join(names) or 'none'}"
-            )
-        self.experiment_id = found.experiment_id
 
     def _experiment(self, name: str) -> str:
         # Parallel jobs on one sqlite file race on creation: retry, then read what won.
@@ -195,14 +215,14 @@ class Tracker:
                 time.sleep(0.5 * (attempt + 1))
         raise RuntimeError("unreachable")
 
-    def runs_view(self, columns: Sequence[str], *, order_by: str, filter_string: str) -> str:
+    def runs_view(self, columns: Sequence[str], *, order_by: str) -> str:
         """A link that opens the UI on this experiment's runs table (not its GenAI Overview)
-        with ``columns`` shown, ``filter_string`` applied and sorted by ``order_by``, best
-        first. The state is a shared view: an experiment tag named by its content, so the jobs
-        of one sweep write the same tag once each and print the same link."""
+        showing the jobs (parent runs) with ``columns``, sorted by ``order_by``, best first. The
+        state is a shared view: an experiment tag named by its content, so the jobs of one sweep
+        write the same tag once each and print the same link."""
         state = {
             "selectedColumns": list(columns),
-            "searchFilter": filter_string,
+            "searchFilter": _JOB,
             "orderByKey": order_by,
             "orderByAsc": False,
         }
@@ -213,19 +233,88 @@ class Tracker:
         page = f"{ui_base(self.uri)}/#/experiments/{self.experiment_id}/runs"
         return f"{page}?{WORKFLOW}&viewStateShareKey={key}"
 
+    def _search(
+        self, *where: str, order_by: str | None = None, limit: int = MAX_RESULTS
+    ) -> list[Run]:
+        """This experiment's runs meeting every condition in ``where`` (MLflow filter syntax)."""
+        found = self.client.search_runs(
+            [self.experiment_id],
+            filter_string=" and ".join(where),
+            order_by=[order_by] if order_by else None,
+            max_results=limit,
+        )
+        return list(found)
+
     def finished_run(self, config_hash: str, *, data_identity: str) -> str | None:
         """A FINISHED job of ``config_hash`` on the data file ``data_identity`` (its
         ``data.identity`` tag): the same config on another file (a new generator version, a
         replaced or real file) has not been run, so it is not skipped."""
-        runs = self.client.search_runs(
-            [self.experiment_id],
-            filter_string=(
-                f"tags.config_hash = '{config_hash}' and tags.run_level = 'parent' "
-                f"and tags.`data.identity` = '{data_identity}' and attributes.status = 'FINISHED'"
-            ),
-            max_results=1,
+        runs = self._search(
+            f"tags.config_hash = '{config_hash}'",
+            _JOB,
+            f"tags.`data.identity` = '{data_identity}'",
+            _FINISHED,
+            limit=1,
         )
         return runs[0].info.run_id if runs else None
+
+    def jobs(
+        self, *, sweep_id: str | None = None, finished_only: bool = True, limit: int = MAX_RESULTS
+    ) -> list[Run]:
+        """The experiment's jobs (parent runs), newest first: the FINISHED ones unless
+        ``finished_only`` is false, those of sweep ``sweep_id`` when it is given."""
+        where = [_JOB, *([_FINISHED] if finished_only else [])]
+        if sweep_id is not None:
+            where.append(f"tags.sweep_id = '{sweep_id}'")
+        return self._search(*where, order_by=_NEWEST_FIRST, limit=limit)
+
+    def child_runs(
+        self, parent_id: str, *, level: str | None = "child", finished_only: bool = False
+    ) -> list[Run]:
+        """The runs under job ``parent_id``, oldest first: its adjectives' (``level`` child),
+        its trained parts' (``part``) or all of them (None); the FINISHED ones when
+        ``finished_only``."""
+        where = [f"tags.mlflow.parentRunId = '{parent_id}'"]
+        if level is not None:
+            where.append(f"tags.run_level = '{level}'")
+        if finished_only:
+            where.append(_FINISHED)
+        runs = self._search(*where)
+        return sorted(runs, key=lambda r: (r.info.start_time, r.info.run_id))
+
+    def children(self, parent_id: str) -> dict[str, str]:
+        """Adjective -> the FINISHED child run of job ``parent_id`` that scored it (what predict
+        applies and the report reads)."""
+        runs = self.child_runs(parent_id, finished_only=True)
+        return {r.data.tags["adjective"]: r.info.run_id for r in runs}
+
+    def child_metrics(self, parent_id: str, key: str) -> dict[str, float]:
+        """Adjective -> metric ``key`` of each child run of job ``parent_id`` that logged it
+        (a skipped job's validation AUCs, read back for its objective)."""
+        return {
+            r.data.tags["adjective"]: r.data.metrics[key]
+            for r in self.child_runs(parent_id)
+            if key in r.data.metrics
+        }
+
+    def trained_run(self, key: str) -> Run | None:
+        """The newest FINISHED run tagged with training key ``key``: it trained that model, or
+        loaded it (then its ``reused_from`` tag names the run that trained it)."""
+        runs = self._search(
+            f"tags.training_key = '{key}'", _FINISHED, order_by=_NEWEST_FIRST, limit=1
+        )
+        return runs[0] if runs else None
+
+    def claims(self, key: str) -> list[Run]:
+        """The RUNNING runs tagged with training key ``key``, oldest first: each is a job's claim
+        to train that model (``store.await_trained`` decides which claim trains it)."""
+        runs = self._search(f"tags.training_key = '{key}'", _RUNNING)
+        return sorted(runs, key=lambda r: (r.info.start_time, r.info.run_id))
+
+    def sweep_runs(self, sweep_id: str) -> list[Run]:
+        """The runs a sweep keeps about itself (``run_level`` sweep: the cells it listed
+        invalid) for sweep ``sweep_id``."""
+        return self._search("tags.run_level = 'sweep'", f"tags.sweep_id = '{sweep_id}'")
 
     def end_stale_runs(self, config_hash: str) -> list[str]:
         """Mark KILLED the RUNNING runs of ``config_hash`` whose process on this host is gone
@@ -246,27 +335,21 @@ class Tracker:
         """Mark FAILED, with ``error``, the RUNNING runs of processes ``pids`` on this host that
         have ended: a terminated sweep's workers that were killed before they closed their runs."""
         wanted = {str(pid) for pid in pids}
-        return self._end_orphans("", status="FAILED", error=lambda _pid, _host: error, pids=wanted)
+        return self._end_orphans(status="FAILED", error=lambda _pid, _host: error, pids=wanted)
 
     def _end_orphans(
         self,
-        filter_string: str,
-        *,
+        *where: str,
         status: str,
         error: Callable[[str, str], str],
         pids: Collection[str] | None = None,
     ) -> list[str]:
-        """End the RUNNING runs matching ``filter_string`` whose process on this host is gone
+        """End the RUNNING runs meeting ``where`` whose process on this host is gone
         (and is one of ``pids`` when given); ``error(pid, host)`` is their ``error`` tag."""
         from mlflow.entities import RunTag
 
         host = socket.gethostname()
-        running = "attributes.status = 'RUNNING'"
-        runs = self.client.search_runs(
-            [self.experiment_id],
-            filter_string=f"{filter_string} and {running}" if filter_string else running,
-            max_results=1000,
-        )
+        runs = self._search(*where, _RUNNING)
         ended = []
         for r in runs:
             tags = r.data.tags

@@ -1,14 +1,19 @@
 """Every YAML composes and builds; option names are registry names; bad values fail early."""
 
 import inspect
+import os
 import re
+import subprocess
+import sys
 from fnmatch import fnmatch
 from pathlib import Path
 
 import pytest
 import yaml
+from conftest import TINY_DATA
 from hydra import compose, initialize_config_dir
 from hydra.errors import MissingConfigException
+from mlflow.tracking import MlflowClient
 from omegaconf import OmegaConf
 
 from tactile_exp.combine import COMBINERS
@@ -125,6 +130,78 @@ def test_tracking_options(compose_config, monkeypatch):
     monkeypatch.setenv("MLFLOW_TRACKING_URI", "http://tracking.example:5000")
     server = settings_from_config(compose_config(["tracking=server"])).tracking
     assert server.uri == "http://tracking.example:5000"
+
+
+def test_tracking_switches_are_typed_settings(compose_config):
+    """What a job reads of ``tracking`` is in ``Settings.tracking``, the YAML's values or, for a
+    tracking YAML of one's own that lacks them, the defaults."""
+    tracking = settings_from_config(compose_config()).tracking
+    assert (tracking.reuse, tracking.claim_lease, tracking.skip_finished) == (True, 3600.0, True)
+    changed = ["tracking.reuse=false", "tracking.claim_lease=60", "tracking.skip_finished=false"]
+    tracking = settings_from_config(compose_config(changed)).tracking
+    assert (tracking.reuse, tracking.claim_lease, tracking.skip_finished) == (False, 60.0, False)
+    assert isinstance(tracking.claim_lease, float)
+    lacking = ["~tracking.reuse", "~tracking.claim_lease", "~tracking.skip_finished"]
+    tracking = settings_from_config(compose_config(lacking)).tracking
+    assert (tracking.reuse, tracking.claim_lease, tracking.skip_finished) == (True, 3600.0, True)
+
+
+@pytest.mark.parametrize(
+    ("override", "line"),
+    [
+        ("tracking.reuse=maybe", "tracking.reuse: must be true or false, got 'maybe'"),
+        ("tracking.reuse=1", "tracking.reuse: must be true or false, got 1"),
+        ("tracking.skip_finished=no", "tracking.skip_finished: must be true or false, got 'no'"),
+        ("tracking.claim_lease=0", "tracking.claim_lease: must be a number of seconds > 0, got 0"),
+        (
+            "tracking.claim_lease=-5",
+            "tracking.claim_lease: must be a number of seconds > 0, got -5",
+        ),
+        (
+            "tracking.claim_lease=long",
+            "tracking.claim_lease: must be a number of seconds > 0, got 'long'",
+        ),
+        (
+            "tracking.claim_lease=true",
+            "tracking.claim_lease: must be a number of seconds > 0, got True",
+        ),
+        ("tracking.experiment=''", "tracking.experiment: must name an MLflow experiment, got ''"),
+    ],
+)
+def test_tracking_values_fail_at_the_config_edge(compose_config, override, line):
+    with pytest.raises(ConfigError) as err:
+        settings_from_config(compose_config([override]))
+    assert str(err.value).startswith(line) and "\n" not in str(err.value)
+
+
+@pytest.mark.slow  # a `python -m tactile_exp` process: Hydra's start, ~5 s
+def test_a_bad_reuse_value_is_refused_before_any_run(tmp_path, mlflow_uri):
+    """``tracking.reuse`` is read per adjective inside a job: a typo must stop the command with
+    one error line before any run exists, not fail the job's runs one by one."""
+    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
+    args = [*TINY_DATA, "model=random", "combine_instances=separate", "adjectives=[hard]"]
+    args += [f"tracking.uri={mlflow_uri}", f"hydra.run.dir={tmp_path / 'run'}"]
+    done = subprocess.run(
+        [sys.executable, "-m", "tactile_exp", *args, "tracking.reuse=maybe"],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        env=env,
+    )
+    assert done.returncode == 2
+    errors = [line for line in done.stderr.splitlines() if "Warning" not in line]
+    assert errors == ["error: tracking.reuse: must be true or false, got 'maybe'"]
+    client = MlflowClient(mlflow_uri)
+    assert [e.name for e in client.search_experiments()] == ["Default"]  # no experiment, no run
+    assert not client.search_runs(["0"])
+
+
+def test_component_modules_are_settings(compose_config):
+    """A component's ``_module_`` (imported again by each worker process) is a setting."""
+    settings = settings_from_config(compose_config(["+model._module_=tactile_exp.models.sgd"]))
+    assert settings.modules == ("tactile_exp.models.sgd",)
+    assert "_module_" not in settings.model.params
+    assert settings_from_config(compose_config()).modules == ()
 
 
 def test_experiments_read_like_table1(compose_config):

@@ -40,7 +40,7 @@ def _held_out(uri: str, job: str, dataset) -> tuple[int, list[str]]:
     """A test object of the job's one adjective and its trials (sorted by name)."""
     stored = StoredJob.open(job, tracking_uri=uri)
     (child,) = stored.children().values()
-    scores = stored.client.download_artifacts(child, "scores.csv")
+    scores = stored.tracker.client.download_artifacts(child, "scores.csv")
     units = [r["unit"] for r in csv.DictReader(io.StringIO(Path(scores).read_text()))]
     by_stem = {t.stem: t.object_id for t in dataset.trials}
     by_name = {t.name: t.object_id for t in dataset.trials}

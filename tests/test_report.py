@@ -13,7 +13,7 @@ from sklearn.metrics import roc_auc_score
 from tactile_exp import experiment, stats, store
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
-from tactile_exp.report import activations, cli, figures, heldout, runs, scores, table1
+from tactile_exp.report import activations, cli, figures, heldout, runs, table1
 from tactile_exp.report import table3 as t3
 from tactile_exp.runtime import sweep
 from tactile_exp.tracking import Tracker
@@ -282,7 +282,7 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
     dataset, modality, splits = experiment.load(settings)
     train = splits["metallic"].trials("train", dataset)
     test = modality.fit(train).transform(splits["metallic"].trials("test", dataset))
-    child = scores.children(tracker, job.run_id)["metallic"]
+    child = tracker.children(job.run_id)["metallic"]
     net = store.load_model(tracker, child, "model")
     for m in data.maps:
         assert m.unit.label == 1 and m.unit.unit in set(result.units)

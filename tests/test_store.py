@@ -23,7 +23,6 @@ from mlflow.tracking import MlflowClient
 from tactile_exp import store
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances
-from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import HapticCNN
@@ -241,19 +240,6 @@ def test_training_key_changes_with_what_trains_the_model_and_nothing_else():
     assert same == [key] * 3
     odd = Component("haptic_cnn", {"weights": Path("w.pt")})  # not JSON: hashed as its text
     assert _key(model=odd) == _key(model=Component("haptic_cnn", {"weights": "w.pt"}))
-
-
-@pytest.mark.parametrize("value,expected", [(None, True), (True, True), (False, False)])
-def test_reuse_switch(value, expected):
-    resolved = {} if value is None else {"tracking": {"reuse": value}}
-    assert store.reuse_enabled(resolved) is expected
-
-
-def test_reuse_switch_rejects_non_booleans():
-    from tactile_exp.errors import ConfigError
-
-    with pytest.raises(ConfigError, match=r"^tracking.reuse: must be true or false, got 'yes'$"):
-        store.reuse_enabled({"tracking": {"reuse": "yes"}})
 
 
 @pytest.mark.job
@@ -557,6 +543,21 @@ def test_a_dead_claimants_claim_is_taken_over(mlflow_uri, caplog):
     assert found == [None]
 
 
+@pytest.mark.job
+def test_a_job_claims_with_the_configured_lease(tiny_config, monkeypatch):
+    """``tracking.claim_lease`` (a typed setting) is the lease the job's claims hold for."""
+    leases = []
+    waited = store.await_trained
+
+    def spy(tracker: Tracker, key: str, run_id: str, *, lease: float) -> str | None:
+        leases.append(lease)
+        return waited(tracker, key, run_id, lease=lease)
+
+    monkeypatch.setattr(store, "await_trained", spy)
+    run(settings_from_config(tiny_config([*REPEAT, "tracking.claim_lease=42"], ONE)))
+    assert leases == [42.0]
+
+
 @pytest.mark.parametrize(("lease", "waits"), [(3600.0, True), (0.001, False)])
 def test_another_hosts_claim_holds_for_its_lease(mlflow_uri, lease, waits):
     tracker = Tracker(mlflow_uri, "tactile_exp")
@@ -568,14 +569,6 @@ def test_another_hosts_claim_holds_for_its_lease(mlflow_uri, lease, waits):
     tracker.client.set_terminated(theirs, "FAILED")
     thread.join(10)
     assert found == [None]
-
-
-@pytest.mark.parametrize("value", [0, -5, "long", True])
-def test_claim_lease_must_be_positive_seconds(value):
-    assert store.claim_lease({"tracking": {}}) == store.CLAIM_LEASE
-    assert store.claim_lease({"tracking": {"claim_lease": 60}}) == 60.0
-    with pytest.raises(ConfigError, match="tracking.claim_lease: must be a number of seconds"):
-        store.claim_lease({"tracking": {"claim_lease": value}})
 
 
 def _job(overrides: list[str], log: Path) -> subprocess.Popen:

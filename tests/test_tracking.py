@@ -222,13 +222,15 @@ def test_reading_a_missing_experiment_names_the_ones_there(mlflow_uri):
         rf"^no MLflow experiment 'absent' in {mlflow_uri}; experiments there: Default, present$"
     )
     with pytest.raises(ExperimentNotFound, match=message):
-        Tracker(mlflow_uri, "absent", create=False)
-    assert Tracker(mlflow_uri, "present", create=False).experiment_id
+        Tracker.open(mlflow_uri, "absent")
+    present = Tracker.open(mlflow_uri, "present").experiment_id
+    assert present == Tracker(mlflow_uri, "present").experiment_id
     client = MlflowClient(mlflow_uri)
+    assert sorted(e.name for e in client.search_experiments()) == ["Default", "present"]
     for experiment in client.search_experiments():
         client.delete_experiment(experiment.experiment_id)
     with pytest.raises(ExperimentNotFound, match=r"; experiments there: none$"):
-        Tracker(mlflow_uri, "absent", create=False)
+        Tracker.open(mlflow_uri, "absent")
 
 
 def test_unreachable_server_is_reported_before_any_work():
@@ -264,6 +266,91 @@ def test_finished_run_is_the_finished_parent_of_that_config_and_data_only(mlflow
         pass
     assert tracker.finished_run("h1", data_identity="d1") == done
     assert Tracker(mlflow_uri, "elsewhere").finished_run("h1", data_identity="d1") is None
+
+
+def test_run_queries_return_what_they_are_named_after(mlflow_uri):
+    """A store of two jobs (one of a sweep), children of every level and status, training-key
+    claims, and the same tree in another experiment, which no query may return."""
+    tracker, other = Tracker(mlflow_uri, "queries"), Tracker(mlflow_uri, "other")
+
+    def logged(where: Tracker, name: str, tags: dict, parent=None, fail=False, metrics=None):
+        time.sleep(0.01)  # distinct start times (ms): "newest" and "oldest" are defined
+        try:
+            with where.run(name, {}, tags, parent) as run_id:
+                where.log_metrics(run_id, metrics or {})
+                if fail:
+                    raise RuntimeError("crash")
+        except RuntimeError:
+            pass
+        return run_id
+
+    job = {"run_level": "parent"}
+    old = logged(tracker, "old", job)
+    crashed = logged(tracker, "crashed", job, fail=True)
+    new = logged(tracker, "new", job | {"sweep_id": "s1"})
+    logged(other, "elsewhere", job)
+    hard = logged(
+        tracker,
+        "hard",
+        {"run_level": "child", "adjective": "hard"},
+        new,
+        metrics={"val_auc": 0.75, "auc": 0.5},
+    )
+    soft = logged(
+        tracker, "soft", {"run_level": "child", "adjective": "soft"}, new, metrics={"auc": 0.25}
+    )
+    failed = logged(
+        tracker,
+        "cool",
+        {"run_level": "child", "adjective": "cool"},
+        new,
+        fail=True,
+        metrics={"val_auc": 0.5},
+    )
+    part = logged(tracker, "part", {"run_level": "part", "adjective": "hard"}, new)
+    logged(tracker, "old's", {"run_level": "child", "adjective": "hard"}, old)
+    running = tracker.client.create_run(tracker.experiment_id, tags=job).info.run_id
+
+    ids = lambda runs: [r.info.run_id for r in runs]  # noqa: E731
+    assert ids(tracker.jobs()) == [new, old]  # FINISHED, newest first
+    assert ids(tracker.jobs(finished_only=False)) == [running, new, crashed, old]
+    assert ids(tracker.jobs(sweep_id="s1")) == [new] and tracker.jobs(sweep_id="s2") == []
+    assert ids(tracker.jobs(limit=1)) == [new]
+    assert ids(tracker.child_runs(new)) == [hard, soft, failed]  # oldest first, any status
+    assert ids(tracker.child_runs(new, finished_only=True)) == [hard, soft]
+    assert ids(tracker.child_runs(new, level="part")) == [part]
+    assert ids(tracker.child_runs(new, level=None)) == [hard, soft, failed, part]
+    assert tracker.children(new) == {"hard": hard, "soft": soft}
+    assert tracker.child_metrics(new, "val_auc") == {"hard": 0.75, "cool": 0.5}
+    assert tracker.child_metrics(new, "auc") == {"hard": 0.5, "soft": 0.25}
+    assert tracker.children(running) == {} and other.children(new) == {}
+
+    assert tracker.trained_run("k") is None and tracker.claims("k") == []
+    first = tracker.client.create_run(tracker.experiment_id, tags={"training_key": "k"})
+    time.sleep(0.01)
+    second = tracker.client.create_run(tracker.experiment_id, tags={"training_key": "k"})
+    tracker.client.create_run(tracker.experiment_id, tags={"training_key": "k2"})
+    assert ids(tracker.claims("k")) == [first.info.run_id, second.info.run_id]
+    assert tracker.trained_run("k") is None  # RUNNING: a claim, not a trained model
+    for claim in (first, second):
+        tracker.client.set_terminated(claim.info.run_id, "FINISHED")
+    assert tracker.claims("k") == [] and other.claims("k") == []
+    assert tracker.trained_run("k").info.run_id == second.info.run_id  # the newest
+
+    sweep = logged(tracker, "sweep", {"run_level": "sweep", "sweep_id": "s1"})
+    assert ids(tracker.sweep_runs("s1")) == [sweep] and tracker.sweep_runs("s2") == []
+
+
+def test_no_module_but_tracking_writes_a_run_query():
+    """MLflow's filter syntax and the tags it filters on live in ``Tracker`` alone."""
+    package = ROOT / "tactile_exp"
+    writers = [
+        str(path.relative_to(ROOT))
+        for path in sorted(package.rglob("*.py"))
+        if path != package / "tracking.py"
+        and re.search(r"search_runs|filter_string|run_level = '", path.read_text())
+    ]
+    assert writers == []
 
 
 def test_runs_carry_source_and_process_tags_and_their_artifacts(mlflow_uri, tmp_path):
@@ -548,7 +635,7 @@ def test_a_child_found_alone_names_its_job_choices_and_data(tiny_config, mlflow_
 def test_runs_view_opens_the_runs_table_with_its_columns(mlflow_uri):
     tracker = Tracker(mlflow_uri, "views")
     columns = ["metrics.`mean_auc`", "params.`axis.combine`"]
-    where = {"order_by": "metrics.`mean_auc`", "filter_string": "tags.run_level = 'parent'"}
+    where = {"order_by": "metrics.`mean_auc`"}
     url = tracker.runs_view(columns, **where)
     page, query = url.split("?")
     assert page == f"http://127.0.0.1:5000/#/experiments/{tracker.experiment_id}/runs"

@@ -51,7 +51,7 @@ def _example(job: StoredJob, child: str) -> Any:
     config = job.config
     modality = MODALITIES[job.modality]
     takes_trials, takes_photos = modality.takes_trials, modality.takes_photographs
-    scores = Path(job.client.download_artifacts(child, "scores.csv")).read_text()
+    scores = Path(job.tracker.client.download_artifacts(child, "scores.csv")).read_text()
     unit = next(csv.DictReader(io.StringIO(scores)))["unit"].split("#")[0]
     example: dict[str, list[str]] = {}
     if takes_trials:
@@ -88,14 +88,16 @@ def log_job(
         folder = Path(tmp) / "job"
         for child in children.values():
             (folder / "runs" / child).mkdir(parents=True)
-            listed = {a.path for a in stored.client.list_artifacts(child)}
+            listed = {a.path for a in stored.tracker.client.list_artifacts(child)}
             for path in KEPT:
                 if path in listed:
-                    stored.client.download_artifacts(child, path, str(folder / "runs" / child))
+                    stored.tracker.client.download_artifacts(
+                        child, path, str(folder / "runs" / child)
+                    )
         (folder / "job.json").write_text(
             json.dumps({"job": job_id, "config": config, "adjectives": children}, indent=1)
         )
-        mlflow.set_tracking_uri(stored.uri)
+        mlflow.set_tracking_uri(stored.tracker.uri)
         metrics = job.data.metrics
         tags = {
             "experiment": experiment,

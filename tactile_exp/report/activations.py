@@ -19,7 +19,7 @@ import numpy as np
 
 from tactile_exp.data.layout import EPS
 from tactile_exp.preprocess.haptic import N_SCALAR, SIGNALS
-from tactile_exp.report.scores import ReportError, UnitScore, children, read_scores
+from tactile_exp.report.scores import ReportError, UnitScore, read_scores
 from tactile_exp.tracking import Tracker
 
 N_TRIALS = 2  # panels per adjective: its best- and worst-scored positive test trial
@@ -101,7 +101,7 @@ def conv3_maps(
     modality, model = config["modality"]["name"], config["model"]["name"]
     if (modality, model) != ("haptic", "haptic_cnn"):
         raise ReportError(f"run {job_id}: a {modality}/{model} job, not a haptic ConvNet's")
-    found = children(tracker, job_id)
+    found = tracker.children(job_id)
     data = dict(config["data"])
     dataset = DATA_SOURCES.build(data.pop("name"), **data)
     logged = tracker.client.get_run(job_id).data.tags.get("data.identity")

@@ -485,7 +485,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.fig6_trials < 1:
         parser.error("--fig6-trials must be >= 1")
     try:
-        tracker = Tracker(args.tracking_uri, args.experiment, entry_point=ENTRY_POINT, create=False)
+        tracker = Tracker.open(args.tracking_uri, args.experiment, entry_point=ENTRY_POINT)
     except ExperimentNotFound as err:
         sys.exit(f"error: {err}")
     if args.runs_table:

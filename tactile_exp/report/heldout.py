@@ -13,7 +13,7 @@ import numpy as np
 
 from tactile_exp import stats
 from tactile_exp.report.runs import Group
-from tactile_exp.report.scores import ReportError, children, read_scores
+from tactile_exp.report.scores import ReportError, read_scores
 from tactile_exp.tracking import Tracker
 
 # An AUC over fewer positive (or negative) test objects than this moves in steps of at least a
@@ -71,7 +71,7 @@ def load(tracker: Tracker, group: Group) -> Evidence:
         pooled: dict[str, list[list[float]]] = {}
         runs = group.fold_runs(seed)
         for run in runs:
-            found = children(tracker, run.run_id)
+            found = tracker.children(run.run_id)
             missing = sorted(set(run.aucs) - set(found))
             if missing:
                 return Evidence(

@@ -134,10 +134,7 @@ def _tuned(tags: dict[str, str]) -> tuple[str, ...]:
 
 def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
     """Every group of FINISHED parent runs (of one sweep, if given), sorted by Table I row."""
-    query = "tags.run_level = 'parent' and attributes.status = 'FINISHED'"
-    if sweep_id:
-        query += f" and tags.sweep_id = '{sweep_id}'"
-    found = tracker.client.search_runs([tracker.experiment_id], query, max_results=50000)
+    found = tracker.jobs(sweep_id=sweep_id or None)
     groups: dict[str, Group] = {}
     for run in found:
         params, tags, metrics = run.data.params, run.data.tags, run.data.metrics
@@ -200,8 +197,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
 def skipped_cells(tracker: Tracker, sweep_id: str) -> list[str]:
     """The cells sweep ``sweep_id`` listed invalid and skipped, one line each (``#num cell:
     reason``): the ``invalid`` tag of its ``run_level=sweep`` run (``runtime.sweep``)."""
-    query = f"tags.run_level = 'sweep' and tags.sweep_id = '{sweep_id}'"
-    found = tracker.client.search_runs([tracker.experiment_id], query)
+    found = tracker.sweep_runs(sweep_id)
     return [line for run in found for line in run.data.tags.get("invalid", "").splitlines()]
 
 

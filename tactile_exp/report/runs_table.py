@@ -30,10 +30,7 @@ def _cells(run) -> list[str]:
 def runs_table(*, tracker: Tracker, job_id: str) -> str:
     """The job (parent) run and its child runs, oldest first, with the columns ``COLUMNS``."""
     parent = tracker.client.get_run(job_id)
-    found = tracker.client.search_runs(
-        [tracker.experiment_id], f"tags.mlflow.parentRunId = '{job_id}'", max_results=1000
-    )
-    found.sort(key=lambda r: r.info.start_time)
+    found = tracker.child_runs(job_id, level=None)
     lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines.append("| " + " | ".join(_cells(parent)) + " |")
     for run in found:

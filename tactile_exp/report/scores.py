@@ -35,17 +35,6 @@ class UnitScore:
         return self.score > THRESHOLD
 
 
-def children(tracker: Tracker, job_id: str) -> dict[str, str]:
-    """Adjective -> the job's FINISHED child (per-adjective) run."""
-    runs = tracker.client.search_runs(
-        [tracker.experiment_id],
-        f"tags.mlflow.parentRunId = '{job_id}' and tags.run_level = 'child' "
-        "and attributes.status = 'FINISHED'",
-        max_results=1000,
-    )
-    return {r.data.tags["adjective"]: r.info.run_id for r in runs}
-
-
 def read_scores(tracker: Tracker, child_id: str) -> list[UnitScore]:
     """The test units of one child run, as its ``scores.csv`` lists them."""
     from mlflow.exceptions import MlflowException

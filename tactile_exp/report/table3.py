@@ -18,7 +18,7 @@ import numpy as np
 
 from tactile_exp.data.layout import ADJECTIVES, objects
 from tactile_exp.report.runs import Group, row_group
-from tactile_exp.report.scores import THRESHOLD, UnitScore, children, read_scores
+from tactile_exp.report.scores import THRESHOLD, UnitScore, read_scores
 from tactile_exp.tracking import Tracker
 
 # The paper's Table III columns: Table I row -> modality shown.
@@ -62,7 +62,7 @@ def read_rows(tracker: Tracker, groups: list[Group]) -> dict[str, RowScores | No
             continue
         run_id = group.first_run.run_id
         scores = {
-            a: object_scores(read_scores(tracker, c)) for a, c in children(tracker, run_id).items()
+            a: object_scores(read_scores(tracker, c)) for a, c in tracker.children(run_id).items()
         }
         out[row] = RowScores(row, group.method, run_id, scores)
     return out
