@@ -16,7 +16,7 @@ from conftest import CONF, TINY_DATA
 from hydra.core.global_hydra import GlobalHydra
 from mlflow.tracking import MlflowClient
 
-from tactile_exp import evaluate, experiment, search
+from tactile_exp import experiment, metrics, search
 from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.data.layout import Instances
 from tactile_exp.modalities.haptic import Haptic
@@ -261,7 +261,7 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
     clean = value(settings.objective, experiment.run(settings).val_aucs)
 
-    real_score, real_auc = experiment.score, evaluate.auc
+    real_score, real_evaluate = experiment.score, metrics.evaluate
 
     def nan_test_scores(*args, **kwargs):
         scored, head, history = real_score(*args, **kwargs)
@@ -269,11 +269,13 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
         scored["test"] = (np.full_like(scores, np.nan, dtype=float), units)
         return scored, head, history
 
-    def nan_tolerant_auc(y, scores):
-        return float("nan") if not np.all(np.isfinite(scores)) else real_auc(y, scores)
+    def nan_tolerant(names, y, scores):
+        if np.all(np.isfinite(scores)):
+            return real_evaluate(names, y, scores)
+        return {metrics.METRICS.build(n).key: float("nan") for n in names}
 
     monkeypatch.setattr(experiment, "score", nan_test_scores)
-    monkeypatch.setattr(evaluate, "auc", nan_tolerant_auc)
+    monkeypatch.setattr(metrics, "evaluate", nan_tolerant)
     monkeypatch.setattr(experiment, "_log_summary", lambda *args: None)  # ROC of NaN scores
     sentinel = experiment.run(settings)
     assert math.isnan(sentinel.mean_auc)  # the test scores were NaN
