@@ -151,7 +151,7 @@ def run_adjective(
         scored = {"train": pipeline.train_scores_, "test": (scores, units)}
         if "val" in sides:
             scored["val"] = pipeline.decision_function(sides["val"])
-        values = metrics.evaluate(settings.metrics, units.y, scores)
+        values = metrics.compute(settings.metrics, units.y, scores)
         diagnostics = _diagnostics(scored)
         sizes = _sizes(split, sides, pipeline, test, units, scored.get("val"))
         sizes["seconds"] = time.perf_counter() - start

@@ -28,18 +28,22 @@ from tactile_exp.registry import Registry
 THRESHOLD = 0.0
 
 Function = Callable[[np.ndarray, np.ndarray], float]  # (0/1 labels, decision values) -> value
+# (labels (n,), decision values (n,), unit weights (b, n)) -> the metric under each weighting (b,)
+Weighted = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
 class Metric:
     """A registered metric: ``key`` is the name it is logged under, ``label`` the one people
-    read; ``needs_both_classes``: undefined unless the labels hold positives and negatives."""
+    read; ``needs_both_classes``: undefined unless the labels hold positives and negatives;
+    ``weighted`` (optional): the same metric under many integer unit weightings at once."""
 
     name: str
     key: str
     label: str
     function: Function
     needs_both_classes: bool
+    weighted: Weighted | None = None
 
     def __call__(self, y: np.ndarray, scores: np.ndarray) -> float:
         """The metric of ``scores`` against 0/1 labels ``y``; refuses what it cannot score."""
@@ -53,16 +57,29 @@ class Metric:
             raise ValueError("scores contain NaN or infinite values")
         return float(self.function(y, scores))
 
+    def replicates(self, y: np.ndarray, scores: np.ndarray, counts: np.ndarray) -> np.ndarray:
+        """The metric with each unit taken ``counts[b, unit]`` times, per row ``b`` of counts
+        (the report's bootstrap: an object drawn twice counts its units twice)."""
+        if self.weighted is not None:
+            return self.weighted(np.asarray(y), np.asarray(scores, dtype=float), counts)
+        return np.array([self(np.repeat(y, c), np.repeat(scores, c)) for c in counts])
+
 
 METRICS: Registry[Metric] = Registry("metric")  # entries build a Metric: see ``register``
 
 
 def register(
-    name: str, *, key: str | None = None, label: str | None = None, needs_both_classes: bool
+    name: str,
+    *,
+    key: str | None = None,
+    label: str | None = None,
+    needs_both_classes: bool,
+    weighted: Weighted | None = None,
 ) -> Callable[[Function], Function]:
     """Register ``function(y, scores) -> float`` as metric ``name``, logged as ``key`` (default
     ``name``); two metrics may not share a key (their logged values would overwrite), and a key
-    has no dot (the job's run logs ``<key>.<adjective>``)."""
+    has no dot (the job's run logs ``<key>.<adjective>``). ``weighted`` only makes the report's
+    bootstrap faster; without it each replicate's units are repeated and ``function`` called."""
 
     def add(function: Function) -> Function:
         logged = key or name
@@ -72,7 +89,7 @@ def register(
         if logged in taken:
             raise ValueError(f"metric {name!r}: key {logged!r} is already metric {taken[logged]!r}")
         factory = functools.partial(
-            Metric, name, logged, label or logged, function, needs_both_classes
+            Metric, name, logged, label or logged, function, needs_both_classes, weighted
         )
         METRICS.register(name)(factory)
         return function
@@ -80,7 +97,7 @@ def register(
     return add
 
 
-def evaluate(names: Sequence[str], y: np.ndarray, scores: np.ndarray) -> dict[str, float]:
+def compute(names: Sequence[str], y: np.ndarray, scores: np.ndarray) -> dict[str, float]:
     """One adjective's test units scored by each named metric: ``{key: value}``, in order."""
     return {m.key: m(y, scores) for m in map(METRICS.build, names)}
 
@@ -103,27 +120,47 @@ def roc_auc(y: np.ndarray, scores: np.ndarray) -> float:
     return float(roc_auc_score(y, scores))
 
 
-@register("average_precision", label="average precision", needs_both_classes=True)
-def average_precision(y: np.ndarray, scores: np.ndarray) -> float:
-    """Area under the precision-recall curve as scikit-learn's ``average_precision_score``
-    defines it (sum over thresholds of precision times the recall gained, no interpolation),
-    in numpy: the report's bootstrap calls it 2000 times per adjective."""
+def _average_precision_weighted(
+    y: np.ndarray, scores: np.ndarray, weights: np.ndarray
+) -> np.ndarray:
+    """Average precision as scikit-learn's ``average_precision_score`` defines it (sum over
+    thresholds of precision times the recall gained, no interpolation), per row of ``weights``:
+    units ranked by score once, tied units one threshold, weights summed down the ranking."""
     order = np.argsort(-scores, kind="mergesort")
     ranked, positive = scores[order], (y[order] == 1)
     last = np.r_[np.flatnonzero(ranked[1:] != ranked[:-1]), len(ranked) - 1]  # end of each tie
-    true_positives = np.cumsum(positive)[last]
-    precision = true_positives / (last + 1)
-    recall = true_positives / true_positives[-1]
-    return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
+    ranked_weights = weights[:, order]
+    true_positives = np.cumsum(ranked_weights * positive, axis=1)[:, last]
+    taken = np.cumsum(ranked_weights, axis=1)[:, last]
+    precision = np.divide(true_positives, taken, out=np.zeros(taken.shape), where=taken > 0)
+    recall = true_positives / true_positives[:, -1:]
+    return np.sum(np.diff(recall, axis=1, prepend=0.0) * precision, axis=1)
 
 
-@register("f1", label="F1", needs_both_classes=False)
+@register(
+    "average_precision",
+    label="average precision",
+    needs_both_classes=True,
+    weighted=_average_precision_weighted,
+)
+def average_precision(y: np.ndarray, scores: np.ndarray) -> float:
+    """Area under the precision-recall curve (scikit-learn's definition), in numpy: ~20x faster
+    than ``average_precision_score``, which the report's bootstrap would call 2000 times."""
+    return float(_average_precision_weighted(y, scores, np.ones((1, len(y))))[0])
+
+
+def _f1_weighted(y: np.ndarray, scores: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """F1 at the decision threshold per row of unit ``weights`` (0 where nothing is positive)."""
+    predicted, positive = scores > THRESHOLD, y == 1
+    true_positives = weights @ (predicted & positive)
+    denominator = 2 * true_positives + weights @ (predicted != positive)
+    out = np.zeros(len(weights))
+    return np.divide(2 * true_positives, denominator, out=out, where=denominator > 0)
+
+
+@register("f1", label="F1", needs_both_classes=False, weighted=_f1_weighted)
 def f1(y: np.ndarray, scores: np.ndarray) -> float:
     """F1 of the positive class at the decision threshold (a unit is positive when its score
     is > 0), as Chu et al. report it, so their 0.77 stays comparable; 0 when there is nothing
     positive, labelled or predicted (scikit-learn's ``zero_division=0``)."""
-    predicted, positive = scores > THRESHOLD, y == 1
-    true_positives = np.sum(predicted & positive)
-    wrong = np.sum(predicted != positive)
-    denominator = 2 * true_positives + wrong
-    return float(2 * true_positives / denominator) if denominator else 0.0
+    return float(_f1_weighted(y, scores, np.ones((1, len(y))))[0])

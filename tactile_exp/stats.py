@@ -55,7 +55,7 @@ class HeldOut:
 
     @functools.cached_property
     def auc(self) -> float:
-        """ROC AUC over units (ties count one half), as ``tactile_exp.evaluate`` computes it."""
+        """ROC AUC over units (ties count one half), as metric ``roc_auc`` computes it."""
         return float(self.pairs[0].sum() / (self.pairs[1].sum() * self.pairs[2].sum()))
 
     @functools.cached_property
@@ -154,13 +154,12 @@ def _resampled(test: HeldOut, cp: np.ndarray, cn: np.ndarray) -> np.ndarray:
     """``test.metric`` on each replicate's units: each unit as often as its object is drawn."""
     from tactile_exp.metrics import METRICS
 
-    metric = METRICS.build(test.metric)
     pos_ids, neg_ids = test.key
     counts = np.empty((len(cp), len(test.label)), dtype=int)
     for label, ids, drawn in ((1, pos_ids, cp), (0, neg_ids, cn)):
         units = test.label == label
         counts[:, units] = drawn[:, np.searchsorted(ids, test.object_id[units])]
-    return np.array([metric(np.repeat(test.label, c), np.repeat(test.score, c)) for c in counts])
+    return METRICS.build(test.metric).replicates(test.label, test.score, counts)
 
 
 def bootstrap_mean(

@@ -91,7 +91,7 @@ def test_roc_auc_is_logged_as_auc_and_the_others_by_name():
         METRICS.build("roc_auc").needs_both_classes and not METRICS.build("f1").needs_both_classes
     )
     y, s = np.array([0, 1, 1, 0]), np.array([-1.0, 2.0, 0.5, 0.7])
-    assert list(metrics.evaluate(["f1", "roc_auc"], y, s)) == ["f1", "auc"]  # in order
+    assert list(metrics.compute(["f1", "roc_auc"], y, s)) == ["f1", "auc"]  # in order
 
 
 def test_summary_is_the_mean_over_adjectives_and_each_adjectives_value():
@@ -116,18 +116,35 @@ def test_two_metrics_may_not_share_a_key(registry):
         metrics.register("dotted", key="a.b", needs_both_classes=True)(roc_auc_score)
 
 
-def test_bootstrap_of_a_registered_metric_recomputes_it_on_the_resampled_units(registry):
-    """Known answer: ROC AUC registered again under another name goes through the generic path
-    (units repeated as often as their object is drawn) and must give the pair-sum replicates."""
-    metrics.register("auc_again", needs_both_classes=True)(metrics.roc_auc)
+@pytest.mark.parametrize("name", ["roc_auc", "average_precision", "f1"])
+def test_bootstrap_of_a_registered_metric_recomputes_it_on_the_resampled_units(registry, name):
+    """Known answer: a metric registered again without its fast path goes through the generic
+    one (units repeated as often as their object is drawn) and must give the same replicates
+    as ROC AUC's pair sums and the other metrics' weighted forms."""
+    shipped = METRICS.build(name)
+    plain = f"{name}_again"
+    metrics.register(plain, needs_both_classes=shipped.needs_both_classes)(shipped.function)
     rng = np.random.default_rng(3)
     obj = np.repeat(np.arange(7), 3)
     label = (obj < 3).astype(int)
-    score = np.round(label + rng.normal(size=len(obj)), 1)
-    fast = stats.bootstrap(stats.HeldOut(obj, label, score), "hard", 300, 0)
-    generic = stats.bootstrap(stats.HeldOut(obj, label, score, "auc_again"), "hard", 300, 0)
+    score = np.round(label - 0.5 + rng.normal(size=len(obj)), 1)
+    fast = stats.bootstrap(stats.HeldOut(obj, label, score, name), "hard", 300, 0)
+    generic = stats.bootstrap(stats.HeldOut(obj, label, score, plain), "hard", 300, 0)
     np.testing.assert_allclose(generic, fast, atol=1e-12)
     assert fast.std() > 0.01  # the replicates differ: the draws are really compared
+
+
+def test_weighted_forms_equal_scikit_learn_with_sample_weights():
+    rng = np.random.default_rng(5)
+    for y, s in list(_cases())[:20]:
+        w = rng.integers(0, 3, size=(4, len(y)))
+        w[:, np.flatnonzero(y == 1)[0]] += 1  # a positive in every weighting
+        ap = METRICS.build("average_precision").replicates(y, s, w)
+        f1 = METRICS.build("f1").replicates(y, s, w)
+        for row, weights in enumerate(w):
+            expected = average_precision_score(y, s, sample_weight=weights)
+            assert ap[row] == pytest.approx(expected, abs=1e-12)
+            assert f1[row] == pytest.approx(f1_score(y, s > 0, sample_weight=weights), abs=1e-12)
 
 
 def _csv(path: Path) -> list[dict[str, str]]:

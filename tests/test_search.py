@@ -261,7 +261,7 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
     clean = value(settings.objective, experiment.run(settings).val_aucs)
 
-    real_score, real_evaluate = experiment.score, metrics.evaluate
+    real_score, real_compute = experiment.score, metrics.compute
 
     def nan_test_scores(*args, **kwargs):
         scored, head, history = real_score(*args, **kwargs)
@@ -271,11 +271,11 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
 
     def nan_tolerant(names, y, scores):
         if np.all(np.isfinite(scores)):
-            return real_evaluate(names, y, scores)
+            return real_compute(names, y, scores)
         return {metrics.METRICS.build(n).key: float("nan") for n in names}
 
     monkeypatch.setattr(experiment, "score", nan_test_scores)
-    monkeypatch.setattr(metrics, "evaluate", nan_tolerant)
+    monkeypatch.setattr(metrics, "compute", nan_tolerant)
     monkeypatch.setattr(experiment, "_log_summary", lambda *args: None)  # ROC of NaN scores
     sentinel = experiment.run(settings)
     assert math.isnan(sentinel.mean_auc)  # the test scores were NaN
