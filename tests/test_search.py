@@ -21,6 +21,7 @@ from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.data.layout import Instances
 from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.objective import value
+from tactile_exp.pipeline import AdjectivePipeline
 
 
 def _search(monkeypatch, tmp_path: Path, cache_dir: Path, mlflow_uri: str, *args: str) -> None:
@@ -261,20 +262,22 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
     clean = value(settings.objective, experiment.run(settings).val_aucs)
 
-    real_score, real_compute = experiment.score, metrics.compute
+    real_score, real_compute = AdjectivePipeline.score, metrics.compute
 
-    def nan_test_scores(*args, **kwargs):
-        scored, head, history = real_score(*args, **kwargs)
-        scores, units = scored["test"]
-        scored["test"] = (np.full_like(scores, np.nan, dtype=float), units)
-        return scored, head, history
+    def nan_test_scores(self, instances):  # the engine scores the test side with score()
+        scores, units = real_score(self, instances)
+        return np.full_like(scores, np.nan, dtype=float), units
+
+    def clean_decision_function(self, trials):  # validation (and predict) go through here
+        return real_score(self, self.preprocess.transform(trials))
 
     def nan_tolerant(names, y, scores):
         if np.all(np.isfinite(scores)):
             return real_compute(names, y, scores)
         return {metrics.METRICS.build(n).key: float("nan") for n in names}
 
-    monkeypatch.setattr(experiment, "score", nan_test_scores)
+    monkeypatch.setattr(AdjectivePipeline, "score", nan_test_scores)
+    monkeypatch.setattr(AdjectivePipeline, "decision_function", clean_decision_function)
     monkeypatch.setattr(metrics, "compute", nan_tolerant)
     monkeypatch.setattr(experiment, "_log_summary", lambda *args: None)  # ROC of NaN scores
     sentinel = experiment.run(settings)
