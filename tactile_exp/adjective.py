@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, store
+from tactile_exp import metrics, store
 from tactile_exp.config import Settings
 from tactile_exp.data.layout import Instances, Split, Trials
 from tactile_exp.modalities.base import Modality, PartProvider
@@ -42,6 +42,7 @@ class AdjectiveResult:
     sizes: dict[str, float]
     history: History = field(default_factory=dict)
     diagnostics: dict[str, float] = field(default_factory=dict)  # train_auc, val_auc
+    metrics: dict[str, float] = field(default_factory=dict)  # key -> value: settings.metrics
 
 
 def key_params(settings: Settings) -> dict[str, str]:
@@ -152,12 +153,12 @@ def run_adjective(
         scored = {"train": pipeline.train_scores_, "test": (scores, units)}
         if "val" in sides:
             scored["val"] = pipeline.decision_function(sides["val"])
-        auc = evaluate.auc(units.y, scores)
+        values = metrics.compute(settings.metrics, units.y, scores)
         diagnostics = _diagnostics(scored)
         sizes = _sizes(split, sides, pipeline, test, units, scored.get("val"))
         sizes["seconds"] = time.perf_counter() - start
-        metrics = {"auc": auc, **sizes, **diagnostics, **pipeline.preprocess.metrics()}
-        tracker.log_metrics(run_id, metrics)
+        logged = {**values, **sizes, **diagnostics, **pipeline.preprocess.metrics()}
+        tracker.log_metrics(run_id, logged)
         log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in diagnostics.items()))
         tracker.log_curves(run_id, history)
         tracker.log_text(run_id, scores_table(scores, units), "scores.csv")
@@ -165,7 +166,16 @@ def run_adjective(
         # runs only, so a job killed while writing leaves nothing reusable.
         store.log_folder(tracker, run_id, "", pipeline.save)
     return AdjectiveResult(
-        adjective, auc, units.y, scores, units.trial, units.object_id, sizes, history, diagnostics
+        adjective,
+        values["auc"],
+        units.y,
+        scores,
+        units.trial,
+        units.object_id,
+        sizes,
+        history,
+        diagnostics,
+        values,
     )
 
 
@@ -212,7 +222,7 @@ def _diagnostics(scored: dict[str, tuple[np.ndarray, Instances]]) -> dict[str, f
     for name in ("train", "val"):
         if name in scored and len(np.unique(scored[name][1].y)) == 2:
             scores, units = scored[name]
-            out[f"{name}_auc"] = evaluate.auc(units.y, scores)
+            out[f"{name}_auc"] = metrics.METRICS.build("roc_auc")(units.y, scores)
     return out
 
 

@@ -28,12 +28,23 @@ DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accept
 # job runs, not its results (beyond float rounding): a finished job is not rerun for it.
 # ``objective`` is what the job returns to Hydra and ``study`` only tags it (issue 28): a search
 # trial is the same job as the plain run of its values, and is skipped once either finished.
-# ``sweep`` (sweep.on_invalid) says what a sweep does with its other jobs.
-UNHASHED = ("tracking", "hydra", "paper", "trunk", "workers", "objective", "study", "sweep")
+# ``sweep`` (sweep.on_invalid) says what a sweep does with its other jobs. ``metrics`` says
+# what is logged about a job's test scores, not what is trained: a finished job is not rerun.
+UNHASHED = (
+    "tracking",
+    "hydra",
+    "paper",
+    "trunk",
+    "workers",
+    "objective",
+    "study",
+    "sweep",
+    "metrics",
+)
 STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best values' test run
 # Overrides that say where results go or how a search tags a job, not which job it is: left out
 # of run names and axes.
-UNNAMED = ("tracking", "hydra", "sweep", "cache_dir", "study", "objective")
+UNNAMED = ("tracking", "hydra", "sweep", "cache_dir", "study", "objective", "metrics")
 ADJECTIVES_SPELLED_OUT = 3  # a run name lists at most this many adjectives, else counts them
 
 
@@ -78,6 +89,7 @@ class Settings:
     axes: dict[str, str] = field(default_factory=dict)  # the job's overrides: see ``axes``
     split_params: dict[str, Any] = field(default_factory=dict)  # e.g. folds=5, fold=0
     modules: tuple[str, ...] = ()  # the components' ``_module_``s: see ``component_modules``
+    metrics: tuple[str, ...] = ("roc_auc",)  # logged per adjective (tactile_exp.metrics)
 
     @property
     def split_key(self) -> str:
@@ -270,6 +282,7 @@ def settings_from_config(
         raise ConfigError(f"validation.fraction: must be a number in [0, 1), got {fraction!r}")
 
     objective = _check_objective(resolved.get("objective", "mean_val_auc"))
+    metrics = _check_metrics(resolved.get("metrics", ["roc_auc"]))
     study_tags = _check_study(resolved.get("study") or {}, float(fraction))
 
     tracking = _check_tracking(resolved.get("tracking"))
@@ -301,6 +314,7 @@ def settings_from_config(
         axes=job_axes,
         split_params={k: v for k, v in resolved["split"].items() if k != "name"},
         modules=component_modules(resolved),
+        metrics=metrics,
     )
     check_components(settings)
     return settings
@@ -319,6 +333,26 @@ def _check_objective(name: Any) -> str:
             f"a search selects on) must be a validation metric: {known}"
         )
     raise ConfigError(f"objective: unknown {name!r}; allowed: {known}")
+
+
+def _check_metrics(names: Any) -> tuple[str, ...]:
+    """Registered metrics, each once, roc_auc among them (mean_auc and the report rest on it)."""
+    from tactile_exp.metrics import METRICS
+
+    known = ", ".join(METRICS.names())
+    if not isinstance(names, list) or not names:
+        raise ConfigError(f"metrics: must be a list of metric names from {known}, got {names!r}")
+    unknown = [n for n in names if not isinstance(n, str) or n not in METRICS]
+    if unknown:
+        raise ConfigError(f"metrics: unknown {unknown}; known metrics: {known}")
+    if len(set(names)) != len(names):
+        raise ConfigError(f"metrics: listed twice in {names}")
+    if "roc_auc" not in names:
+        raise ConfigError(
+            f"metrics: {names} leaves out roc_auc, the paper's E2 (mean_auc, its interval and "
+            "the report's default rest on it); list it, e.g. [roc_auc, f1]"
+        )
+    return tuple(names)
 
 
 def _check_study(study: dict[str, Any], fraction: float) -> dict[str, str]:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, stats
+from tactile_exp import evaluate, metrics, stats
 from tactile_exp.adjective import AdjectiveResult, key_params, log_data, run_adjective
 from tactile_exp.config import Settings, param_error
 from tactile_exp.data.layout import Split
@@ -115,27 +115,29 @@ def run(settings: Settings) -> JobResult:
         tracker.set_tags(parent_id, {"data.identity": dataset.identity()})
         log_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
+        headline = metrics.METRICS.build(settings.metrics[0])
         for i, result in enumerate(_adjectives(settings, tracker, parent_id, dataset, splits), 1):
             results[result.adjective] = result
             log.info(
-                "[%d/%d] %s AUC %.3f (%.1f s)",
+                "[%d/%d] %s %s %.3f (%.1f s)",
                 i,
                 len(settings.adjectives),
                 result.adjective,
-                result.auc,
+                headline.label,
+                result.metrics[headline.key],
                 result.sizes["seconds"],
             )
-        aucs = {a: r.auc for a, r in results.items()}
-        mean = evaluate.mean_auc(aucs)
+        logged = metrics.summary({a: r.metrics for a, r in results.items()})
+        mean = logged["mean_auc"]
         held_out = {a: stats.HeldOut(r.objects, r.y, r.scores) for a, r in results.items()}
         ci = stats.mean_interval([held_out])  # over test objects (issue 27)
         tracker.log_metrics(
             parent_id,
-            {"mean_auc": mean, **{f"auc.{a}": v for a, v in aucs.items()}, **_means(results)}
-            | {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high},
+            logged | _means(results) | {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high},
         )
         _log_summary(tracker, parent_id, settings, dataset, results)
-        log.info("mean AUC over %d adjectives: %.4f", len(aucs), mean)
+        key, label = headline.key, headline.label
+        log.info("mean %s over %d adjectives: %.4f", label, len(results), logged[f"mean_{key}"])
     val_aucs = {
         a: r.diagnostics["val_auc"] for a, r in results.items() if "val_auc" in r.diagnostics
     }

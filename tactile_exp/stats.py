@@ -12,6 +12,10 @@ A replicate's draws are a function of (seed, adjective, test objects): two confi
 on the same objects get the same resampled objects, which is what makes a comparison paired.
 Evaluations of several seeds (or splits) are averaged replicate by replicate; what the interval
 covers is test-object sampling, not the spread of training seeds.
+
+The numbers are of a `HeldOut`'s ``metric`` (``tactile_exp.metrics``): ROC AUC by default, from
+object-pair sums without resampling units; any other metric, a function of the units' labels and
+scores, is recomputed on each replicate's units (an object drawn twice counts its units twice).
 """
 
 from __future__ import annotations
@@ -35,10 +39,11 @@ class HeldOut:
     object_id: np.ndarray
     label: np.ndarray
     score: np.ndarray
+    metric: str = "roc_auc"  # what `value` and `bootstrap` compute (tactile_exp.metrics)
 
     @functools.cached_property
     def replicates(self) -> dict[tuple[str, int, int], np.ndarray]:
-        """Bootstrap AUCs by (adjective, n_boot, seed), filled by `bootstrap_aucs`."""
+        """Bootstrap values by (adjective, n_boot, seed), filled by `bootstrap`."""
         return {}
 
     @functools.cached_property
@@ -50,8 +55,17 @@ class HeldOut:
 
     @functools.cached_property
     def auc(self) -> float:
-        """ROC AUC over units (ties count one half), as ``tactile_exp.evaluate`` computes it."""
+        """ROC AUC over units (ties count one half), as metric ``roc_auc`` computes it."""
         return float(self.pairs[0].sum() / (self.pairs[1].sum() * self.pairs[2].sum()))
+
+    @functools.cached_property
+    def value(self) -> float:
+        """The metric of all units: ``auc`` for roc_auc."""
+        if self.metric == "roc_auc":
+            return self.auc
+        from tactile_exp.metrics import METRICS
+
+        return METRICS.build(self.metric)(self.label, self.score)
 
     @functools.cached_property
     def pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -119,20 +133,33 @@ def _draws(adjective: str, objects: tuple[int, ...], n_boot: int, seed: int) -> 
     return counts
 
 
-def bootstrap_aucs(
-    test: HeldOut, adjective: str, n_boot: int = N_BOOT, seed: int = SEED
-) -> np.ndarray:
-    """The adjective's AUC in each bootstrap replicate (n_boot,); kept on ``test``, since a
+def bootstrap(test: HeldOut, adjective: str, n_boot: int = N_BOOT, seed: int = SEED) -> np.ndarray:
+    """The adjective's metric in each bootstrap replicate (n_boot,); kept on ``test``, since a
     configuration enters several comparisons."""
     kept = test.replicates.get((adjective, n_boot, seed))
     if kept is None:
-        wins, u, v = test.pairs
         pos_ids, neg_ids = test.key
         cp = _draws(f"{adjective}+", pos_ids, n_boot, seed)
         cn = _draws(f"{adjective}-", neg_ids, n_boot, seed)
-        kept = np.einsum("bi,bi->b", cp @ wins, cn) / ((cp @ u) * (cn @ v))
+        if test.metric == "roc_auc":
+            wins, u, v = test.pairs
+            kept = np.einsum("bi,bi->b", cp @ wins, cn) / ((cp @ u) * (cn @ v))
+        else:
+            kept = _resampled(test, cp, cn)
         test.replicates[(adjective, n_boot, seed)] = kept
     return kept
+
+
+def _resampled(test: HeldOut, cp: np.ndarray, cn: np.ndarray) -> np.ndarray:
+    """``test.metric`` on each replicate's units: each unit as often as its object is drawn."""
+    from tactile_exp.metrics import METRICS
+
+    pos_ids, neg_ids = test.key
+    counts = np.empty((len(cp), len(test.label)), dtype=int)
+    for label, ids, drawn in ((1, pos_ids, cp), (0, neg_ids, cn)):
+        units = test.label == label
+        counts[:, units] = drawn[:, np.searchsorted(ids, test.object_id[units])]
+    return METRICS.build(test.metric).replicates(test.label, test.score, counts)
 
 
 def bootstrap_mean(
@@ -141,8 +168,8 @@ def bootstrap_mean(
     """The mean over adjectives (then over evaluations) and its bootstrap replicates."""
     estimates, replicates = [], []
     for ev in evaluations:
-        estimates.append(np.mean([t.auc for t in ev.values()]))
-        boots = [bootstrap_aucs(t, a, n_boot, seed) for a, t in sorted(ev.items())]
+        estimates.append(np.mean([t.value for t in ev.values()]))
+        boots = [bootstrap(t, a, n_boot, seed) for a, t in sorted(ev.items())]
         replicates.append(np.mean(boots, axis=0))
     return float(np.mean(estimates)), np.mean(replicates, axis=0)
 
@@ -166,8 +193,8 @@ def adjective_intervals(
     out = {}
     for a in sorted({a for ev in evaluations for a in ev}):
         tests = [ev[a] for ev in evaluations if a in ev]
-        boots = np.mean([bootstrap_aucs(t, a, n_boot, seed) for t in tests], axis=0)
-        out[a] = percentile(float(np.mean([t.auc for t in tests])), boots)
+        boots = np.mean([bootstrap(t, a, n_boot, seed) for t in tests], axis=0)
+        out[a] = percentile(float(np.mean([t.value for t in tests])), boots)
     return out
 
 
@@ -203,7 +230,8 @@ def compare(
     est_b, boot_b = bootstrap_mean(b, n_boot, seed)
     adjectives = sorted(a[0])
     diffs = [
-        np.mean([ea[j].auc - eb[j].auc for ea, eb in zip(a, b, strict=True)]) for j in adjectives
+        np.mean([ea[j].value - eb[j].value for ea, eb in zip(a, b, strict=True)])
+        for j in adjectives
     ]
     return Comparison(
         name_a,
@@ -223,10 +251,9 @@ def adjective_difference(
     if not pairs or any(x[adjective].key != y[adjective].key for x, y in pairs):
         raise ValueError(f"not on the same test objects ({adjective})")
     boots = [
-        bootstrap_aucs(x[adjective], adjective) - bootstrap_aucs(y[adjective], adjective)
-        for x, y in pairs
+        bootstrap(x[adjective], adjective) - bootstrap(y[adjective], adjective) for x, y in pairs
     ]
-    estimate = float(np.mean([x[adjective].auc - y[adjective].auc for x, y in pairs]))
+    estimate = float(np.mean([x[adjective].value - y[adjective].value for x, y in pairs]))
     return percentile(estimate, np.mean(boots, axis=0), level)
 
 

@@ -355,3 +355,43 @@ def test_seed_is_checked_the_same_for_every_row(compose_config):
     for row in ("table1_i_haptic_cnn_1trial", "table1_o_random", "table1_a_haptic_static_1trial"):
         with pytest.raises(ConfigError, match="^seed: "):
             settings_from_config(compose_config([f"experiment={row}", "seed=-1"]))
+
+
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        (
+            "metrics=[roc_auc,accuracy]",
+            "metrics: unknown ['accuracy']; known metrics: average_precision, f1, roc_auc",
+        ),
+        ("metrics=[]", "metrics: must be a list of metric names from average_precision, f1, "),
+        ("metrics=roc_auc", "metrics: must be a list of metric names from "),
+        ("metrics=[roc_auc,f1,roc_auc]", "metrics: listed twice in ['roc_auc', 'f1', 'roc_auc']"),
+        ("metrics=[f1,average_precision]", "metrics: ['f1', 'average_precision'] leaves out roc"),
+    ],
+)
+def test_metrics_refuse_unknown_names_in_one_line(compose_config, override, message):
+    with pytest.raises(ConfigError) as err:
+        settings_from_config(compose_config([override]))
+    assert str(err.value).startswith(message) and "\n" not in str(err.value)
+
+
+def test_metrics_are_listed_in_order_and_change_no_hash_name_or_axis(compose_config):
+    """What is logged is not what is trained: a finished job is not rerun for a new metric."""
+    default = _job(["adjectives=[hard,soft]"])
+    assert default.metrics == ("roc_auc", "average_precision", "f1")
+    chosen = _job(["adjectives=[hard,soft]", "metrics=[f1,roc_auc]"])
+    assert chosen.metrics == ("f1", "roc_auc")
+    assert (chosen.config_hash, chosen.row_hash) == (default.config_hash, default.row_hash)
+    assert (chosen.run_name, chosen.axes) == (default.run_name, default.axes)
+
+
+def test_a_metric_registered_after_import_is_accepted(compose_config, monkeypatch):
+    """The registry is read when the config is checked: a test module (or a component's
+    ``_module_``) may add a metric."""
+    from tactile_exp.metrics import METRICS, register
+
+    monkeypatch.setattr(METRICS, "_entries", dict(METRICS._entries))
+    register("hits", needs_both_classes=False)(lambda y, s: float((s > 0).sum()))
+    got = settings_from_config(compose_config(["metrics=[roc_auc,hits]"]))
+    assert got.metrics == ("roc_auc", "hits")

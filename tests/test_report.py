@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 from PIL import Image
-from sklearn.metrics import roc_auc_score
+from sklearn.metrics import f1_score, roc_auc_score
 
 from tactile_exp import experiment, stats, store
 from tactile_exp.config import settings_from_config
@@ -328,7 +328,7 @@ def _fold_job(
     tags = {"run_level": "parent", "row_hash": key, "config_hash": f"{key}{fold}"}
     tags |= {"overrides": overrides, "data.identity": "synthetic-abc", "sweep_id": sweep}
     tested = [o for o in objects if o % folds == fold]
-    aucs = {}
+    aucs, f1s = {}, {}
     name = (
         params["choice.experiment"]
         if params["choice.experiment"] != "None"
@@ -346,10 +346,12 @@ def _fold_job(
                     ys.append(y)
                     ss.append(score)
             aucs[f"auc.{adjective}"] = roc_auc_score(ys, ss)
+            f1s[f"f1.{adjective}"] = f1_score(ys, np.array(ss) > 0)
             ctags = {"run_level": "child", "adjective": adjective}
             with tracker.run(f"adj={adjective}", {}, ctags, job) as child:
                 tracker.log_text(child, "\n".join(lines) + "\n", "scores.csv")
         tracker.log_metrics(job, {"mean_auc": float(np.mean(list(aucs.values()))), **aucs})
+        tracker.log_metrics(job, {"mean_f1": float(np.mean(list(f1s.values()))), **f1s})
 
 
 ROW_G = {**ROW_I, "paper.row": "G", "choice.experiment": "table1_g_haptic_lstm"}
@@ -447,3 +449,37 @@ def test_an_auc_on_few_test_objects_is_flagged(folds_tracker):
     ]
     md = table1.table1_markdown(table1.table1([i], {i.key: evidence}))
     assert "| 2/4 (< 3 on: hard soft) |" in md
+
+
+def test_report_of_another_metric_recomputes_it_from_the_pooled_scores(folds_tracker, tmp_path):
+    """--metric f1 (issue 26): the runs' f1.<adjective>, the pooled out-of-fold F1 of the
+    scores with object-bootstrap intervals, and the claims compared on F1."""
+    groups = runs.collect(folds_tracker, metric="f1")
+    i = next(g for g in groups if g.row == "I")
+    assert [g.key for g in groups] == [g.key for g in runs.collect(folds_tracker)]
+    assert i.aucs.mean() == pytest.approx(np.mean([r.mean_auc for r in i.sorted_runs]))
+    evidence = heldout.load(folds_tracker, i, "f1")
+    pooled = evidence.evaluations[0]["hard"]
+    iv = evidence.per_adjective()["hard"]
+    assert iv.estimate == pytest.approx(f1_score(pooled.label, pooled.score > 0), abs=1e-12)
+    auc = heldout.load(folds_tracker, i).per_adjective()["hard"]
+    assert iv.low <= iv.estimate <= iv.high and (iv.low, iv.high) != (auc.low, auc.high)
+
+    out = tmp_path / "f1"
+    cli.write(groups=groups, out=out, source="test", tracker=folds_tracker, choices=cli.Choices(),
+              metric="f1")  # fmt: skip
+    row = next(r for r in csv.DictReader((out / "table1.csv").read_text().splitlines())
+               if r["row"] == "I")  # fmt: skip
+    assert float(row["mean_f1"]) == pytest.approx(evidence.interval().estimate, abs=1e-6)
+    assert "mean_auc" not in row and row["paper_auc"] == ""
+    claims = {r["claim"]: r for r in csv.DictReader((out / "claims.csv").read_text().splitlines())}
+    a = heldout.load(folds_tracker, next(g for g in groups if g.row == "A"), "f1")
+    difference = np.mean([
+        f1_score(x.label, x.score > 0) - f1_score(y.label, y.score > 0)
+        for x, y in zip(evidence.evaluations[0].values(), a.evaluations[0].values(), strict=True)
+    ])  # fmt: skip
+    assert f"I - A = {difference:+.3f} [" in claims["I > A"]["detail"]
+    index = (out / "index.md").read_text()
+    assert "**Metric: F1** (`--metric f1`, logged as `f1`)" in index
+    assert "## Table I: mean F1 over the 8 adjectives run" in index
+    assert "Per-adjective F1 of the best haptic configuration" in index

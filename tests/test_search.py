@@ -16,12 +16,13 @@ from conftest import CONF, TINY_DATA
 from hydra.core.global_hydra import GlobalHydra
 from mlflow.tracking import MlflowClient
 
-from tactile_exp import evaluate, experiment, search
+from tactile_exp import experiment, metrics, search
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances
 from tactile_exp.errors import ConfigError
 from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.objective import value
+from tactile_exp.pipeline import AdjectivePipeline
 
 
 def _search(monkeypatch, tmp_path: Path, cache_dir: Path, mlflow_uri: str, *args: str) -> None:
@@ -262,19 +263,23 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
     clean = value(settings.objective, experiment.run(settings).val_aucs)
 
-    real_score, real_auc = experiment.score, evaluate.auc
+    real_score, real_compute = AdjectivePipeline.score, metrics.compute
 
-    def nan_test_scores(*args, **kwargs):
-        scored, head, history = real_score(*args, **kwargs)
-        scores, units = scored["test"]
-        scored["test"] = (np.full_like(scores, np.nan, dtype=float), units)
-        return scored, head, history
+    def nan_test_scores(self, instances):  # the engine scores the test side with score()
+        scores, units = real_score(self, instances)
+        return np.full_like(scores, np.nan, dtype=float), units
 
-    def nan_tolerant_auc(y, scores):
-        return float("nan") if not np.all(np.isfinite(scores)) else real_auc(y, scores)
+    def clean_decision_function(self, trials):  # validation (and predict) go through here
+        return real_score(self, self.preprocess.transform(trials))
 
-    monkeypatch.setattr(experiment, "score", nan_test_scores)
-    monkeypatch.setattr(evaluate, "auc", nan_tolerant_auc)
+    def nan_tolerant(names, y, scores):
+        if np.all(np.isfinite(scores)):
+            return real_compute(names, y, scores)
+        return {metrics.METRICS.build(n).key: float("nan") for n in names}
+
+    monkeypatch.setattr(AdjectivePipeline, "score", nan_test_scores)
+    monkeypatch.setattr(AdjectivePipeline, "decision_function", clean_decision_function)
+    monkeypatch.setattr(metrics, "compute", nan_tolerant)
     monkeypatch.setattr(experiment, "_log_summary", lambda *args: None)  # ROC of NaN scores
     sentinel = experiment.run(settings)
     assert math.isnan(sentinel.mean_auc)  # the test scores were NaN

@@ -67,11 +67,11 @@ def test_bootstrap_moves_objects_not_units_and_pairs_by_objects() -> None:
     obj = np.repeat(np.arange(4), 5)
     label = (obj < 2).astype(int)
     score = np.array([3.0, 0.0, 1.0, 2.0])[obj]  # positives 0 (3.0), 1 (0.0); negatives 2, 3
-    boots = stats.bootstrap_aucs(stats.HeldOut(obj, label, score), "hard", 500, 0)
+    boots = stats.bootstrap(stats.HeldOut(obj, label, score), "hard", 500, 0)
     # n-1 = 1 object per class: AUC is 1 (object 0 drawn) or 0 (object 1 drawn)
     assert set(np.unique(boots)) == {0.0, 1.0}
     shifted = stats.HeldOut(obj, label, score + 0.0)
-    again = stats.bootstrap_aucs(shifted, "hard", 500, 0)
+    again = stats.bootstrap(shifted, "hard", 500, 0)
     assert np.array_equal(boots, again)  # the same objects: the same draws (paired)
 
 

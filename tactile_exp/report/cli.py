@@ -23,6 +23,9 @@ Table I's lines (``runs``) and writes into ``--out``:
 
 The folder is also logged as a ``report`` run of the same experiment, so it shows in ``mlflow ui``.
 ``--runs-table RUN_ID`` prints one job's runs as ``mlflow ui`` lists them, in Markdown, instead.
+``--metric NAME`` (``tactile_exp.metrics``; default ``roc_auc``) puts another logged metric
+where AUC stands: Table I, Fig. 5, the per-adjective files, the claims, Friedman's test and the
+ablation view, its intervals recomputed on the resampled test objects.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from pathlib import Path
 
 from tactile_exp import stats
 from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.metrics import METRICS
 from tactile_exp.report import comparisons, heldout
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
@@ -71,13 +75,15 @@ def write(
     tracker: Tracker,
     choices: Choices,
     skipped: tuple[str, ...] = (),
+    metric: str = "roc_auc",
 ) -> list[Path]:
     """Every report file into ``out``; returns their paths, ``index.md`` last. ``skipped``: the
-    sweep's cells that did not run (invalid config), listed at the end of ``index.md``."""
+    sweep's cells that did not run (invalid config), listed at the end of ``index.md``.
+    ``metric``: what the numbers are (``groups`` must be collected for it)."""
     out.mkdir(parents=True, exist_ok=True)
-    evidence = {g.key: heldout.load(tracker, g) for g in groups}
-    rows = table1(groups, evidence)
-    (out / "table1.md").write_text(table1_markdown(rows))
+    evidence = {g.key: heldout.load(tracker, g, metric) for g in groups}
+    rows = table1(groups, evidence, metric)
+    (out / "table1.md").write_text(table1_markdown(rows, metric))
     _write_csv(out / "table1.csv", rows)
     with open(out / "per_adjective.csv", "w", newline="") as f:
         writer = csv.writer(f)
@@ -86,7 +92,7 @@ def write(
             aucs = _per_adjective(g, evidence[g.key])
             cells = [f"{aucs[a]:.6f}" if a in aucs else "" for a in ADJECTIVES]
             writer.writerow([g.row, _configuration(g), g.method, g.row_hash, len(g.seeds), *cells])
-    _write_csv(out / "per_adjective_intervals.csv", _interval_rows(groups, evidence))
+    _write_csv(out / "per_adjective_intervals.csv", _interval_rows(groups, evidence, metric))
     paths = [
         out / "table1.md",
         out / "table1.csv",
@@ -100,16 +106,17 @@ def write(
             for kind, g in (("best haptic", haptic), ("best visual", visual))
             if g is not None
         ]
-        fig5(shown, _fig5_title(haptic, visual), out / "fig5_per_adjective.png")
+        title = _fig5_title(haptic, visual, metric)
+        fig5(shown, title, out / "fig5_per_adjective.png", metric)
         paths.append(out / "fig5_per_adjective.png")
     claim_text, claim_paths = _claims(groups, evidence, haptic, visual, out)
     friedman_text, friedman_paths = _friedman(groups, evidence, out)
-    ablation_text, ablation_paths = _ablation(groups, evidence, out)
+    ablation_text, ablation_paths = _ablation(groups, evidence, out, metric)
     paths += claim_paths + friedman_paths + ablation_paths
     fig6_paths, fig6_text = _fig6(groups, out, tracker, choices)
     table3_lines = _table3(groups, tracker, choices)
     paths += fig6_paths + t3.write_table3(table3_lines, out)
-    index = _index(groups, rows, source, visual, haptic, evidence)
+    index = _index(groups, rows, source, visual, haptic, evidence, metric)
     index += claim_text + friedman_text + ablation_text
     index += fig6_text + _table3_text(table3_lines)
     if skipped:
@@ -140,7 +147,8 @@ def _per_adjective(g: Group, ev: heldout.Evidence) -> dict[str, float]:
     return g.per_adjective()
 
 
-def _interval_rows(groups: list[Group], evidence: dict[str, heldout.Evidence]):
+def _interval_rows(groups: list[Group], evidence: dict[str, heldout.Evidence], metric: str):
+    key = METRICS.build(metric).key
     rows = []
     for g in groups:
         ev = evidence[g.key]
@@ -155,7 +163,7 @@ def _interval_rows(groups: list[Group], evidence: dict[str, heldout.Evidence]):
                     "configuration": _configuration(g),
                     "row_hash": g.row_hash,
                     "adjective": a,
-                    "auc": f"{iv.estimate:.6f}",
+                    key: f"{iv.estimate:.6f}",
                     "ci_low": f"{iv.low:.6f}",
                     "ci_high": f"{iv.high:.6f}",
                     "positive_objects": str(n_pos),
@@ -166,12 +174,13 @@ def _interval_rows(groups: list[Group], evidence: dict[str, heldout.Evidence]):
     return rows
 
 
-def _fig5_title(haptic: Group | None, visual: Group | None) -> str:
+def _fig5_title(haptic: Group | None, visual: Group | None, metric: str) -> str:
+    label = METRICS.build(metric).label
     if haptic and visual:
-        return "Per-adjective AUC: best haptic vs best visual configuration"
+        return f"Per-adjective {label}: best haptic vs best visual configuration"
     kind = "haptic" if haptic else "visual"
     other = "visual" if haptic else "haptic"
-    return f"Per-adjective AUC of the best {kind} configuration (no {other} row was run)"
+    return f"Per-adjective {label} of the best {kind} configuration (no {other} row was run)"
 
 
 def _claims(
@@ -234,7 +243,7 @@ def _friedman(
 
 
 def _ablation(
-    groups: list[Group], evidence: dict[str, heldout.Evidence], out: Path
+    groups: list[Group], evidence: dict[str, heldout.Evidence], out: Path, metric: str
 ) -> tuple[str, list[Path]]:
     view = comparisons.ablation(groups, evidence)
     if view is None:
@@ -269,7 +278,7 @@ def _ablation(
             )
             series.setdefault(rest, []).append((float(values[i]), evidence[g.key].interval()))
         path = out / f"ablation_{axis.replace('/', '_')}.png"
-        numeric_axis(axis, series, path)
+        numeric_axis(axis, series, path, metric)
         paths.append(path)
         lines += ["", f"![mean AUC against {axis}]({path.name})"]
     text = "\n".join(lines) + "\n\n"
@@ -366,7 +375,9 @@ def _index(
     visual: Group | None,
     haptic: Group | None,
     evidence: dict[str, heldout.Evidence],
+    metric: str,
 ) -> str:
+    shown = METRICS.build(metric)
     counts = sorted({g.n_adjectives for g in groups})
     over = (
         f"over the {counts[0]} adjectives run"
@@ -384,7 +395,8 @@ def _index(
         f"once). Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by `{ENTRY_POINT}`"
         + (f" at commit `{commit}`." if (commit := _commit()) else "."),
         "",
-        f"## Table I: mean AUC {over}",
+        *_metric_note(metric),
+        f"## Table I: mean {shown.label} {over}",
         "",
         "One line per configuration up to the seed (and fold); `n seeds` counts its seeds",
         "(splits, with `split=random`), `std over seeds` is the spread of their mean AUC. The",
@@ -408,13 +420,13 @@ def _index(
             + "; ".join(f"`{g.method}`: {evidence[g.key].missing}" for g in missing),
             "",
         ]
-    lines.append(table1_markdown(rows))
+    lines.append(table1_markdown(rows, metric))
     if visual or haptic:
         names = " vs ".join(
             f"`{g.method}` (mean {g.aucs.mean():.3f})" for g in (haptic, visual) if g
         )
         lines += [
-            f"## Fig. 5: {_fig5_title(haptic, visual)}",
+            f"## Fig. 5: {_fig5_title(haptic, visual, metric)}",
             "",
             f"{names}, each averaged over its seeds/splits (pooled out of fold with",
             "`split=folds`); error bars are 95% object-bootstrap intervals per adjective; only",
@@ -426,6 +438,22 @@ def _index(
             "",
         ]
     return "\n".join(lines) + "\n"
+
+
+def _metric_note(metric: str) -> list[str]:
+    """What the numbers are when they are not ROC AUC (the prose below speaks of AUC)."""
+    if metric == "roc_auc":
+        return []
+    shown = METRICS.build(metric)
+    return [
+        f"**Metric: {shown.label}** (`--metric {metric}`, logged as `{shown.key}`). Every AUC",
+        "below (Table I, Fig. 5, the per-adjective files, the claims, Friedman's test, the",
+        f"ablation view) is the {shown.label} of the test units; its intervals come from the same",
+        f"object bootstrap, {shown.label} recomputed on each replicate's resampled objects. The",
+        "paper's column is empty: its figures are ROC AUC. Jobs that did not log",
+        f"`mean_{shown.key}` are not listed.",
+        "",
+    ]
 
 
 def _commit() -> str | None:
@@ -477,6 +505,12 @@ def main(argv: list[str] | None = None) -> None:
         "to rows I, L, M tested on the most adjectives)",
     )
     parser.add_argument(
+        "--metric",
+        default="roc_auc",
+        help="what the tables, figures and comparisons show: a metric the jobs logged "
+        "(conf/config.yaml metrics; default: roc_auc, logged as auc)",
+    )
+    parser.add_argument(
         "--runs-table",
         metavar="RUN_ID",
         help="print this job's runs as mlflow ui lists them (Markdown) and exit",
@@ -484,19 +518,22 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.fig6_trials < 1:
         parser.error("--fig6-trials must be >= 1")
+    if args.metric not in METRICS:
+        parser.error(f"--metric: unknown {args.metric!r}; known: {', '.join(METRICS.names())}")
     try:
         tracker = Tracker.open(args.tracking_uri, args.experiment, entry_point=ENTRY_POINT)
     except ExperimentNotFound as err:
         sys.exit(f"error: {err}")
     if args.runs_table:
-        print(runs_table(tracker=tracker, job_id=args.runs_table), end="")
+        print(runs_table(tracker=tracker, job_id=args.runs_table, metric=args.metric), end="")
         return
-    groups = collect(tracker, args.sweep_id)
+    groups = collect(tracker, args.sweep_id, args.metric)
     if not groups:
         where = f" with sweep_id {args.sweep_id!r}" if args.sweep_id else ""
+        logged = f" that logged mean_{METRICS.build(args.metric).key}"
         sys.exit(
-            f"error: no FINISHED job runs in MLflow experiment {args.experiment!r}{where} "
-            f"({tracker.uri})"
+            f"error: no FINISHED job runs{logged if args.metric != 'roc_auc' else ''} in MLflow "
+            f"experiment {args.experiment!r}{where} ({tracker.uri})"
         )
     source = f"MLflow experiment `{args.experiment}`" + (
         f", sweep `{args.sweep_id}`" if args.sweep_id else ""
@@ -517,10 +554,16 @@ def main(argv: list[str] | None = None) -> None:
             tracker=tracker,
             choices=choices,
             skipped=skipped,
+            metric=args.metric,
         )
     except (ReportError, ArtifactError) as err:
         sys.exit(f"error: {err}")
-    params = {"experiment": args.experiment, "sweep_id": args.sweep_id or "", "out": str(args.out)}
+    params = {
+        "experiment": args.experiment,
+        "sweep_id": args.sweep_id or "",
+        "out": str(args.out),
+        "metric": args.metric,
+    }
     with tracker.run("report", params, {"run_level": "report"}) as run_id:
         tracker.log_metrics(run_id, {"n_groups": len(groups), "n_runs": _n_runs(groups)})
         for path in paths:

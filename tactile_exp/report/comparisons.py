@@ -245,7 +245,7 @@ def friedman(groups: list[Group], evidence: dict[str, Evidence]) -> stats.Friedm
     adjectives = sorted(evidence[chosen[0].key].evaluations[0])
     aucs = np.array(
         [
-            [np.mean([e[a].auc for e in evidence[g.key].evaluations]) for a in adjectives]
+            [np.mean([e[a].value for e in evidence[g.key].evaluations]) for a in adjectives]
             for g in chosen
         ]
     )

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_exp.data.layout import ADJECTIVES, EPS
+from tactile_exp.metrics import METRICS
 from tactile_exp.report.activations import Conv3Map
 from tactile_exp.report.runs import Group
 from tactile_exp.report.scores import ReportError
@@ -35,10 +36,16 @@ def _pyplot():
     return plt
 
 
-def fig5(shown: list[tuple[str, Group, dict[str, Interval]]], title: str, path: Path) -> None:
-    """Per-adjective AUC of the given groups (kind, group, intervals) side by side, with 95%
-    object-bootstrap error bars where the scores allow; adjectives a group did not run are left
-    empty and named on the axis as not run."""
+def fig5(
+    shown: list[tuple[str, Group, dict[str, Interval]]],
+    title: str,
+    path: Path,
+    metric: str = "roc_auc",
+) -> None:
+    """Per-adjective AUC (or ``metric``) of the given groups (kind, group, intervals) side by
+    side, with 95% object-bootstrap error bars where the scores allow; adjectives a group did not
+    run are left empty and named on the axis as not run. Chance is drawn for ROC AUC only (for
+    the others it depends on each adjective's share of positives)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=FIG5_SIZE)
     run = fig5_adjectives([g for _, g, _ in shown])
@@ -58,10 +65,11 @@ def fig5(shown: list[tuple[str, Group, dict[str, Interval]]], title: str, path: 
             errors = np.vstack([values - low, high - values])
             label += ", 95% interval"
         ax.bar(offset, values, width, color=colour, label=label, yerr=errors, capsize=2)
-    ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance (AUC 0.5)")
+    if metric == "roc_auc":
+        ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance (AUC 0.5)")
     ax.set_xticks(x, run, rotation=60, ha="right", fontsize=8)
     ax.set_xlabel("haptic adjective (only those run)")
-    ax.set_ylabel("ROC AUC on held-out objects")
+    ax.set_ylabel(f"{_label(metric)} on held-out objects")
     ax.set_ylim(0, 1.3)
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, loc="upper left", ncol=3)
@@ -138,9 +146,18 @@ def cd_diagram(result: Friedman, path: Path) -> None:
     plt.close(fig)
 
 
-def numeric_axis(axis: str, lines: dict[str, list[tuple[float, Interval]]], path: Path) -> None:
-    """Mean AUC (95% interval) against a numeric swept axis, one line per combination of the
-    other axes."""
+def _label(metric: str) -> str:
+    return "ROC AUC" if metric == "roc_auc" else METRICS.build(metric).label
+
+
+def numeric_axis(
+    axis: str,
+    lines: dict[str, list[tuple[float, Interval]]],
+    path: Path,
+    metric: str = "roc_auc",
+) -> None:
+    """Mean AUC (or ``metric``; 95% interval) against a numeric swept axis, one line per
+    combination of the other axes."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.0, 4.0))
     for name, points in sorted(lines.items()):
@@ -154,10 +171,11 @@ def numeric_axis(axis: str, lines: dict[str, list[tuple[float, Interval]]], path
             ]
         )
         ax.errorbar(xs, ys, yerr=err, marker="o", capsize=3, label=name or "(all)")
-    ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance")
+    if metric == "roc_auc":
+        ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance")
     ax.set_xlabel(axis)
-    ax.set_ylabel("mean AUC over adjectives (95% interval)")
-    ax.set_title(f"Mean AUC against {axis}", fontsize=10)
+    ax.set_ylabel(f"mean {_label(metric)} over adjectives (95% interval)")
+    ax.set_title(f"Mean {_label(metric)} against {axis}", fontsize=10)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)

@@ -63,8 +63,9 @@ class Evidence:
         return sorted(a for a, (p, n) in self.sizes().items() if min(p, n) < FEW_OBJECTS)
 
 
-def load(tracker: Tracker, group: Group) -> Evidence:
-    """Every seed's held-out scores of ``group`` (folds pooled), or why they are missing."""
+def load(tracker: Tracker, group: Group, metric: str = "roc_auc") -> Evidence:
+    """Every seed's held-out scores of ``group`` (folds pooled), or why they are missing; its
+    numbers are ``metric``'s (``tactile_exp.metrics``)."""
     evaluations: list[stats.Evaluation] = []
     fewest = None
     for seed in group.seeds:
@@ -96,7 +97,7 @@ def load(tracker: Tracker, group: Group) -> Evidence:
                     missing=f"seed {seed}: {adjective}'s test units are of one class only"
                 )
             evaluation[adjective] = stats.HeldOut(
-                table[:, 0].astype(int), table[:, 1].astype(int), table[:, 2]
+                table[:, 0].astype(int), table[:, 1].astype(int), table[:, 2], metric
             )
         evaluations.append(evaluation)
         fewest = len(runs) if fewest is None else min(fewest, len(runs))

@@ -3,6 +3,10 @@
 Runs are grouped by ``row_hash``, the resolved config up to the seed (and fold): runs in a group
 differ only in seed (and, with ``split=random``, in the split the seed draws; with
 ``split=folds``, in the fold). Each (seed, fold) counts once (its latest run).
+
+A run's numbers are those of the report's metric (``--metric``, ``tactile_exp.metrics``): its
+``mean_<key>`` and ``<key>.<adjective>``, ROC AUC (``mean_auc``, ``auc.<adjective>``) by default;
+the fields keep AUC's names.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tactile_exp.data.layout import ADJECTIVES
+from tactile_exp.metrics import METRICS
 from tactile_exp.tracking import Tracker
 
 # Command-line overrides that leave a row's method as the paper has it: which data, which split,
@@ -41,8 +46,8 @@ class Run:
     run_id: str
     seed: int
     start_time: int
-    mean_auc: float
-    aucs: dict[str, float]
+    mean_auc: float  # mean_<key> of the report's metric
+    aucs: dict[str, float]  # <key>.<adjective> of the report's metric
     data: str  # the data file's identity
     sweep_id: str
     fold: int = -1  # split=folds: the tested fold; -1 for the other split rules
@@ -132,17 +137,20 @@ def _tuned(tags: dict[str, str]) -> tuple[str, ...]:
     return (f"tuned on validation (study {tags.get('search.study', '?')})",)
 
 
-def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
-    """Every group of FINISHED parent runs (of one sweep, if given), sorted by Table I row."""
+def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_auc") -> list[Group]:
+    """Every group of FINISHED parent runs (of one sweep, if given) that logged ``metric``,
+    sorted by Table I row."""
+    metric_key = METRICS.build(metric).key
     found = tracker.jobs(sweep_id=sweep_id or None)
     groups: dict[str, Group] = {}
     for run in found:
         params, tags, metrics = run.data.params, run.data.tags, run.data.metrics
         # A search trial's job selects on validation objects; its test AUC is no result of its
         # own (the study's one final evaluation, tagged "final", is the tuned row's line).
-        if "mean_auc" not in metrics or tags.get("search.role") == "trial":
+        if f"mean_{metric_key}" not in metrics or tags.get("search.role") == "trial":
             continue
-        aucs = {k.removeprefix("auc."): v for k, v in metrics.items() if k.startswith("auc.")}
+        prefix = f"{metric_key}."
+        aucs = {k.removeprefix(prefix): v for k, v in metrics.items() if k.startswith(prefix)}
         key = tags.get("row_hash") or tags["config_hash"]  # runs logged before row_hash existed
         row_hash = key
         experiment = params.get("choice.experiment", "None")
@@ -178,7 +186,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None) -> list[Group]:
             run_id=run.info.run_id,
             seed=int(params["seed"]),
             start_time=run.info.start_time,
-            mean_auc=metrics["mean_auc"],
+            mean_auc=metrics[f"mean_{metric_key}"],
             aucs=aucs,
             data=tags.get("data.identity", ""),
             sweep_id=tags.get("sweep_id", ""),

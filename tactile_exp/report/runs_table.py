@@ -5,12 +5,13 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 
+from tactile_exp.metrics import METRICS
 from tactile_exp.tracking import Tracker
 
-COLUMNS = ("Run Name", "Created (UTC)", "Duration", "Source", "Dataset", "mean_auc", "auc")
+COLUMNS = ("Run Name", "Created (UTC)", "Duration", "Source", "Dataset")  # then the metric's
 
 
-def _cells(run) -> list[str]:
+def _cells(run, key: str) -> list[str]:
     info, data = run.info, run.data
     created = datetime.fromtimestamp(info.start_time / 1000, UTC)
     seconds = ((info.end_time or info.start_time) - info.start_time) / 1000
@@ -22,19 +23,22 @@ def _cells(run) -> list[str]:
         f"{seconds:.1f} s" if seconds < 120 else f"{seconds / 60:.1f} min",
         data.tags.get("mlflow.source.name", "") + (f" @ {commit[:7]}" if commit else ""),
         ", ".join(datasets),
-        f"{metrics['mean_auc']:.3f}" if "mean_auc" in metrics else "",
-        f"{metrics['auc']:.3f}" if "auc" in metrics else "",
+        f"{metrics[f'mean_{key}']:.3f}" if f"mean_{key}" in metrics else "",
+        f"{metrics[key]:.3f}" if key in metrics else "",
     ]
 
 
-def runs_table(*, tracker: Tracker, job_id: str) -> str:
-    """The job (parent) run and its child runs, oldest first, with the columns ``COLUMNS``."""
+def runs_table(*, tracker: Tracker, job_id: str, metric: str = "roc_auc") -> str:
+    """The job (parent) run and its child runs, oldest first, with the columns ``COLUMNS`` and
+    ``mean_<key>``, ``<key>`` of ``metric`` (``mean_auc``, ``auc`` by default)."""
+    key = METRICS.build(metric).key
+    columns = (*COLUMNS, f"mean_{key}", key)
     parent = tracker.client.get_run(job_id)
     found = tracker.child_runs(job_id, level=None)
-    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-    lines.append("| " + " | ".join(_cells(parent)) + " |")
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines.append("| " + " | ".join(_cells(parent, key)) + " |")
     for run in found:
-        cells = _cells(run)
+        cells = _cells(run, key)
         cells[0] = f"└ {cells[0]}"
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+from tactile_exp.metrics import METRICS
 from tactile_exp.report.heldout import FEW_OBJECTS, Evidence
 from tactile_exp.report.runs import Group
 
 
 def table1(
-    groups: list[Group], evidence: dict[str, Evidence] | None = None
+    groups: list[Group], evidence: dict[str, Evidence] | None = None, metric: str = "roc_auc"
 ) -> list[dict[str, str]]:
     """Table I's lines, machine-readable: AUC as fractions, full precision, full run ids.
 
@@ -15,7 +16,10 @@ def table1(
     adjective's AUC over all objects' pooled out-of-fold scores when the scores are there, and
     ``per_fold_mean_auc`` the mean of the folds' own AUCs. The interval (95%, object bootstrap,
     ``tactile_exp.stats``) needs the scores; without them its cells are empty and
-    ``intervals`` says why."""
+    ``intervals`` says why. Another ``metric`` than roc_auc names the columns by its key
+    (``mean_f1``, ...; the groups and evidence must be of it) and leaves ``paper_auc`` empty:
+    the paper's figures are ROC AUC."""
+    key = METRICS.build(metric).key
     rows = []
     for g in groups:
         ev = (evidence or {}).get(g.key) or Evidence(missing="scores not read")
@@ -37,15 +41,17 @@ def table1(
                 "split": g.split + (f" ({ev.folds_run} folds pooled)" if ev.folds_run else ""),
                 "seeds": " ".join(str(s) for s in g.seeds),
                 "n_seeds": str(len(g.seeds)),
-                "mean_auc": f"{mean:.6f}",
-                "mean_auc_ci_low": low,
-                "mean_auc_ci_high": high,
-                "per_fold_mean_auc": f"{aucs.mean():.6f}" if g.folds else "",
-                "std_auc": f"{aucs.std(ddof=1):.6f}" if len(aucs) > 1 else "",
+                f"mean_{key}": f"{mean:.6f}",
+                f"mean_{key}_ci_low": low,
+                f"mean_{key}_ci_high": high,
+                f"per_fold_mean_{key}": f"{aucs.mean():.6f}" if g.folds else "",
+                f"std_{key}": f"{aucs.std(ddof=1):.6f}" if len(aucs) > 1 else "",
                 "test_objects": _sizes(sizes),
                 "few_objects": " ".join(ev.thin()),
                 "intervals": "" if ev.ok else ev.missing,
-                "paper_auc": f"{g.paper_auc / 100:.3f}" if g.paper_auc is not None else "",
+                "paper_auc": f"{g.paper_auc / 100:.3f}"
+                if g.paper_auc is not None and metric == "roc_auc"
+                else "",
                 "data": " ".join(sorted({r.data for r in g.sorted_runs})),
                 "run_ids": " ".join(r.run_id for r in g.sorted_runs),
             }
@@ -66,9 +72,12 @@ def _sizes(sizes: dict[str, tuple[int, int]]) -> str:
     return f"{span(pos)}/{span(neg)}"
 
 
-def table1_markdown(rows: list[dict[str, str]]) -> str:
-    """Table I for people: AUC in % with its 95% interval, a row letter in brackets when not at
-    the paper's settings, a warning mark where an adjective rests on few test objects."""
+def table1_markdown(rows: list[dict[str, str]], metric: str = "roc_auc") -> str:
+    """Table I for people: AUC (or ``metric``) in % with its 95% interval, a row letter in
+    brackets when not at the paper's settings, a warning mark where an adjective rests on few
+    test objects."""
+    shown = METRICS.build(metric)
+    key = shown.key
     head = [
         "row",
         "method",
@@ -77,7 +86,7 @@ def table1_markdown(rows: list[dict[str, str]]) -> str:
         "adj.",
         "split",
         "n seeds",
-        "mean AUC % [95% CI]",
+        f"mean {shown.label} % [95% CI]",
         "per-fold mean %",
         "std over seeds",
         "test objects +/- per adj.",
@@ -88,11 +97,11 @@ def table1_markdown(rows: list[dict[str, str]]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         paper_settings = r["at_paper_settings"] == "True"
-        mean = f"{float(r['mean_auc']) * 100:.1f}"
-        if r["mean_auc_ci_low"]:
+        mean = f"{float(r[f'mean_{key}']) * 100:.1f}"
+        if r[f"mean_{key}_ci_low"]:
             mean += (
-                f" [{float(r['mean_auc_ci_low']) * 100:.1f}, "
-                f"{float(r['mean_auc_ci_high']) * 100:.1f}]"
+                f" [{float(r[f'mean_{key}_ci_low']) * 100:.1f}, "
+                f"{float(r[f'mean_{key}_ci_high']) * 100:.1f}]"
             )
         else:
             mean += " (no interval: no scores)"
@@ -106,8 +115,8 @@ def table1_markdown(rows: list[dict[str, str]]) -> str:
             r["split"],
             r["n_seeds"],
             mean,
-            f"{float(r['per_fold_mean_auc']) * 100:.1f}" if r["per_fold_mean_auc"] else "",
-            f"{float(r['std_auc']) * 100:.1f}" if r["std_auc"] else "",
+            f"{float(r[f'per_fold_mean_{key}']) * 100:.1f}" if r[f"per_fold_mean_{key}"] else "",
+            f"{float(r[f'std_{key}']) * 100:.1f}" if r[f"std_{key}"] else "",
             (r["test_objects"] + few) if r["test_objects"] else "",
             f"{float(r['paper_auc']) * 100:.1f}" if r["paper_auc"] else "",
             r["data"],
