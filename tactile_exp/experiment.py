@@ -22,6 +22,7 @@ import numpy as np
 from tactile_exp import evaluate, stats, store, termination, workers
 from tactile_exp.combine import COMBINERS
 from tactile_exp.config import ConfigError, Settings, component_modules, param_error
+from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Instances, Split
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
@@ -164,7 +165,7 @@ def open_data(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
         )
     splits = {
         a: make_split(dataset, a, settings.split, settings.seed, **settings.split_params)
-        for a in settings.adjectives
+        for a in select_labels(dataset, settings.adjectives)
     }
     return dataset, modality, splits
 
@@ -209,7 +210,10 @@ def run(settings: Settings) -> JobResult:
         )
         _log_config(tracker, parent_id, settings)
         modality.prepare()
-        tracker.set_tags(parent_id, {"data.identity": dataset.identity()})
+        tracker.set_tags(
+            parent_id,
+            {"data.identity": dataset.identity(), "data.labels": " ".join(dataset.label_names)},
+        )
         _log_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
         for i, result in enumerate(_adjectives(settings, tracker, parent_id, modality, splits), 1):
@@ -217,7 +221,7 @@ def run(settings: Settings) -> JobResult:
             log.info(
                 "[%d/%d] %s AUC %.3f (%.1f s)",
                 i,
-                len(settings.adjectives),
+                len(splits),
                 result.adjective,
                 result.auc,
                 result.sizes["seconds"],
@@ -299,10 +303,10 @@ def _adjectives(
 ) -> Iterator[AdjectiveResult]:
     """Each adjective's result, in order: here, or ``settings.workers`` at a time in worker
     processes (``tactile_exp.workers``) that open the data and the tracking store once each."""
-    n = len(settings.adjectives)
+    n = len(splits)
     processes = min(settings.workers, n)
     if processes == 1:
-        for i, adjective in enumerate(settings.adjectives, start=1):
+        for i, adjective in enumerate(splits, start=1):
             log.info("[%d/%d] %s", i, n, adjective)
             yield _run_adjective(settings, tracker, parent_id, modality, splits[adjective])
         return
@@ -310,7 +314,7 @@ def _adjectives(
     log.info("%d adjectives in %d worker processes", n, processes)
     try:
         with pool:
-            calls = [(i, n, a) for i, a in enumerate(settings.adjectives, start=1)]
+            calls = [(i, n, a) for i, a in enumerate(splits, start=1)]
             yield from pool.map(_adjective_in_worker, calls)
     except BaseException:
         error = "a worker was stopped before it ended this run (the job failed or was terminated)"
