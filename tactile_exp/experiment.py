@@ -1,54 +1,33 @@
-"""One job: for each adjective, split, fit the preprocessing on training trials, train, score the
-test units, compute ROC AUC, and log it all (T1, T4, E1, E2).
+"""One job: every adjective's run (``adjective.run_adjective``: split, fitted pipeline, scores,
+ROC AUC) under one parent run, with the job's summary (T1, T4, E1, E2).
 
 Runs without Hydra: it takes the plain ``Settings`` built by ``tactile_exp.config``.
 """
 
 from __future__ import annotations
 
-import functools
 import importlib
-import io
 import logging
 import os
-import time
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from tactile_exp import evaluate, stats, store, termination, workers
-from tactile_exp.combine import COMBINERS
+from tactile_exp import evaluate, stats, store, workers
+from tactile_exp.adjective import AdjectiveResult, key_params, log_data, run_adjective
 from tactile_exp.config import ConfigError, Settings, component_modules, param_error
 from tactile_exp.data.dataset import select_labels
-from tactile_exp.data.layout import Instances, Split
-from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
 from tactile_exp.modalities import MODALITIES, Modality
-from tactile_exp.modalities.base import PartProvider
-from tactile_exp.models.base import EpochCallback, History, Model
-from tactile_exp.models.registry import MODELS
-from tactile_exp.tracking import MAX_PARAM_LENGTH, Tracker, canonical_column, flatten
+from tactile_exp.tracking import Tracker, canonical_column, flatten
 from tactile_exp.train import device_name
-from tactile_exp.validation import take_trials, validation_split
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class AdjectiveResult:
-    adjective: str
-    auc: float
-    y: np.ndarray  # test unit labels
-    scores: np.ndarray  # test unit scores
-    units: np.ndarray  # test unit names (first trial of each unit)
-    objects: np.ndarray
-    sizes: dict[str, float]
-    history: History = field(default_factory=dict)
-    diagnostics: dict[str, float] = field(default_factory=dict)  # train_auc, val_auc
 
 
 @dataclass
@@ -62,102 +41,25 @@ class JobResult:
     val_aucs: dict[str, float] = field(default_factory=dict)
 
 
-def fit_model(
-    model: Model, combiner: str, train: Instances, on_epoch: EpochCallback | None = None
-) -> History | None:
-    """Train ``model`` when its own scores or its learned features are used; None when not."""
-    if COMBINERS.build(combiner).keeps_instances or model.learns_representation:
-        return model.fit(train, on_epoch)
-    return None
-
-
-def score(
-    model: Model,
-    combiner: str,
-    combine: int,
-    train: Instances,
-    sets: Mapping[str, Instances],
-    *,
-    pad: bool = True,
-) -> tuple[dict[str, tuple[np.ndarray, Instances]], Model | None, History]:
-    """Score each of ``sets`` (test, validation, the training set itself) with a fitted ``model``,
-    or with a head retrained once on combined training units (T4).
-
-    ``pad``: whether an object's last short group of instances is padded (``unit_members``).
-    Returns, per set, the scores and the units they belong to; the head (None when the model
-    scores instances itself) and the head's training curves.
-    """
-    combine_units = COMBINERS.build(combiner)
-    if combine_units.keeps_instances:
-        return {k: (model.decision_function(s.X), s) for k, s in sets.items()}, None, {}
-    train_units = combine_units(model.transform(train.X), train, combine, pad=pad)
-    head = model.head()
-    head_history = {f"head_{k}": v for k, v in head.fit(train_units).items()}
-    scored = {}
-    for name, instances in sets.items():
-        units = (
-            train_units
-            if instances is train
-            else combine_units(model.transform(instances.X), instances, combine, pad=pad)
-        )
-        scored[name] = (head.decision_function(units.X), units)
-    return scored, head, head_history
-
-
-def classify(
-    model_factory: Callable[[], Model],
-    combiner: str,
-    combine: int,
-    train: Instances,
-    test: Instances,
-    on_epoch: EpochCallback | None = None,
-    *,
-    pad: bool = True,
-) -> tuple[np.ndarray, Instances, History]:
-    """Train on ``train`` and score ``test``, combining instances into units first if asked.
-
-    ``pad``: whether an object's last short group of instances is padded (``unit_members``).
-    Returns the test scores, the test units they belong to, and the training curves.
-    """
-    model = model_factory()
-    history = fit_model(model, combiner, train, on_epoch) or {}
-    scored, _, head_history = score(model, combiner, combine, train, {"test": test}, pad=pad)
-    history.update(head_history)
-    return *scored["test"], history
-
-
-def _epoch_logger(adjective: str) -> EpochCallback:
-    """A compact line at ~5 points per run instead of one per epoch; and a SIGTERM check."""
-
-    def on_epoch(epoch: int, n_epochs: int, metrics: dict[str, float]) -> None:
-        termination.check()
-        if epoch == 1 or epoch % max(1, n_epochs // 5) == 0 or epoch == n_epochs:
-            shown = " ".join(f"{k}={v:.4f}" for k, v in metrics.items())
-            log.info("  %s epoch %d/%d %s", adjective, epoch, n_epochs, shown)
-
-    return on_epoch
-
-
-def load(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
+def load(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
     """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
     dataset, modality, splits = open_data(settings)
-    modality.prepare()
+    modality.check(dataset)
     return dataset, modality, splits
 
 
-def open_data(settings: Settings) -> tuple[PHAC2, Modality, dict[str, Split]]:
+def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
     """Open the data and check ``combine`` and every split, cheaply (before a run is created)."""
     dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
     try:
         modality = MODALITIES.build(
             settings.modality.name,
-            dataset=dataset,
             cache_dir=settings.cache_dir / "preprocessed",
             **settings.modality.params,
         )
     except (TypeError, ValueError) as err:
         raise param_error("modality", settings.modality.params, err) from err
-    limit, unit = modality.max_combine()
+    limit, unit = modality.max_combine(dataset)
     if settings.combine > limit:
         raise ConfigError(
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
@@ -209,14 +111,14 @@ def run(settings: Settings) -> JobResult:
             tags["device"],
         )
         _log_config(tracker, parent_id, settings)
-        modality.prepare()
+        modality.check(dataset)
         tracker.set_tags(
             parent_id,
             {"data.identity": dataset.identity(), "data.labels": " ".join(dataset.label_names)},
         )
-        _log_data(tracker, parent_id, dataset)
+        log_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
-        for i, result in enumerate(_adjectives(settings, tracker, parent_id, modality, splits), 1):
+        for i, result in enumerate(_adjectives(settings, tracker, parent_id, dataset, splits), 1):
             results[result.adjective] = result
             log.info(
                 "[%d/%d] %s AUC %.3f (%.1f s)",
@@ -258,25 +160,6 @@ def _val_aucs(tracker: Tracker, parent_id: str) -> dict[str, float]:
     }
 
 
-def key_params(settings: Settings) -> dict[str, str]:
-    """The params that say which job a run belongs to: the config-group choices (``choice.*``,
-    none left at None) and every axis the job sets (``axis.*``: a sweep's swept values, plain
-    ones like ``combine`` too), which sort first among the params that differ, so the compare
-    view's parallel-coordinates plot, which starts on the first three of those, shows them."""
-    out = {f"choice.{k}": v for k, v in settings.choices.items() if v != "None"}
-    out.update({f"axis.{k}": v[:MAX_PARAM_LENGTH] for k, v in settings.axes.items()})
-    return out
-
-
-def _log_data(tracker: Tracker, run_id: str, dataset: PHAC2) -> None:
-    tracker.log_dataset(
-        run_id,
-        name=dataset.path.stem,
-        digest=dataset.digest(),
-        source=dataset.path.resolve().as_uri(),
-    )
-
-
 def _log_view(tracker: Tracker, settings: Settings) -> None:
     """The last lines of a job's log: where its sweep's runs table is, with its numbers."""
     columns = [canonical_column("metrics", "mean_auc")]
@@ -298,7 +181,7 @@ def _adjectives(
     settings: Settings,
     tracker: Tracker,
     parent_id: str,
-    modality: Modality,
+    dataset: Any,
     splits: Mapping[str, Split],
 ) -> Iterator[AdjectiveResult]:
     """Each adjective's result, in order: here, or ``settings.workers`` at a time in worker
@@ -308,7 +191,7 @@ def _adjectives(
     if processes == 1:
         for i, adjective in enumerate(splits, start=1):
             log.info("[%d/%d] %s", i, n, adjective)
-            yield _run_adjective(settings, tracker, parent_id, modality, splits[adjective])
+            yield run_adjective(settings, tracker, parent_id, dataset, splits[adjective])
         return
     pool = workers.Pool(processes, init=_open_in_worker, initargs=(settings, parent_id))
     log.info("%d adjectives in %d worker processes", n, processes)
@@ -330,12 +213,12 @@ def _open_in_worker(settings: Settings, parent_id: str) -> None:
         importlib.import_module(module)
     with warnings.catch_warnings():  # the job's own load() has already shown them
         warnings.simplefilter("ignore")
-        _, modality, splits = load(settings)
+        dataset, _, splits = load(settings)
     _WORKER.update(
         settings=settings,
         tracker=Tracker(settings.tracking.uri, settings.tracking.experiment),
         parent_id=parent_id,
-        modality=modality,
+        dataset=dataset,
         splits=splits,
     )
 
@@ -343,204 +226,9 @@ def _open_in_worker(settings: Settings, parent_id: str) -> None:
 def _adjective_in_worker(i: int, n: int, adjective: str) -> AdjectiveResult:
     log.info("[%d/%d] %s (worker %d)", i, n, adjective, os.getpid())
     w = _WORKER
-    return _run_adjective(
-        w["settings"], w["tracker"], w["parent_id"], w["modality"], w["splits"][adjective]
+    return run_adjective(
+        w["settings"], w["tracker"], w["parent_id"], w["dataset"], w["splits"][adjective]
     )
-
-
-def _run_adjective(
-    settings: Settings, tracker: Tracker, parent_id: str, modality: Modality, split: Split
-) -> AdjectiveResult:
-    termination.check()
-    adjective = split.adjective
-    reuse = store.reuse_enabled(settings.resolved)
-    model = MODELS.build(settings.model.name, **settings.model.params)
-    key = store.training_key(
-        dataset=modality.dataset.identity(),
-        modality=settings.modality,
-        model=settings.model,
-        split=settings.split_key,
-        validation=settings.validation_fraction,
-        seed=settings.seed,
-        adjective=adjective,
-    )
-    tags = {
-        "config_hash": settings.config_hash,
-        "run_level": "child",
-        "adjective": adjective,
-        "job": settings.run_name,  # a child found alone says which job it is part of
-        "sweep_id": settings.sweep_id,
-    }
-    params = {"adjective": adjective, "combine": str(settings.combine), "seed": str(settings.seed)}
-    params.update(key_params(settings))
-    trains = model.storable and (
-        model.learns_representation or COMBINERS.build(settings.combiner).keeps_instances
-    )
-    if trains:
-        tags["training_key"] = key
-    with tracker.run(f"adj={adjective}", params, tags, parent_id) as run_id:
-        _log_data(tracker, run_id, modality.dataset)
-        start = time.perf_counter()
-        parts: dict[str, tuple[str, Model]] = {}
-        modality.use_parts(_part_provider(settings, tracker, parent_id, run_id, modality, parts))
-        # Held-out training objects score the model without touching the test objects (issue 13).
-        fit_split, val_trials = validation_split(
-            split, fraction=settings.validation_fraction, seed=settings.seed
-        )
-        train, rest = modality.instances(
-            Split(adjective, fit_split.train, split.test + val_trials, split.labels)
-        )
-        val, test = take_trials(rest, val_trials)
-        sets = {"test": test, "train": train, **({"val": val} if len(val) else {})}
-        # This run, tagged with the key, is its claim: wait while an older live job trains it.
-        lease = store.claim_lease(settings.resolved)
-        source = (
-            store.await_trained(tracker, key, run_id, lease=lease) if reuse and trains else None
-        )
-        if source is not None:
-            log.info("  %s: reusing the model trained in run %s", adjective, source)
-            tracker.set_tags(run_id, {"reused_from": source})
-            model = store.load_model(
-                tracker, source, "model", overrides=_unkeyed(settings.model.params)
-            )
-            history: History = {}
-        else:
-            history = fit_model(model, settings.combiner, train, _epoch_logger(adjective)) or {}
-        scored, head, head_history = score(
-            model, settings.combiner, settings.combine, train, sets, pad=modality.pad_units
-        )
-        history.update(head_history)
-        scores, units = scored["test"]
-        auc = evaluate.auc(units.y, scores)
-        diagnostics = _diagnostics(scored)
-        sizes = {
-            "n_train_instances": len(train),
-            "n_test_instances": len(test),
-            "n_train_trials": len(fit_split.train),
-            "n_test_trials": len(split.test),
-            "n_train_objects": len(fit_split.objects("train")),
-            "n_test_objects": len(split.objects("test")),
-            "n_test_units": len(units),
-            "n_test_positive_units": int(units.y.sum()),
-            "n_val_objects": len(np.unique(val.object_id)),
-            "n_val_positive_objects": len(np.unique(val.object_id[val.y == 1])),
-            "seconds": time.perf_counter() - start,
-        }
-        tracker.log_metrics(run_id, {"auc": auc, **sizes, **diagnostics, **modality.metrics()})
-        log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in diagnostics.items()))
-        tracker.log_curves(run_id, history)
-        table = io.StringIO()
-        np.savetxt(
-            table,
-            np.column_stack([units.trial, units.object_id, units.y, scores]),
-            fmt="%s",
-            delimiter=",",
-            header="unit,object_id,label,score",
-            comments="",
-        )
-        tracker.log_text(run_id, table.getvalue(), "scores.csv")
-        _keep_models(settings, tracker, run_id, modality, model if trains else None, head, parts)
-    return AdjectiveResult(
-        adjective, auc, units.y, scores, units.trial, units.object_id, sizes, history, diagnostics
-    )
-
-
-def _unkeyed(params: dict[str, Any]) -> dict[str, Any]:
-    """The model settings a reused model takes from this job (not from where it was trained)."""
-    return {k: params[k] for k in store.MODEL_UNKEYED if k in params}
-
-
-def _part_provider(
-    settings: Settings,
-    tracker: Tracker,
-    parent_id: str,
-    run_id: str,
-    modality: Modality,
-    parts: dict[str, tuple[str, Model]],
-) -> PartProvider:
-    """A modality's trained parts (row M's ConvNet): found by training key, else trained here
-    in a run of their own (run_level=part, tagged with the key), so any later job finds them."""
-
-    def provide(part: str, split: Split, train: Instances) -> Model:
-        part_modality, part_model = modality.parts()[part]
-        key = store.training_key(
-            dataset=modality.dataset.identity(),
-            modality=part_modality,
-            model=part_model,
-            split=settings.split_key,
-            validation=settings.validation_fraction,
-            seed=settings.seed,
-            adjective=split.adjective,
-        )
-        name = f"{split.adjective}/{part}"
-        reuse = store.reuse_enabled(settings.resolved)
-        source = store.find_trained(tracker, key) if reuse else None
-        model = None
-        if source is None:
-            tags = {
-                "config_hash": settings.config_hash,
-                "run_level": "part",
-                "adjective": split.adjective,
-                "part": part,
-                "training_key": key,
-            }
-            with tracker.run(f"adj={name}", {"adjective": split.adjective}, tags, parent_id) as rid:
-                # This run is the key's claim: wait while an older live job trains the part.
-                lease = store.claim_lease(settings.resolved)
-                source = store.await_trained(tracker, key, rid, lease=lease) if reuse else None
-                if source is None:
-                    model = MODELS.build(part_model.name, **part_model.params)
-                    tracker.log_curves(rid, model.fit(train, _epoch_logger(name)))
-                    store.log_folder(
-                        tracker,
-                        rid,
-                        "model",
-                        lambda f: store.write_model(f, part_model.name, model),
-                    )
-                    source = rid
-                else:
-                    tracker.set_tags(rid, {"reused_from": source})
-        if model is None:
-            log.info("  %s: reusing the model trained in run %s", name, source)
-            tracker.set_tags(run_id, {f"reused_from.{part}": source})
-            model = store.load_model(
-                tracker, source, "model", overrides=_unkeyed(part_model.params)
-            )
-        tracker.set_tags(run_id, {f"part.{part}": source})
-        parts[part] = (part_model.name, model)
-        return model
-
-    return provide
-
-
-def _keep_models(
-    settings: Settings,
-    tracker: Tracker,
-    run_id: str,
-    modality: Modality,
-    model: Model | None,
-    head: Model | None,
-    parts: dict[str, tuple[str, Model]],
-) -> None:
-    """What applies this adjective's classifier to new data, as artifacts of its run: the model
-    (``model/``), the head (``head/``), the parts (``parts/<part>/``) and the fitted
-    preprocessing (``preprocess/``). The run turns FINISHED only after all are written, and
-    lookups take FINISHED runs only, so a job killed while writing leaves nothing reusable."""
-    if model is not None:
-        store.log_folder(
-            tracker, run_id, "model", lambda f: store.write_model(f, settings.model.name, model)
-        )
-    if head is not None and head.storable:
-        write = functools.partial(store.write_model, name=store.model_name(head), model=head)
-        store.log_folder(tracker, run_id, "head", write)
-    for part, (name, fitted) in parts.items():
-        write = functools.partial(store.write_model, name=name, model=fitted)
-        store.log_folder(tracker, run_id, f"parts/{part}", write)
-    state, arrays = modality.state()
-    if state:
-        store.log_folder(
-            tracker, run_id, "preprocess", lambda f: store.write_state(f, state, arrays)
-        )
 
 
 def _means(results: Mapping[str, AdjectiveResult]) -> dict[str, float]:
@@ -551,16 +239,6 @@ def _means(results: Mapping[str, AdjectiveResult]) -> dict[str, float]:
         if values:
             out[f"mean_{name}"] = float(np.mean(values))
             out[f"n_{name}"] = len(values)
-    return out
-
-
-def _diagnostics(scored: Mapping[str, tuple[np.ndarray, Instances]]) -> dict[str, float]:
-    """Training AUC, and the held-out training objects' AUC when they hold both classes."""
-    out = {}
-    for name in ("train", "val"):
-        if name in scored and len(np.unique(scored[name][1].y)) == 2:
-            scores, units = scored[name]
-            out[f"{name}_auc"] = evaluate.auc(units.y, scores)
     return out
 
 
@@ -576,7 +254,7 @@ def _log_summary(
     tracker: Tracker,
     run_id: str,
     settings: Settings,
-    dataset: PHAC2,
+    dataset: Any,
     results: dict[str, AdjectiveResult],
 ) -> None:
     lines = ["adjective,auc,n_test_units,n_test_positive_units,n_train_objects,n_test_objects"]

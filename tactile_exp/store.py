@@ -152,6 +152,23 @@ def await_trained(
         time.sleep(poll)
 
 
+def reusable(
+    tracker: Tracker,
+    key: str,
+    claim: str,
+    *,
+    lease: float,
+    overrides: Mapping[str, Any] | None = None,
+) -> tuple[Any, str] | None:
+    """The trained model of ``key`` and the run that trained it, waiting while an older live
+    job trains it (``await_trained``); None when run ``claim`` (tagged with the key) is to train
+    it. The one find-or-train rule for every stored model: an adjective's and a part's."""
+    source = await_trained(tracker, key, claim, lease=lease)
+    if source is None:
+        return None
+    return load_model(tracker, source, "model", overrides), source
+
+
 def _oldest_live_claim(tracker: Tracker, key: str, lease: float) -> tuple[Any, list[str]]:
     """The oldest RUNNING run tagged ``training_key = key`` whose process may still run it
     (None when there is none), and the ids of the older abandoned ones passed over."""
@@ -203,7 +220,7 @@ def write_model(folder: Path, name: str, model: Any) -> None:
         "params": model.get_params(),
         "input_shape": list(model.input_shape_),
     }
-    (folder / "settings.json").write_text(json.dumps(settings, indent=1, default=_jsonable))
+    (folder / "settings.json").write_text(json.dumps(settings, indent=1, default=jsonable))
     torch.save(tensors, folder / "weights.pt")
     np.savez(folder / "arrays.npz", **arrays)
 
@@ -211,12 +228,13 @@ def write_model(folder: Path, name: str, model: Any) -> None:
 def write_state(folder: Path, settings: Mapping[str, Any], arrays: Mapping[str, Any]) -> None:
     """Fitted preprocessing: its settings as JSON and its arrays as npz."""
     (folder / "settings.json").write_text(
-        json.dumps({"format": FORMAT, **settings}, indent=1, default=_jsonable)
+        json.dumps({"format": FORMAT, **settings}, indent=1, default=jsonable)
     )
     np.savez(folder / "arrays.npz", **{k: np.asarray(v) for k, v in arrays.items()})
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
+    """``json.dumps``' ``default`` for numpy values and tuples."""
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, tuple | np.ndarray):
@@ -236,13 +254,13 @@ def download(tracker: Tracker, run_id: str, path: str, files: tuple[str, ...]) -
     return local
 
 
-def read_json(folder: Path, where: str) -> dict[str, Any]:
+def read_json(folder: Path, where: str, name: str = "settings.json") -> dict[str, Any]:
     try:
-        settings = json.loads((folder / "settings.json").read_text())
+        settings = json.loads((folder / name).read_text())
     except (OSError, ValueError) as err:
-        raise ArtifactError(f"{where}/settings.json is not readable JSON ({err})") from None
+        raise ArtifactError(f"{where}/{name} is not readable JSON ({err})") from None
     if not isinstance(settings, dict) or settings.get("format") != FORMAT:
-        raise ArtifactError(f"{where}/settings.json: expected a mapping with format {FORMAT}")
+        raise ArtifactError(f"{where}/{name}: expected a mapping with format {FORMAT}")
     return settings
 
 

@@ -14,8 +14,8 @@ pooled moments, never from the raw rows again.
 
 N, T, K are chosen inside the training positives: some positive training objects are held out,
 candidates are scored by mean held-out log-likelihood (the authors' criterion), and the chosen
-chain is refitted on all training positives. ``leak_test_positives=True`` reproduces the authors'
-leak (choose on the test positives, refit on train + test positives); never the default.
+chain is refitted on all training positives. The authors chose on the test positives and refit
+on train + test positives, a test-data leak we do not offer (no test trial enters a fit).
 """
 
 from __future__ import annotations
@@ -342,7 +342,6 @@ class DynamicFeatures:
     def __init__(
         self,
         grid: str = "small",
-        leak_test_positives: bool = False,
         holdout: float = 0.2,
         n_init: int = 10,
         seed: int = 0,
@@ -350,7 +349,6 @@ class DynamicFeatures:
         if grid not in GRIDS:
             raise KeyError(f"unknown HMM grid {grid!r}; known grids: {', '.join(GRIDS)}")
         self.grid = grid
-        self.leak_test_positives = leak_test_positives
         self.holdout = holdout
         self.n_init = n_init
         self.seed = seed
@@ -360,7 +358,6 @@ class DynamicFeatures:
         """Everything besides the data and the split that the fitted chains depend on."""
         return {
             "grid": GRIDS[self.grid],
-            "leak_test_positives": self.leak_test_positives,
             "holdout": self.holdout,
             "n_init": self.n_init,
             "seed": self.seed,
@@ -404,8 +401,6 @@ class DynamicFeatures:
 
     def _selection_sets(self, split: Split, positives: list[str]) -> tuple[list[str], list[str]]:
         """(fit trials, scoring trials) for choosing N, T, K; scoring empty = no choice."""
-        if self.leak_test_positives:
-            return positives, [t for t in split.test if split.labels[t] == 1]
         objects = sorted({TrialName.parse(t).object_id for t in positives})  # type: ignore[union-attr]
         if len(objects) < 2:
             return positives, []
@@ -424,7 +419,7 @@ class DynamicFeatures:
         if not positives:
             raise ValueError(f"adjective {split.adjective!r}: no positive training trial")
         fit_set, score_set = self._selection_sets(split, positives)
-        final = positives + (score_set if self.leak_test_positives else [])
+        final = positives
         candidates = _candidates(GRIDS[self.grid])
         if not score_set and len(candidates) > 1:
             warnings.warn(

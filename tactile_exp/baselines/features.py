@@ -17,6 +17,7 @@ from __future__ import annotations
 import sys
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -133,8 +134,47 @@ def _concat_sequences(parts: list[SequenceTable], lengths: Sequence[int]) -> Seq
     )
 
 
+@dataclass
+class FittedFeatures:
+    """What ``BaselineFeatures.fit`` learned for one adjective: the static base names kept and
+    their PCA, and the adjective's HMM chains; applied to any trials' tables."""
+
+    static: StaticFeatures | None
+    static_names: list[str]
+    dynamic: DynamicFeatures | None
+    dynamic_pool: str
+
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        settings: dict[str, Any] = {}
+        arrays: dict[str, np.ndarray] = {}
+        if self.static is not None:
+            settings["static_names"] = list(self.static_names)
+            arrays |= {f"static.{k}": v for k, v in self.static.arrays().items()}
+        if self.dynamic is not None:
+            arrays |= {f"dynamic.{k}": v for k, v in self.dynamic.arrays().items()}
+        return settings, arrays
+
+    @classmethod
+    def from_state(
+        cls, params: dict[str, Any], settings: dict[str, Any], arrays: dict[str, np.ndarray]
+    ) -> FittedFeatures:
+        """``state()``'s output back, with the modality's ``params`` (features, faithful, ...)."""
+        static = dynamic = None
+        names: list[str] = []
+        if "static" in params["features"]:
+            faithful = bool(params["faithful"])
+            static = StaticFeatures(per_trial_pca=faithful, interleave=faithful)
+            static.load_arrays({k.removeprefix("static."): v for k, v in arrays.items()})
+            names = [str(n) for n in settings["static_names"]]
+        if "dynamic" in params["features"]:
+            dynamic = DynamicFeatures(str(params["hmm_grid"]), seed=int(params["seed"]))
+            dynamic.load_arrays({k.removeprefix("dynamic."): v for k, v in arrays.items()})
+        return cls(static, names, dynamic, str(params["dynamic_pool"]))
+
+
 class BaselineFeatures:
-    """Chu et al.'s static and/or dynamic features of trials, fitted on one adjective's split."""
+    """Chu et al.'s static and/or dynamic features of a data set's trials: the per-trial tables
+    (``prepare``, cached), fitted on one adjective's training trials (``fit``)."""
 
     def __init__(
         self,
@@ -143,7 +183,6 @@ class BaselineFeatures:
         faithful: bool = True,
         dynamic_pool: str = "trial",
         hmm_grid: str = "small",
-        leak_test_positives: bool = False,
         cache_dir: Path | None = None,
         seed: int = 0,
     ) -> None:
@@ -161,7 +200,6 @@ class BaselineFeatures:
         self.faithful = faithful
         self.dynamic_pool = dynamic_pool
         self.hmm_grid = hmm_grid
-        self.leak_test_positives = leak_test_positives
         self.cache_dir = cache_dir
         self.seed = seed
         self.feature_names: list[str] = []
@@ -182,22 +220,27 @@ class BaselineFeatures:
         """Fit what depends on the split on ``split.train`` only (HMMs: training positives)."""
         if not hasattr(self, "static_table_"):
             self.prepare()
-        self.split_ = split
         self.feature_names = []
+        static = dynamic = None
         if self.static_table_ is not None:
-            self.static_ = StaticFeatures(per_trial_pca=self.faithful, interleave=self.faithful)
-            self.static_.fit(self.static_table_, split.train)
-            self.feature_names += self.static_.feature_names(self.static_table_)
+            static = StaticFeatures(per_trial_pca=self.faithful, interleave=self.faithful)
+            static.fit(self.static_table_, split.train)
+            self.feature_names += static.feature_names(self.static_table_)
         if self.sequence_table_ is not None:
-            self.dynamic_ = self._fit_dynamic(split)
+            dynamic = self._fit_dynamic(split)
             suffix = "@object" if self.dynamic_pool == "object" else ""
-            self.feature_names += [n + suffix for n in self.dynamic_.feature_names]
+            self.feature_names += [n + suffix for n in dynamic.feature_names]
+        names = list(self.static_table_.names) if self.static_table_ is not None else []
+        self.fitted_ = FittedFeatures(static, names, dynamic, self.dynamic_pool)
         return self
+
+    def fitted(self) -> FittedFeatures:
+        return self.fitted_
 
     def _fit_dynamic(self, split: Split) -> DynamicFeatures:
         """The adjective's 16 chains: loaded from ``cache_dir`` when fitted before, else fitted
         (and saved there)."""
-        dynamic = DynamicFeatures(self.hmm_grid, self.leak_test_positives, seed=self.seed)
+        dynamic = DynamicFeatures(self.hmm_grid, seed=self.seed)
         if self.cache_dir is None:
             return dynamic.fit(self.sequence_table_, split)
         key = self._chain_key(split, dynamic)
@@ -214,49 +257,53 @@ class BaselineFeatures:
         return dynamic
 
     def _chain_key(self, split: Split, dynamic: DynamicFeatures) -> str:
-        """Cache key of one adjective's fitted chains: data, split, chain settings, seed."""
+        """Cache key of one adjective's fitted chains: data, training trials, settings, seed."""
         return cache_key(
             kind="hmm",
             data=self.dataset.identity(),
             adjective=split.adjective,
             train=sorted(split.train),
-            test=sorted(split.test),
-            labels=sorted(split.labels.items()),
+            labels=sorted((t, split.labels[t]) for t in split.train),
             settings=dynamic.settings(),
             v=CODE_VERSION,
         )
 
-    def _dynamic(self, trials: Sequence[str]) -> np.ndarray:
-        table = self.sequence_table_
-        if self.dynamic_pool == "trial":
-            return self.dynamic_.transform(table, trials)
-        sides = {t: "train" for t in self.split_.train} | {t: "test" for t in self.split_.test}
-        outside = [t for t in trials if t not in sides]
-        if outside:
-            raise ValueError(
-                f"dynamic_pool='object' pools within one side of the split; trial(s) "
-                f"{outside[:5]} are in neither side of the {self.split_.adjective!r} split"
-            )
-
-        def obj(t: str) -> int:
-            return TrialName.parse(t).object_id  # type: ignore[union-attr]
-
-        groups = {(sides[t], obj(t)) for t in trials}
-        members = {g: [t for t, s in sides.items() if (s, obj(t)) == g] for g in groups}
-        pooled = {g: self.dynamic_.transform(table, m).mean(axis=0) for g, m in members.items()}
-        return np.array([pooled[(sides[t], obj(t))] for t in trials])
-
     def transform(self, trials: Sequence[str]) -> np.ndarray:
-        """(n, D) float features of ``trials`` in ``feature_names`` order; never NaN."""
-        if not hasattr(self, "split_"):
+        """(n, D) float features of ``trials`` by this object's own fit."""
+        if not hasattr(self, "fitted_"):
             raise RuntimeError("BaselineFeatures.transform called before fit")
+        return self.transform_with(self.fitted_, trials)
+
+    def transform_with(self, fitted: FittedFeatures, trials: Sequence[str]) -> np.ndarray:
+        """(n, D) float features of ``trials`` (from this object's tables) by ``fitted``; never
+        NaN. Object pooling (row F) averages over the trials of each object among ``trials``."""
+        if not hasattr(self, "static_table_"):
+            self.prepare()
         trials = list(trials)
         blocks = []
-        if self.static_table_ is not None:
-            blocks.append(self.static_.transform(self.static_table_, trials))
-        if self.sequence_table_ is not None:
-            blocks.append(self._dynamic(trials))
+        if fitted.static is not None:
+            blocks.append(fitted.static.transform(self._static_table(fitted), trials))
+        if fitted.dynamic is not None:
+            X = fitted.dynamic.transform(self.sequence_table_, trials)
+            if fitted.dynamic_pool == "object":
+                objects = np.array([TrialName.parse(t).object_id for t in trials])  # type: ignore[union-attr]
+                X = np.stack([X[objects == o].mean(axis=0) for o in objects])
+            blocks.append(X)
         X = np.hstack(blocks).astype(float)
         if not np.isfinite(X).all():
             raise FloatingPointError("baseline features: non-finite values (a bug, please report)")
         return X
+
+    def _static_table(self, fitted: FittedFeatures) -> StaticTable:
+        """The static table with the base features ``fitted`` kept, in its order."""
+        table = self.static_table_
+        if list(table.names) == fitted.static_names:
+            return table
+        lacking = [n for n in fitted.static_names if n not in table.names]
+        if lacking:
+            raise ValueError(
+                f"{self.dataset!r}: trials lack static features {lacking} that the model was "
+                "trained with (gripper or transforms channel missing)"
+            )
+        order = [table.names.index(n) for n in fitted.static_names]
+        return replace(table, base=table.base[:, :, order], names=list(fitted.static_names))

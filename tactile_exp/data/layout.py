@@ -8,11 +8,16 @@ from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from tactile_exp.data.dataset import DataSet
 
 
 class DataError(ValueError):
@@ -188,6 +193,63 @@ class Split:
     def objects(self, part: str) -> set[int]:
         names = self.train if part == "train" else self.test
         return {TrialName.parse(n).object_id for n in names}  # type: ignore[union-attr]
+
+    def trials(self, part: str, dataset: DataSet, names: tuple[str, ...] | None = None) -> Trials:
+        """One side (``train`` or ``test``) as labelled ``Trials``; ``names``: a subset of it
+        (validation). An object split by trial records both sides' trial counts (``shared``)."""
+        names = (self.train if part == "train" else self.test) if names is None else names
+        per_side: dict[int, list[int]] = {}
+        for side, side_names in enumerate((self.train, self.test)):
+            for t in side_names:
+                per_side.setdefault(TrialName.parse(t).object_id, [0, 0])[side] += 1  # type: ignore[union-attr]
+        shared = {o: (a, b) for o, (a, b) in per_side.items() if a and b}
+        labels = {t: self.labels[t] for t in names}
+        return Trials(dataset, tuple(names), labels, self.adjective, part, shared)
+
+
+@dataclass(frozen=True)
+class Trials:
+    """Some trials of one data set and, when known, one label's value for each: what a modality
+    fits on and transforms (training, validation and test trials, or a new object's).
+
+    ``side`` and ``shared`` serve photographs, which belong to objects, not trials: an object
+    whose trials are on both sides of a split (``shared``: object -> (train, test) trial counts)
+    has its photographs divided in that proportion, first views to ``train``.
+    ``object_ids`` names objects given without trials (photographs only, as predict takes them).
+    """
+
+    dataset: Any  # a DataSet (tactile_exp.data.dataset)
+    names: tuple[str, ...]
+    labels: Mapping[str, int] | None = None  # trial -> 0/1; None: unlabelled (new data)
+    label: str = ""  # the label's name (an adjective), for messages and caches
+    side: str = "train"  # train | test: which share of a shared object's photographs
+    shared: Mapping[int, tuple[int, int]] = field(default_factory=dict)
+    object_ids: tuple[int, ...] | None = None
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def objects(self) -> tuple[int, ...]:
+        """The objects, in first-seen order."""
+        if self.object_ids is not None:
+            return self.object_ids
+        seen = (TrialName.parse(n).object_id for n in self.names)  # type: ignore[union-attr]
+        return tuple(dict.fromkeys(seen))
+
+    def y(self, names: tuple[str, ...] | None = None) -> np.ndarray:
+        """Labels of ``names`` (default: all), zeros when unlabelled."""
+        names = self.names if names is None else names
+        if self.labels is None:
+            return np.zeros(len(names), np.int64)
+        return np.array([self.labels[t] for t in names], dtype=np.int64)
+
+    def object_labels(self) -> dict[int, int]:
+        """Each object's label (0 when unlabelled)."""
+        out = {o: 0 for o in self.objects}
+        for t, v in zip(self.names, self.y(), strict=True):
+            out[TrialName.parse(t).object_id] = int(v)  # type: ignore[union-attr]
+        return out
 
 
 @dataclass

@@ -126,11 +126,11 @@ class PHAC2:
         return tuple(sorted({t.object_id for t in self.trials}))
 
     def object_name(self, object_id: int) -> str:
-        """The group stem of the object's trials without its id (``car_sponge`` for 101)."""
+        """The object's group stem (``car_sponge_101``): what its trial groups start with."""
         for t in self.trials:
             if t.object_id == object_id:
-                return t.stem.removesuffix(f"_{object_id:03d}")
-        raise DataError(f"{self.path}: no trial groups of object {object_id}")
+                return t.stem
+        raise DataError(f"{self.path}: no trials of object {object_id}")
 
     def trial_name(self, name: str | TrialName) -> TrialName:
         """The `TrialName` of a trial group in this file; `DataError` if there is none."""

@@ -1,56 +1,67 @@
 """What a model sees: the ``modality`` config group.
 
-A modality turns one adjective's split into training and test ``Instances``, fitting whatever it
-must fit (normaliser, PCA, HMM chains) on the training trials only. ``prepare`` does the one pass
-over the file that every adjective shares (cached on disk), before any training starts.
+A modality is a preprocessor, shaped as scikit-learn's: hyperparameters in the constructor, data
+in ``fit(trials)`` (normaliser, PCA, HMM chains: fitted on training trials only) and
+``transform(trials) -> Instances`` (training, validation, test or new trials alike). ``check``
+makes the one pass over a data set that every adjective shares (cached on disk) before any run,
+so bad input surfaces there. ``get_state``/``set_state`` carry what ``fit`` learned to the store.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
 from tactile_exp.config import Component
-from tactile_exp.data.layout import Instances, Split, TrialName
-from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.layout import Instances, TrialName, Trials
 from tactile_exp.models.base import Model
 from tactile_exp.registry import Registry
 
-# provide(part, split, training instances of the part's modality) -> the part's fitted model
-PartProvider = Callable[[str, Split, Instances], Model]
+# provide(part, training instances of the part's modality, their trials) -> the part's fitted model
+PartProvider = Callable[[str, Instances, Trials], Model]
 
 
 class Modality(ABC):
     # Capability, declared: whether combining pads an object's last short group of instances by
     # repeating its own (True, haptic trials) or drops it (``combine.unit_members``).
     pad_units: bool = True
+    # What the data set must give for new trials: trials (signals), photographs, or both.
+    takes_trials: bool = True
+    takes_photographs: bool = False
 
-    def __init__(self, dataset: PHAC2, cache_dir: Path) -> None:
-        self.dataset = dataset
+    def __init__(self, *, cache_dir: Path | None = None) -> None:
         self.cache_dir = cache_dir
 
-    def max_combine(self) -> tuple[int, str]:
+    def max_combine(self, dataset: Any) -> tuple[int, str]:
         """The largest ``combine`` (instances of one object grouped as a unit) and its unit name."""
-        return int(max(np.bincount([t.object_id for t in self.dataset.trials]))), "trials"
+        return int(max(np.bincount([t.object_id for t in dataset.trials]))), "trials"
 
     @abstractmethod
-    def prepare(self) -> None:
+    def check(self, dataset: Any) -> None:
         """Read and cache what all adjectives share; raises on bad input before any training."""
 
     @abstractmethod
-    def instances(self, split: Split) -> tuple[Instances, Instances]:
-        """Training and test instances of one adjective's split."""
+    def fit(self, trials: Trials) -> Self:
+        """Learn the preprocessing from (training) ``trials``."""
 
-    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        """Settings and arrays of what the last ``instances`` call fitted (kept with the model)."""
+    @abstractmethod
+    def transform(self, trials: Trials) -> Instances:
+        """The instances of ``trials``, labelled with ``trials.labels``."""
+
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """What ``fit`` learned: JSON-able settings and arrays (kept with the model)."""
         return {}, {}
 
+    def set_state(self, settings: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        """Take ``get_state()``'s output instead of fitting; ValueError/KeyError when it is off."""
+        return self
+
     def metrics(self) -> dict[str, float]:
-        """Counts of the last ``instances`` call worth logging on the adjective's run."""
+        """Counts of the last ``fit`` worth logging on the adjective's run."""
         return {}
 
     def parts(self) -> dict[str, tuple[Component, Component]]:
@@ -61,8 +72,17 @@ class Modality(ABC):
         return {}
 
     def use_parts(self, provide: PartProvider) -> None:
-        """Receive the engine's ``provide(part, split, train) -> fitted model``."""
+        """Receive the engine's ``provide(part, train, trials) -> fitted model``."""
         self.provide = provide
+
+    def fitted_parts(self) -> dict[str, Model]:
+        """The parts ``fit`` used (saved beside the model); set them with ``set_parts``."""
+        return {}
+
+    def set_parts(self, parts: dict[str, Model]) -> None:
+        """Take stored parts instead of asking the provider (a loaded pipeline)."""
+        if parts:
+            raise ValueError(f"{type(self).__name__} has no parts, got {sorted(parts)}")
 
 
 MODALITIES: Registry[Modality] = Registry(
@@ -77,9 +97,9 @@ MODALITIES: Registry[Modality] = Registry(
 )
 
 
-def trial_rows(trials: Sequence[str], split: Split, per_trial: int) -> tuple[np.ndarray, ...]:
+def trial_rows(trials: Trials, per_trial: int) -> tuple[np.ndarray, ...]:
     """Labels, names and object ids of ``per_trial`` consecutive rows per trial of ``trials``."""
-    names = np.repeat(np.asarray(trials, dtype=object), per_trial)
-    y = np.repeat([split.labels[t] for t in trials], per_trial).astype(np.int64)
-    objects = np.repeat([TrialName.parse(t).object_id for t in trials], per_trial)  # type: ignore[union-attr]
+    names = np.repeat(np.asarray(trials.names, dtype=object), per_trial)
+    y = np.repeat(trials.y(), per_trial).astype(np.int64)
+    objects = np.repeat([TrialName.parse(t).object_id for t in trials.names], per_trial)  # type: ignore[union-attr]
     return y, names, objects

@@ -1,26 +1,45 @@
-"""The ``haptic`` modality: P1-P6 signals, one instance per finger and offset of a trial."""
+"""The ``haptic`` modality: BioTac P1-P6 signals, one instance per finger and offset of a trial."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import Instances, Split
-from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.layout import Instances, TrialData, TrialName, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
+
+
+class _Chosen:
+    """Some trials of a data set, as ``compute_haptic_arrays`` reads a data set (new trials)."""
+
+    def __init__(self, dataset: Any, names: Iterable[str]) -> None:
+        self.dataset = dataset
+        self.trials = tuple(dataset.trial_name(t) for t in names)
+
+    def iter_trials(self, names: Iterable[TrialName] | None = None) -> Iterator[TrialData]:
+        return self.dataset.iter_trials(self.trials if names is None else names, optional=False)
+
+    def identity(self) -> str:
+        return self.dataset.identity()
 
 
 @MODALITIES.register("haptic")
 class Haptic(Modality):
-    """P1-P6: each trial gives 2 fingers x ``offsets`` instances of (32 signals, ``steps``)."""
+    """P1-P6: each trial gives 2 fingers x ``offsets`` instances of (32 signals, ``steps``).
+
+    ``check`` computes (or loads from ``cache_dir``) every trial's resampled signals and
+    statistics once per data set; ``fit`` is then small algebra on the training trials'
+    statistics (``preprocess.haptic.HapticPreprocessor``). Trials of a data set that was not
+    checked (a new object's, in predict) are read when transformed.
+    """
 
     def __init__(
         self,
-        dataset: PHAC2,
-        cache_dir: Path,
+        *,
+        cache_dir: Path | None = None,
         steps: int = 150,
         offsets: int = 5,
         pca_components: int = 4,
@@ -28,10 +47,10 @@ class Haptic(Modality):
         per_finger: bool = True,
         fit_on: str = "train",
     ) -> None:
-        super().__init__(dataset, cache_dir)
+        super().__init__(cache_dir=cache_dir)
         from tactile_exp.preprocess.haptic import N_ELECTRODES, check_settings
 
-        check_settings(steps, offsets, pac_downsample)  # before any run, not in prepare()
+        check_settings(steps, offsets, pac_downsample)  # before any run
         if not isinstance(pca_components, int) or not 1 <= pca_components <= N_ELECTRODES:
             raise ValueError(
                 f"pca_components must be an integer in 1..{N_ELECTRODES} (electrodes per "
@@ -39,34 +58,52 @@ class Haptic(Modality):
             )
         if fit_on not in ("train", "all"):
             raise ValueError(f"modality.fit_on must be 'train' or 'all', got {fit_on!r}")
-        self.settings = dict(steps=steps, offsets=offsets, pac_downsample=pac_downsample)
+        self.steps, self.offsets, self.pac_downsample = steps, offsets, pac_downsample
         self.pca_components = pca_components
         self.per_finger = per_finger
         self.fit_on = fit_on
+        self._arrays: dict[str, Any] = {}  # data set identity -> its checked HapticArrays
 
-    def prepare(self) -> None:
+    def check(self, dataset: Any) -> None:
         from tactile_exp.preprocess.haptic import load_haptic_arrays
 
-        self.arrays = load_haptic_arrays(self.dataset, cache_dir=self.cache_dir, **self.settings)
+        self._arrays[dataset.identity()] = load_haptic_arrays(
+            dataset, self.steps, self.offsets, self.pac_downsample, cache_dir=self.cache_dir
+        )
 
-    def instances(self, split: Split) -> tuple[Instances, Instances]:
+    def arrays(self, trials: Trials) -> Any:
+        """The resampled signals holding ``trials``: the checked data set's, else read now."""
+        from tactile_exp.preprocess.haptic import compute_haptic_arrays
+
+        checked = self._arrays.get(trials.dataset.identity())
+        if checked is not None:
+            return checked
+        chosen = _Chosen(trials.dataset, trials.names)
+        return compute_haptic_arrays(chosen, self.steps, self.offsets, self.pac_downsample)
+
+    def fit(self, trials: Trials) -> Self:
         from tactile_exp.preprocess.haptic import HapticPreprocessor
 
-        pre = HapticPreprocessor(self.arrays, self.pca_components, self.per_finger)
-        pre.fit(split.train if self.fit_on == "train" else self.arrays.trials)
-        self.fitted_ = pre
-        return self._instances(pre, split.train, split), self._instances(pre, split.test, split)
+        arrays = self.arrays(trials)
+        pre = HapticPreprocessor(arrays, self.pca_components, self.per_finger)
+        self.state_ = pre.fit(trials.names if self.fit_on == "train" else arrays.trials).state()
+        return self
 
-    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        """P1's normaliser and P4's PCA as fitted for the last split, with the P2-P6 settings."""
-        settings = dict(
-            modality="haptic", **self.settings, pca_components=self.pca_components,
-            per_finger=self.per_finger, fit_on=self.fit_on,
-        )  # fmt: skip
-        return settings, self.fitted_.state()
+    def transform(self, trials: Trials) -> Instances:
+        from tactile_exp.preprocess.haptic import HapticPreprocessor
 
-    def _instances(self, pre, trials: Sequence[str], split: Split) -> Instances:
-        X = pre.transform(trials)  # (n, fingers, offsets, 32, steps)
+        pre = HapticPreprocessor(self.arrays(trials), self.pca_components, self.per_finger)
+        X = pre.restore(self.state_).transform(trials.names)  # (n, fingers, offsets, 32, steps)
         per_trial = X.shape[1] * X.shape[2]
-        y, names, objects = trial_rows(trials, split, per_trial)
-        return Instances(X.reshape(-1, *X.shape[3:]), y, names, objects)
+        return Instances(X.reshape(-1, *X.shape[3:]), *trial_rows(trials, per_trial))
+
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """P1's normaliser and P4's PCA as fitted."""
+        return {}, dict(self.state_)
+
+    def set_state(self, settings: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        from tactile_exp.preprocess.haptic import HapticPreprocessor
+
+        HapticPreprocessor.check_state(arrays, self.pca_components)
+        self.state_ = dict(arrays)
+        return self

@@ -6,8 +6,9 @@ L2-normalised inception (5a) features of the object's first ``views`` photograph
 built by the visual modality's rule: ``unit_members`` without padding). ``multimodal_units`` and
 ``visual_units`` build the units for training and for ``predict`` alike.
 The ConvNet is the ``haptic`` part: the engine finds it by its training key (the model rows H, I
-and J train) or trains it in the job when absent, per adjective. The visual trunk is frozen and
-untrained (its features are cached on disk by weights file), so it needs no lookup. The model on
+and J train) or trains it in the job when absent, per adjective; the fitted pipeline keeps it.
+The visual trunk is frozen and untrained (its features are cached on disk by weights file), so
+it needs no lookup. The model on
 top is only a classification layer (``experiment=table1_m_*``: ``linear``, hinge loss).
 """
 
@@ -15,18 +16,16 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
 from tactile_exp.combine import COMBINERS, unit_members
 from tactile_exp.config import Component
-from tactile_exp.data.layout import Instances, Split
-from tactile_exp.data.phac2 import PHAC2
-from tactile_exp.data.splits import split_photographs
+from tactile_exp.data.layout import Instances, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality
 from tactile_exp.modalities.haptic import Haptic
-from tactile_exp.modalities.visual import Visual
+from tactile_exp.modalities.visual import Visual, view_name
 from tactile_exp.models.base import Model
 
 log = logging.getLogger(__name__)
@@ -48,8 +47,8 @@ def visual_units(features: np.ndarray, object_id: np.ndarray, views: int) -> dic
     for obj in np.unique(object_id):
         rows = np.flatnonzero(object_id == obj)
         rank[rows] = np.arange(len(rows))
-    names = np.array([f"{o}_v{r:04d}" for o, r in zip(object_id, rank, strict=True)], dtype=object)
-    photos = Instances(features, np.zeros(n, np.int64), names, np.asarray(object_id))
+    names = np.array([view_name(str(o), r) for o, r in zip(object_id, rank, strict=True)])
+    photos = Instances(features, np.zeros(n, np.int64), names.astype(object), object_id)
     units: dict[int, np.ndarray] = {}
     for members in unit_members(photos, views, pad=Visual.pad_units):
         units.setdefault(int(object_id[members[0]]), features[members].reshape(-1))
@@ -61,8 +60,7 @@ def multimodal_units(
 ) -> Instances:
     """Rows M/N's instances: the ConvNet ``net``'s conv3 of ``trials`` trials of an object
     concatenated (row I/J's unit, padded as the ``haptic`` modality pads), then the object's
-    visual unit (``visual``: object id -> its ``visual_units`` entry). Training and predict
-    both build their units here."""
+    visual unit (``visual``: object id -> its ``visual_units`` entry)."""
     units = COMBINERS.build("concat")(net.transform(haptic.X), haptic, trials, pad=Haptic.pad_units)
     seen = np.stack([visual[int(o)] for o in units.object_id])
     X = np.hstack([units.X, seen]).astype(np.float32)
@@ -73,18 +71,19 @@ def multimodal_units(
 class Multimodal(Modality):
     """Haptic units (``trials`` trials of an object) with their object's ``views`` photographs."""
 
+    takes_photographs = True
+
     def __init__(
         self,
-        dataset: PHAC2,
-        cache_dir: Path,
         *,
+        cache_dir: Path | None = None,
         haptic: dict[str, Any],
         visual: dict[str, Any],
         haptic_model: dict[str, Any],
         trials: int = 1,
         views: int = 8,
     ) -> None:
-        super().__init__(dataset, cache_dir)
+        super().__init__(cache_dir=cache_dir)
         if not isinstance(trials, int) or trials < 1:
             raise ValueError(f"modality.trials must be an integer >= 1, got {trials!r}")
         if not isinstance(views, int) or views < 1:
@@ -97,75 +96,79 @@ class Multimodal(Modality):
                 "modality.haptic and modality.visual must be the haptic and visual modalities, "
                 f"got {self.haptic_part.name!r} and {self.visual_part.name!r}"
             )
-        self.haptic = Haptic(dataset, cache_dir, **self.haptic_part.params)
-        self.visual = Visual(dataset, cache_dir, **self.visual_part.params)
+        self.haptic = Haptic(cache_dir=cache_dir, **self.haptic_part.params)
+        self.visual = Visual(cache_dir=cache_dir, **self.visual_part.params)
         self.trials = trials
         self.views = views
+        self.left_out_: set[int] = set()
 
     def parts(self) -> dict[str, tuple[Component, Component]]:
         return {"haptic": (self.haptic_part, self.model_part)}
 
-    def max_combine(self) -> tuple[int, str]:
+    def max_combine(self, dataset: Any) -> tuple[int, str]:
         return 1, "multimodal units (set modality.trials for trials per unit)"
 
-    def prepare(self) -> None:
-        self.haptic.prepare()
-        self.visual.prepare()
-        limit, _ = self.haptic.max_combine()
+    def check(self, dataset: Any) -> None:
+        self.haptic.check(dataset)
+        self.visual.check(dataset)
+        limit, _ = self.haptic.max_combine(dataset)
         if self.trials > limit:
             raise ValueError(
                 f"modality.trials: {self.trials} trials per unit, but objects in "
-                f"{self.dataset.path} have at most {limit}; allowed 1..{limit}"
+                f"{dataset.path} have at most {limit}; allowed 1..{limit}"
             )
-        self.missing_ = set(int(o) for o in self.visual.arrays.missing)
 
-    def _visual_units(self, split: Split) -> dict[int, np.ndarray]:
-        """Each object's visual unit (``visual_units``) from its photographs in view order."""
-        arrays = self.visual.arrays
-        if self.visual.mean == "train":
-            train_idx, _, _ = split_photographs(split, arrays.object_id)
-            self.visual.features.fit(train_idx)
-        features = self.visual.features.transform(np.arange(len(arrays.object_id)))
-        order = np.lexsort((arrays.view, arrays.object_id))
-        return visual_units(features[order], arrays.object_id[order], self.views)
+    def fit(self, trials: Trials) -> Self:
+        self.haptic.fit(trials)
+        self.visual.fit(trials)
+        self.left_out_ = set()
+        self.net_ = self.provide("haptic", self.haptic.transform(trials), trials)
+        return self
 
-    def instances(self, split: Split) -> tuple[Instances, Instances]:
-        train, test = self.haptic.instances(split)
-        net = self.provide("haptic", split, train)
-        visual = self._visual_units(split)
-        out = []
-        left_out: set[int] = set()
-        for part, inst in (("train", train), ("test", test)):
-            keep = np.array([o not in self.missing_ for o in inst.object_id], dtype=bool)
-            left_out |= {int(o) for o in inst.object_id[~keep]}
-            kept = Instances(inst.X[keep], inst.y[keep], inst.trial[keep], inst.object_id[keep])
-            if len(np.unique(kept.y)) != 2:
-                raise ValueError(
-                    f"multimodal split of {split.adjective!r}: the {part} units with "
-                    f"photographs hold labels {np.unique(kept.y).tolist()}, expected positives "
-                    f"and negatives (objects without photographs: {sorted(self.missing_)})"
-                )
-            out.append(multimodal_units(net, kept, self.trials, visual))
-        self.left_out_ = sorted(left_out)
+    def fitted_parts(self) -> dict[str, Model]:
+        return {"haptic": self.net_}
+
+    def set_parts(self, parts: dict[str, Model]) -> None:
+        self.net_ = parts["haptic"]
+
+    def transform(self, trials: Trials) -> Instances:
+        inst = self.haptic.transform(trials)
+        objects = tuple(int(o) for o in np.unique(inst.object_id))
+        seen = self.visual.transform(Trials(trials.dataset, (), object_ids=objects))
+        units = visual_units(seen.X, seen.object_id, self.views)
+        keep = np.isin(inst.object_id, list(units))
+        left_out = sorted(set(objects) - set(units))
         if left_out:
+            self.left_out_ |= set(left_out)
             log.warning(
-                "multimodal %s: %d objects without photographs left out: %s",
-                split.adjective,
-                len(left_out),
-                self.left_out_,
+                "multimodal %s: %d %s objects without photographs left out: %s",
+                trials.label, len(left_out), trials.side, left_out,
+            )  # fmt: skip
+        kept = Instances(inst.X[keep], inst.y[keep], inst.trial[keep], inst.object_id[keep])
+        if len(np.unique(inst.y)) == 2 and len(np.unique(kept.y)) != 2:
+            raise ValueError(
+                f"multimodal split of {trials.label!r}: the {trials.side} units with "
+                f"photographs hold labels {np.unique(kept.y).tolist()}, expected positives "
+                f"and negatives (objects without photographs: {left_out})"
             )
-        return out[0], out[1]
+        return multimodal_units(self.net_, kept, self.trials, units)
 
     def metrics(self) -> dict[str, float]:
         return {"n_objects_without_photographs": float(len(self.left_out_))}
 
-    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """The haptic and visual preprocessing as fitted, keys prefixed by part."""
-        settings: dict[str, Any] = {"modality": "multimodal", "trials": self.trials}
-        settings["views"] = self.views
+        settings: dict[str, Any] = {}
         arrays: dict[str, np.ndarray] = {}
         for name, modality in (("haptic", self.haptic), ("visual", self.visual)):
-            part_settings, part_arrays = modality.state()
+            part_settings, part_arrays = modality.get_state()
             settings[name] = part_settings
             arrays.update({f"{name}.{k}": v for k, v in part_arrays.items()})
         return settings, arrays
+
+    def set_state(self, settings: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        for name, modality in (("haptic", self.haptic), ("visual", self.visual)):
+            prefix = f"{name}."
+            part = {k.removeprefix(prefix): v for k, v in arrays.items() if k.startswith(prefix)}
+            modality.set_state(settings.get(name, {}), part)
+        return self

@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import Instances, Split
-from tactile_exp.data.phac2 import PHAC2
-from tactile_exp.data.splits import split_photographs
+from tactile_exp.data.layout import Instances, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality
 
 log = logging.getLogger(__name__)
+
+
+def view_name(stem: str, view: int) -> str:
+    """A photograph's instance name: its object's name and its rank among the object's views
+    (by file name), ``<stem>_v<VV>``: ``combine=k`` then groups ``k`` views of one object."""
+    return f"{stem}_v{view:02d}"
 
 
 @MODALITIES.register("visual")
@@ -21,14 +25,12 @@ class Visual(Modality):
     """V1-V2 and M3's frozen trunk: one instance per photograph, its pooled, L2-normalised
     inception (5a) activations (832 values), labelled with its object's label.
 
-    ``VisualFeatures`` (``preprocess/visual.py``) holds the fit/transform; see
-    ``models/googlenet.py`` for why the trunk lives here rather than in the model. ``mean="train"``
-    fits the V2 channel mean on each split's training photographs instead of using the one the
-    layout's weights expect; that costs one trunk pass per adjective. ``layout`` picks the trunk
-    (``torchvision`` or ``caffe``, the MINC release's) and its input (``googlenet.network_input``).
-    Photographs follow their object's trials (``data.splits.split_photographs``). Instances are
-    named ``<group stem>_v<VV>``: the combiner's ``combine=k`` then groups ``k`` views of one
-    object. Objects without photographs are left out (a warning gives their count).
+    ``fit`` learns the V2 channel mean: the one the layout's weights expect (``mean="imagenet"``)
+    or the training photographs' (``mean="train"``, one trunk pass per adjective).
+    ``layout`` picks the trunk (``torchvision`` or ``caffe``, the MINC release's) and its input
+    (``preprocess.trunk``). Photographs follow their object's trials; an object whose trials a
+    split shares between sides has its views divided in that proportion (``Trials.shared``).
+    Objects without photographs are left out (a warning gives their count).
 
     Units of views are never padded (``pad_units``): row L's unit is an object's first 8 views
     (by file name); further views (PHAC-2 has objects with 10) form no second unit. An object with
@@ -37,11 +39,13 @@ class Visual(Modality):
     """
 
     pad_units = False
+    takes_trials = False
+    takes_photographs = True
 
     def __init__(
         self,
-        dataset: PHAC2,
-        cache_dir: Path,
+        *,
+        cache_dir: Path | None = None,
         size: int = 224,
         mean: str = "imagenet",
         weights: str | None = None,
@@ -52,7 +56,7 @@ class Visual(Modality):
     ) -> None:
         from tactile_exp.train import resolve_device
 
-        super().__init__(dataset, cache_dir)
+        super().__init__(cache_dir=cache_dir)
         if mean not in ("imagenet", "train"):
             raise ValueError(f"modality.mean must be 'imagenet' or 'train', got {mean!r}")
         if layout not in ("torchvision", "caffe"):
@@ -76,67 +80,113 @@ class Visual(Modality):
         self.seed = seed
         self.batch_size = batch_size
         self.device = device
+        self._trunks: dict[str, Any] = {}  # data set identity -> its VisualFeatures
 
-    def max_combine(self) -> tuple[int, str]:
+    def max_combine(self, dataset: Any) -> tuple[int, str]:
         """The most views of one object: the largest ``combine`` that groups distinct views."""
-        photos = self.dataset.photographs()
+        photos = dataset.photographs()
         return max((len(p) for p in photos.values()), default=0), "views"
 
-    def prepare(self) -> None:
-        from tactile_exp.preprocess.visual import VisualFeatures, load_visual_arrays
-
-        self.arrays = load_visual_arrays(self.dataset, self.size, self.cache_dir)
-        if len(self.arrays.images) == 0:
-            raise ValueError(f"{self.dataset.path}: no photographs found for any object")
-        if len(self.arrays.missing):
+    def check(self, dataset: Any) -> None:
+        trunk = self._trunk(dataset)
+        arrays = trunk.arrays
+        if len(arrays.images) == 0:
+            raise ValueError(f"{dataset.path}: no photographs found for any object")
+        if len(arrays.missing):
             log.warning(
                 "visual: %d of %d objects have no photographs and are left out: %s",
-                len(self.arrays.missing),
-                len(self.dataset.object_ids()),
-                self.arrays.missing.tolist(),
+                len(arrays.missing),
+                len(dataset.object_ids()),
+                arrays.missing.tolist(),
             )
         if self.weights is None:
             log.warning(
                 "visual: modality.weights is null: GoogLeNet has random (Xavier) weights, so its "
                 "features are random projections, not transferred MINC/ImageNet features"
             )
-        self._stems = {t.object_id: t.stem for t in self.dataset.trials}
-        self.features = VisualFeatures(
-            self.arrays,
-            cache_dir=self.cache_dir,
-            mean=self.mean,
-            weights=self.weights,
-            layout=self.layout,
-            seed=self.seed,
-            batch_size=self.batch_size,
-            device=self.device,
-        )
         if self.mean == "imagenet":
-            self.features.fit()  # one trunk pass shared by every adjective, before any training
+            trunk.features(self._layout_mean())  # one trunk pass for every adjective, up front
 
-    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        """V2's channel mean as fitted, and the crop and trunk settings."""
-        settings = dict(
-            modality="visual", size=self.size, mean=self.mean, layout=self.layout,
-            weights=None if self.weights is None else str(self.weights), seed=self.seed,
-        )  # fmt: skip
-        return settings, {"channel_mean": np.asarray(self.features.mean_, dtype=np.float64)}
+    def _trunk(self, dataset: Any) -> Any:
+        """The photographs of ``dataset`` and their trunk features (cached when checked)."""
+        from tactile_exp.preprocess.visual import (
+            VisualFeatures,
+            compute_visual_arrays,
+            load_visual_arrays,
+        )
 
-    def instances(self, split: Split) -> tuple[Instances, Instances]:
-        train_idx, test_idx, labels = split_photographs(split, self.arrays.object_id)
-        if self.mean == "train":
-            self.features.fit(train_idx)
-        out = []
-        for part, idx in (("train", train_idx), ("test", test_idx)):
-            obj = self.arrays.object_id[idx]
-            y = np.array([labels[o] for o in obj], dtype=np.int64)
-            if len(np.unique(y)) != 2:
-                raise ValueError(
-                    f"visual split of {split.adjective!r}: the {part} photographs hold labels "
-                    f"{np.unique(y).tolist()}, expected positives and negatives (objects without "
-                    f"photographs: {self.arrays.missing.tolist()})"
-                )
-            views = zip(obj, self.arrays.view[idx], strict=True)
-            names = np.array([f"{self._stems[o]}_v{v:02d}" for o, v in views], dtype=object)
-            out.append(Instances(self.features.transform(idx), y, names, obj))
-        return out[0], out[1]
+        key = dataset.identity()
+        if key not in self._trunks:
+            if self.cache_dir is None:
+                arrays = compute_visual_arrays(dataset, self.size)
+            else:
+                arrays = load_visual_arrays(dataset, self.size, self.cache_dir)
+            self._trunks[key] = VisualFeatures(
+                arrays, cache_dir=self.cache_dir, weights=self.weights, layout=self.layout,
+                seed=self.seed, batch_size=self.batch_size, device=self.device,
+            )  # fmt: skip
+        return self._trunks[key]
+
+    def _layout_mean(self) -> tuple[float, ...]:
+        from tactile_exp.models.googlenet import LAYOUT_MEAN_RGB
+
+        return tuple(round(float(m), 4) for m in LAYOUT_MEAN_RGB[self.layout])
+
+    def photographs(self, trials: Trials) -> np.ndarray:
+        """Rows (of the data set's photograph arrays) of ``trials``' objects, in view order."""
+        arrays = self._trunk(trials.dataset).arrays
+        rows = []
+        for obj in sorted(trials.objects):
+            views = np.flatnonzero(arrays.object_id == obj)
+            views = views[np.argsort(arrays.view[views], kind="stable")]
+            if obj in trials.shared:
+                n_train, n_test = trials.shared[obj]
+                if len(views) < 2:
+                    raise ValueError(
+                        f"visual split of {trials.label!r}: object {obj} is split by trial "
+                        f"({n_train} train, {n_test} test) but has {len(views)} photograph(s); "
+                        "at least 2 are needed to put views on both sides"
+                    )
+                k = min(len(views) - 1, max(1, round(len(views) * n_train / (n_train + n_test))))
+                views = views[:k] if trials.side == "train" else views[k:]
+            rows.append(views)
+        return np.concatenate(rows) if rows else np.zeros(0, np.int64)
+
+    def fit(self, trials: Trials) -> Self:
+        if self.mean == "imagenet":
+            self.mean_ = self._layout_mean()
+        else:
+            arrays = self._trunk(trials.dataset).arrays
+            self.mean_ = tuple(
+                round(float(m), 4) for m in arrays.channel_mean(self.photographs(trials))
+            )
+        return self
+
+    def transform(self, trials: Trials) -> Instances:
+        trunk = self._trunk(trials.dataset)
+        arrays = trunk.arrays
+        rows = self.photographs(trials)
+        obj = arrays.object_id[rows]
+        labels = trials.object_labels()
+        y = np.array([labels[o] for o in obj], dtype=np.int64)
+        if len(np.unique(trials.y())) == 2 and len(np.unique(y)) != 2:
+            raise ValueError(
+                f"visual split of {trials.label!r}: the {trials.side} photographs hold labels "
+                f"{np.unique(y).tolist()}, expected positives and negatives (objects without "
+                f"photographs: {arrays.missing.tolist()})"
+            )
+        stems = {o: trials.dataset.object_name(o) for o in np.unique(obj).tolist()}
+        views = zip(obj.tolist(), arrays.view[rows].tolist(), strict=True)
+        names = np.array([view_name(stems[o], v) for o, v in views], dtype=object)
+        return Instances(trunk.features(self.mean_)[rows], y, names, obj)
+
+    def get_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """V2's channel mean as fitted."""
+        return {}, {"channel_mean": np.asarray(self.mean_, dtype=np.float64)}
+
+    def set_state(self, settings: dict[str, Any], arrays: dict[str, np.ndarray]) -> Self:
+        mean = np.asarray(arrays["channel_mean"], dtype=np.float64)
+        if mean.shape != (3,):
+            raise ValueError(f"channel_mean has shape {mean.shape}, expected (3,)")
+        self.mean_ = tuple(float(m) for m in mean)
+        return self

@@ -324,20 +324,25 @@ class HapticPreprocessor:
 
     def restore(self, state: Mapping[str, np.ndarray]) -> HapticPreprocessor:
         """Take ``state()``'s arrays instead of fitting; ValueError when one is missing or off."""
-        k, c = N_SCALAR + self.n_components, len(SIGNALS)
+        self.check_state(state, self.n_components)
+        self.mean_, self.scale_ = state["mean"], state["scale"]
+        self.components_, self.pca_mean_ = state["components"], state["pca_mean"]
+        self._weight, self._bias = state["weight"], state["bias"]
+        return self
+
+    @classmethod
+    def check_state(cls, state: Mapping[str, np.ndarray], n_components: int) -> None:
+        """ValueError when ``state`` lacks an array or one has the wrong shape."""
+        k, c = N_SCALAR + n_components, len(SIGNALS)
         shapes = {"weight": (2, len(EPS), k, c), "bias": (2, len(EPS), k)}
-        for name in self.STATE:
+        for name in cls.STATE:
             if name not in state:
                 raise ValueError(f"haptic preprocessing state lacks {name!r}")
             if name in shapes and np.shape(state[name]) != shapes[name]:
                 raise ValueError(
                     f"haptic preprocessing {name!r} has shape {np.shape(state[name])}, "
-                    f"expected {shapes[name]} for {self.n_components} electrode PCs"
+                    f"expected {shapes[name]} for {n_components} electrode PCs"
                 )
-        self.mean_, self.scale_ = state["mean"], state["scale"]
-        self.components_, self.pca_mean_ = state["components"], state["pca_mean"]
-        self._weight, self._bias = state["weight"], state["bias"]
-        return self
 
     def transform(self, trials: Sequence[str | TrialName]) -> np.ndarray:
         """(n, 2 fingers, offsets, n_channels, steps) float32 for ``trials``, in order."""

@@ -293,31 +293,27 @@ def load_visual_arrays(
 
 
 class VisualFeatures:
-    """V2 and M3's frozen trunk as fit/transform: ``fit`` learns the channel mean (ImageNet's, or
-    the training photographs' with ``mean="train"``), ``transform`` gives the pooled,
-    L2-normalised inception (5a) features of chosen photographs, (n, 832).
+    """V2 and M3's frozen trunk over a set of photographs: the pooled, L2-normalised inception
+    (5a) features of every photograph with a given channel mean subtracted, (n, 832).
 
-    The trunk runs once per set of images, weights file (or seed) and mean, over every photograph,
-    cached on disk under ``cache_dir``: shared by every adjective and job.
+    The trunk runs once per set of images, weights file (or seed) and mean, cached on disk under
+    ``cache_dir`` (none: not cached, as for a new object's photographs): shared by every
+    adjective and job.
     """
 
     def __init__(
         self,
         arrays: VisualArrays,
         *,
-        cache_dir: Path,
-        mean: str = "imagenet",
+        cache_dir: Path | None,
         weights: Path | None = None,
         layout: str = "torchvision",
         seed: int = 0,
         batch_size: int = 32,
         device: str = "auto",
     ) -> None:
-        if mean not in ("imagenet", "train"):
-            raise ValueError(f"mean must be 'imagenet' or 'train', got {mean!r}")
         self.arrays = arrays
         self.cache_dir = cache_dir
-        self.mean = mean
         self.weights = weights
         self.layout = layout
         self.seed = seed
@@ -325,24 +321,11 @@ class VisualFeatures:
         self.device = device
         self._by_mean: dict[tuple[float, ...], np.ndarray] = {}
 
-    def fit(self, index: np.ndarray | None = None) -> VisualFeatures:
-        """Learn the channel mean from photographs ``index`` (all when None) if ``mean="train"``,
-        and run (or load) the trunk for it."""
-        from tactile_exp.models.googlenet import LAYOUT_MEAN_RGB
-
-        fitted = (
-            LAYOUT_MEAN_RGB[self.layout]
-            if self.mean == "imagenet"
-            else self.arrays.channel_mean(index)
-        )
-        self.mean_ = tuple(round(float(m), 4) for m in fitted)
-        if self.mean_ not in self._by_mean:
-            self._by_mean = {self.mean_: self._all_features(self.mean_)}  # keep only the latest
-        return self
-
-    def transform(self, index: np.ndarray) -> np.ndarray:
-        """Features of photographs ``index`` (rows of ``arrays``): (len(index), 832)."""
-        return self._by_mean[self.mean_][index]
+    def features(self, mean: tuple[float, ...]) -> np.ndarray:
+        """Every photograph's features with channel ``mean`` subtracted (the latest kept)."""
+        if mean not in self._by_mean:
+            self._by_mean = {mean: self._all_features(mean)}
+        return self._by_mean[mean]
 
     def _all_features(self, mean: tuple[float, ...]) -> np.ndarray:
         """The trunk's features of every photograph with channel ``mean`` subtracted; cached on
@@ -365,12 +348,13 @@ class VisualFeatures:
             layout=self.layout,
             version=2,  # 2: torchvision input without transform_input (the mean counts)
         )
-        path = self.cache_dir / f"googlenet5a-{key}.npz"
-        cached = load_arrays(path, ("features",))
+        path = None if self.cache_dir is None else self.cache_dir / f"googlenet5a-{key}.npz"
+        cached = None if path is None else load_arrays(path, ("features",))
         if cached is not None:
             return cached["features"]
         images = network_input(self.arrays.images, mean, self.layout)  # V2, in the trunk's layout
         trunk = build_trunk(self.weights, self.seed, self.layout)
         features = pooled_features(trunk, images, self.batch_size, resolve_device(self.device))
-        save_arrays(path, {"features": features})
+        if path is not None:
+            save_arrays(path, {"features": features})
         return features

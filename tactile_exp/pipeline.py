@@ -1,0 +1,178 @@
+"""One adjective's fitted classifier, from trials to scores: what training builds, the store
+keeps, and predict and the exported models load and call.
+
+``AdjectivePipeline`` chains the modality's preprocessing (fitted on the training trials), the
+model, the combiner that groups ``combine`` instances of an object into a unit (T4) and, when
+units combine instances, the head retrained on them. ``save(folder)`` / ``load(folder)`` is the
+one storage protocol: ``pipeline.json`` (what to build), ``preprocess/`` (what the modality
+learned), ``model/``, ``head/`` and ``parts/<part>/`` (``store.write_model``'s folders: JSON,
+npz and ``weights_only`` tensors; loading runs no stored code).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from tactile_exp import store
+from tactile_exp.combine import COMBINERS
+from tactile_exp.config import Component
+from tactile_exp.data.layout import Instances, Trials
+from tactile_exp.modalities import MODALITIES, Modality
+from tactile_exp.modalities.base import PartProvider
+from tactile_exp.models.base import EpochCallback, History, Model
+from tactile_exp.models.registry import MODELS
+
+SETTINGS = "pipeline.json"
+
+
+class AdjectivePipeline:
+    """Preprocessing -> model -> combiner -> head, for one label (an adjective).
+
+    Hyperparameters are the config's components; ``cache_dir`` is where the modality caches
+    what it computes for a whole data set (None: nothing cached, as for a new object).
+    """
+
+    def __init__(
+        self,
+        modality: Component,
+        model: Component,
+        combiner: str = "concat",
+        combine: int = 1,
+        *,
+        label: str = "",
+        cache_dir: Path | None = None,
+    ) -> None:
+        self.modality = modality
+        self.model = model
+        self.combiner = combiner
+        self.combine = combine
+        self.label = label
+        self.preprocess: Modality = MODALITIES.build(
+            modality.name, cache_dir=cache_dir, **modality.params
+        )
+        self._combine_units = COMBINERS.build(combiner)
+
+    @property
+    def trains_model(self) -> bool:
+        """Whether the model itself is trained: when it scores instances (no head) or learns
+        the features the head classifies (a ConvNet); a fixed transform (``linear``) is not."""
+        return self.keeps_instances or MODELS[self.model.name].learns_representation
+
+    @property
+    def keeps_instances(self) -> bool:
+        return self._combine_units.keeps_instances
+
+    def fit(
+        self,
+        train: Trials,
+        *,
+        model: Model | None = None,
+        provide: PartProvider | None = None,
+        on_epoch: EpochCallback | None = None,
+    ) -> History:
+        """Fit on ``train``; ``model``: an already trained model to use instead of training one
+        (found by its training key), ``provide``: where the modality's parts come from.
+        Returns the training curves (model, then ``head_*``)."""
+        if provide is not None:
+            self.preprocess.use_parts(provide)
+        instances = self.preprocess.fit(train).transform(train)
+        self.n_train_instances_ = len(instances)
+        history: History = {}
+        if model is None:
+            model = MODELS.build(self.model.name, **self.model.params)
+            if self.trains_model:
+                history = model.fit(instances, on_epoch)
+        self.model_ = model
+        self.head_: Model | None = None
+        if self.keeps_instances:
+            self.train_scores_ = (model.decision_function(instances.X), instances)
+            return history
+        units = self._units(instances)
+        self.head_ = model.head()
+        history |= {f"head_{k}": v for k, v in self.head_.fit(units).items()}
+        self.train_scores_ = (self.head_.decision_function(units.X), units)
+        return history
+
+    def _units(self, instances: Instances) -> Instances:
+        features = self.model_.transform(instances.X)
+        return self._combine_units(features, instances, self.combine, pad=self.preprocess.pad_units)
+
+    def decision_function(self, trials: Trials) -> tuple[np.ndarray, Instances]:
+        """One score per unit of ``trials`` (> 0: the label applies) and the units scored."""
+        return self.score(self.preprocess.transform(trials))
+
+    def score(self, instances: Instances) -> tuple[np.ndarray, Instances]:
+        """Scores of preprocessed ``instances``' units, and the units."""
+        if self.head_ is None:
+            return self.model_.decision_function(instances.X), instances
+        units = self._units(instances)
+        return self.head_.decision_function(units.X), units
+
+    def save(self, folder: Path) -> None:
+        """Everything ``load`` needs, into ``folder`` (which may hold other artifacts)."""
+        settings = {
+            "format": store.FORMAT,
+            "label": self.label,
+            "modality": {"name": self.modality.name, "params": self.modality.params},
+            "model": {"name": self.model.name, "params": self.model.params},
+            "combiner": self.combiner,
+            "combine": self.combine,
+        }
+        (folder / SETTINGS).write_text(json.dumps(settings, indent=1, default=store.jsonable))
+        state, arrays = self.preprocess.get_state()
+        (folder / "preprocess").mkdir()
+        store.write_state(folder / "preprocess", state, arrays)
+        if self.trains_model and self.model_.storable:
+            _write_model(folder / "model", self.model.name, self.model_)
+        if self.head_ is not None and self.head_.storable:
+            _write_model(folder / "head", store.model_name(self.head_), self.head_)
+        for part, fitted in self.preprocess.fitted_parts().items():
+            name = self.preprocess.parts()[part][1].name
+            _write_model(folder / "parts" / part, name, fitted)
+
+    @classmethod
+    def load(cls, folder: Path, where: str) -> AdjectivePipeline:
+        """The pipeline ``save`` wrote into ``folder``; ``where`` names it in errors (run id).
+        Raises ``store.ArtifactError`` naming the file when anything is missing or off."""
+        settings = store.read_json(folder, f"{where}", SETTINGS)
+        try:
+            modality = Component(settings["modality"]["name"], settings["modality"]["params"])
+            model = Component(settings["model"]["name"], settings["model"]["params"])
+            pipeline = cls(
+                modality,
+                model,
+                str(settings["combiner"]),
+                int(settings["combine"]),
+                label=str(settings["label"]),
+            )
+        except (KeyError, TypeError, ValueError) as err:
+            raise store.ArtifactError(f"{where}/{SETTINGS}: missing or bad entry {err}") from None
+        pre = folder / "preprocess"
+        state = store.read_json(pre, f"{where}/preprocess")
+        try:
+            pipeline.preprocess.set_state(state, store.read_arrays(pre, f"{where}/preprocess"))
+        except (KeyError, TypeError, ValueError) as err:
+            raise store.ArtifactError(f"{where}/preprocess: {err}") from None
+        parts = {
+            part: store.read_model(folder / "parts" / part, f"{where}/parts/{part}")
+            for part in pipeline.preprocess.parts()
+        }
+        pipeline.preprocess.set_parts(parts)
+        if (folder / "model").is_dir():
+            pipeline.model_ = store.read_model(folder / "model", f"{where}/model")
+        elif pipeline.trains_model:
+            raise store.ArtifactError(f"{where}: no model/ folder, but the model is trained")
+        else:
+            pipeline.model_ = MODELS.build(model.name, **model.params)
+        pipeline.head_ = None
+        if not pipeline.keeps_instances:
+            pipeline.head_ = store.read_model(folder / "head", f"{where}/head")
+        return pipeline
+
+
+def _write_model(folder: Path, name: str, model: Model) -> None:
+    folder.mkdir(parents=True)
+    store.write_model(folder, name, model)
