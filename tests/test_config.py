@@ -174,7 +174,10 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("model.lr=-1", "lr"),
         ("model.epochs=0", "epochs"),
         ("schedule.head.lr=0", "head_schedule.lr must be > 0"),
-        ("modality=visual", "modality: model=haptic_cnn takes modality haptic, got 'visual'"),
+        (
+            "modality=visual",
+            "modality: model=haptic_cnn takes modality haptic or signals, got 'visual'",
+        ),
     ],
 )
 def test_impossible_values_fail_naming_the_key(compose_config, override, message):

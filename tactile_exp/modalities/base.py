@@ -92,6 +92,7 @@ MODALITIES: Registry[Modality] = Registry(
         "tactile_exp.modalities.haptic",
         "tactile_exp.modalities.haptic_features",
         "tactile_exp.modalities.multimodal",
+        "tactile_exp.modalities.signals",
         "tactile_exp.modalities.visual",
     ),
 )
