@@ -137,7 +137,11 @@ class AdjectivePipeline:
     def load(cls, folder: Path, where: str) -> AdjectivePipeline:
         """The pipeline ``save`` wrote into ``folder``; ``where`` names it in errors (run id).
         Raises ``store.ArtifactError`` naming the file when anything is missing or off."""
-        settings = store.read_json(folder, f"{where}", SETTINGS)
+
+        def at(path: str) -> str:
+            return f"{where}: artifact {path}"
+
+        settings = store.read_json(folder, where, SETTINGS)
         try:
             modality = Component(settings["modality"]["name"], settings["modality"]["params"])
             model = Component(settings["model"]["name"], settings["model"]["params"])
@@ -149,27 +153,28 @@ class AdjectivePipeline:
                 label=str(settings["label"]),
             )
         except (KeyError, TypeError, ValueError) as err:
-            raise store.ArtifactError(f"{where}/{SETTINGS}: missing or bad entry {err}") from None
+            raise store.ArtifactError(f"{at(SETTINGS)}: missing or bad entry {err}") from None
         pre = folder / "preprocess"
-        state = store.read_json(pre, f"{where}/preprocess")
+        state = store.read_json(pre, at("preprocess"))
         try:
-            pipeline.preprocess.set_state(state, store.read_arrays(pre, f"{where}/preprocess"))
+            pipeline.preprocess.set_state(state, store.read_arrays(pre, at("preprocess")))
         except (KeyError, TypeError, ValueError) as err:
-            raise store.ArtifactError(f"{where}/preprocess: {err}") from None
-        parts = {
-            part: store.read_model(folder / "parts" / part, f"{where}/parts/{part}")
-            for part in pipeline.preprocess.parts()
-        }
-        pipeline.preprocess.set_parts(parts)
+            raise store.ArtifactError(f"{at('preprocess')}: {err}") from None
+        pipeline.preprocess.set_parts(
+            {
+                part: store.read_model(folder / "parts" / part, at(f"parts/{part}"))
+                for part in pipeline.preprocess.parts()
+            }
+        )
         if (folder / "model").is_dir():
-            pipeline.model_ = store.read_model(folder / "model", f"{where}/model")
+            pipeline.model_ = store.read_model(folder / "model", at("model"))
         elif pipeline.trains_model:
-            raise store.ArtifactError(f"{where}: no model/ folder, but the model is trained")
+            raise store.ArtifactError(f"{where}: no artifact model/, but the model is trained")
         else:
             pipeline.model_ = MODELS.build(model.name, **model.params)
         pipeline.head_ = None
         if not pipeline.keeps_instances:
-            pipeline.head_ = store.read_model(folder / "head", f"{where}/head")
+            pipeline.head_ = store.read_model(folder / "head", at("head"))
         return pipeline
 
 

@@ -18,14 +18,11 @@ from tactile_exp.data.layout import TrialName
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.experiment import run
-from tactile_exp.predict import (
-    PredictError,
-    _tracker,
-    haptic_instances,
-    main,
-    predict,
-    read_photographs,
-)
+from tactile_exp.data.layout import DataError
+from tactile_exp.data.photos import PhotoFolder
+from tactile_exp.predict import PredictError, predict
+from tactile_exp.predict.__main__ import main
+from tactile_exp.preprocess.visual import compute_visual_arrays
 
 
 @pytest.fixture
@@ -109,13 +106,13 @@ def test_predict_errors_are_clear(job, mlflow_uri, tmp_path, capsys):
 
 
 def test_photographs_missing_or_not_images(tmp_path):
-    with pytest.raises(PredictError, match="no such folder"):
-        read_photographs(tmp_path / "none", 32)
-    with pytest.raises(PredictError, match="no photographs"):
-        read_photographs(tmp_path, 32)
+    with pytest.raises(DataError, match="no such folder"):
+        PhotoFolder(tmp_path / "none")
+    with pytest.raises(DataError, match="no photographs"):
+        PhotoFolder(tmp_path)
     (tmp_path / "view.jpg").write_text("not an image")
-    with pytest.raises(PredictError, match="view.jpg"):
-        read_photographs(tmp_path, 32)
+    with pytest.raises(DataError, match="view.jpg"):
+        compute_visual_arrays(PhotoFolder(tmp_path), 32)
 
 
 @pytest.mark.slow  # prepares photographs and runs the GoogLeNet trunk
@@ -265,13 +262,7 @@ def test_the_table_names_the_job_its_data_and_what_the_scores_mean(job, mlflow_u
 def test_missing_trials_name_the_flags(job, mlflow_uri, capsys):
     result, _ = job
     assert main([result.run_id, "--tracking-uri", mlflow_uri]) == 2
-    assert "--trial NAME" in capsys.readouterr().err
-    tracker = _tracker(mlflow_uri, "tactile_exp")
-    child = tracker.client.search_runs(
-        [tracker.experiment_id], f"tags.mlflow.parentRunId = '{result.run_id}'"
-    )[0].info.run_id
-    with pytest.raises(PredictError, match=r"--trial NAME\) or an object \(--object ID\)"):
-        haptic_instances(tracker, data=job[1], trials=[], child=child)
+    assert "give trials (--trial NAME, repeated, or --object ID)" in capsys.readouterr().err
 
 
 def test_a_combined_unit_is_its_object_and_a_gone_data_file_asks_for_data(

@@ -17,11 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.predict import INPUTS, PredictError, _children, _config, _job, _tracker
+from tactile_exp.jobs import PredictError, StoredJob
+from tactile_exp.modalities import MODALITIES
+from tactile_exp.pipeline import SETTINGS
 
 MODEL_FILE = Path(__file__).with_name("pyfunc_model.py")
 ARTIFACT_PATH = "model"
-KEPT = ("preprocess", "model", "head", "parts")  # what predict reads of each child run
+KEPT = (SETTINGS, "preprocess", "model", "head", "parts")  # each child run's saved pipeline
 
 
 def _signature(adjectives: list[str]) -> Any:
@@ -38,7 +40,7 @@ def _signature(adjectives: list[str]) -> Any:
     return ModelSignature(inputs=inputs, outputs=outputs)
 
 
-def _example(tracker: Any, config: dict[str, Any], child: str) -> Any:
+def _example(job: StoredJob, child: str) -> Any:
     """A held-out unit of the job as a request: its trial in the job's data file; for rows that
     take photographs, ``photos/<object stem>``, the folder of that object's photographs a user
     makes (the data file keeps them all in one folder), so that example shows the shape only."""
@@ -46,8 +48,10 @@ def _example(tracker: Any, config: dict[str, Any], child: str) -> Any:
 
     from tactile_exp.data.sources import DATA_SOURCES
 
-    takes_trials, takes_photos = INPUTS[str(config["modality"]["name"])]
-    scores = Path(tracker.client.download_artifacts(child, "scores.csv")).read_text()
+    config = job.config
+    modality = MODALITIES[job.modality]
+    takes_trials, takes_photos = modality.takes_trials, modality.takes_photographs
+    scores = Path(job.client.download_artifacts(child, "scores.csv")).read_text()
     unit = next(csv.DictReader(io.StringIO(scores)))["unit"].split("#")[0]
     example: dict[str, list[str]] = {}
     if takes_trials:
@@ -72,26 +76,26 @@ def log_job(
     Returns MLflow's ``ModelInfo`` and the registered version (None: not registered)."""
     import mlflow
 
-    tracker = _tracker(tracking_uri, experiment)
-    job = _job(tracker, run_id)
-    job_id = job.info.run_id
-    config = _config(tracker, job_id)
-    modality, model_name = str(config["modality"]["name"]), str(config["model"]["name"])
-    if model_name == "random" or modality not in INPUTS:
-        raise PredictError(f"run {job_id}: a {model_name} job on {modality} keeps no model to log")
-    children = _children(tracker, job_id, None)
+    stored = StoredJob.open(run_id, experiment=experiment, tracking_uri=tracking_uri)
+    job, job_id, config = stored.run, stored.id, stored.config
+    model_name = str(config["model"]["name"])
+    if model_name == "random":
+        raise PredictError(
+            f"run {job_id}: a {model_name} job on {stored.modality} keeps no model to log"
+        )
+    children = stored.children()
     with tempfile.TemporaryDirectory(prefix="tactile_exp-model-") as tmp:
         folder = Path(tmp) / "job"
         for child in children.values():
             (folder / "runs" / child).mkdir(parents=True)
-            listed = {a.path for a in tracker.client.list_artifacts(child)}
+            listed = {a.path for a in stored.client.list_artifacts(child)}
             for path in KEPT:
                 if path in listed:
-                    tracker.client.download_artifacts(child, path, str(folder / "runs" / child))
+                    stored.client.download_artifacts(child, path, str(folder / "runs" / child))
         (folder / "job.json").write_text(
             json.dumps({"job": job_id, "config": config, "adjectives": children}, indent=1)
         )
-        mlflow.set_tracking_uri(tracker.uri)
+        mlflow.set_tracking_uri(stored.uri)
         metrics = job.data.metrics
         tags = {
             "experiment": experiment,
@@ -100,7 +104,7 @@ def log_job(
             "mean_auc": f"{metrics.get('mean_auc', float('nan')):.4f}",
             "job": job_id,
         }
-        example = _example(tracker, config, next(iter(children.values())))
+        example = _example(stored, next(iter(children.values())))
         mlflow.start_run(run_id=job_id)
         try:
             info = mlflow.pyfunc.log_model(

@@ -27,8 +27,9 @@ from torch import nn
 from tactile_exp import store
 from tactile_exp.combine import COMBINERS
 from tactile_exp.data.layout import EPS
+from tactile_exp.jobs import PredictError, StoredJob
 from tactile_exp.models.googlenet import INCEPTION5A_CHANNELS as FEATURES
-from tactile_exp.predict import PredictError, _children, _config, _Inputs, _job, _tracker
+from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.preprocess.haptic import N_SCALAR, SIGNALS
 
 MANIFEST_FORMAT = 1
@@ -147,31 +148,35 @@ def _export(
 
 
 def _network(
-    tracker: Any, child: str, modality: str, settings: dict[str, Any], keeps: bool, combine: int
+    folder: Path, child: str, modality: str, settings: dict[str, Any], keeps: bool, combine: int
 ) -> tuple[DecisionNet, dict[str, list[int | None]], int, int]:
-    """Child run ``child``'s network as plain torch, its inputs' shapes (None: any number of
-    rows), and the trials and views one row holds. ``keeps``: the combiner scores instances
-    (``separate``), else ``combine`` instances' features are concatenated for the head."""
+    """Child run ``child``'s network (its saved pipeline in ``folder``) as plain torch, its
+    inputs' shapes (None: any number of rows), and the trials and views one row holds.
+    ``keeps``: the combiner scores instances (``separate``), else ``combine`` instances'
+    features are concatenated for the head."""
+
+    def load(path: str) -> Any:
+        return store.read_model(folder / path, f"run {child}: artifact {path}", TORCH)
+
     if modality == "multimodal":  # the ConvNet part, the object's views, one linear layer
-        part = store.load_model(tracker, child, "parts/haptic", TORCH)
-        model = store.load_model(tracker, child, "model", TORCH)
+        part, model = load("parts/haptic"), load("model")
         trials, views = int(settings["trials"]), int(settings["views"])
         count = trials * FINGERS * int(settings["haptic"]["offsets"])
         inputs = {"instances": [None, count, *part.input_shape_], "views": [None, views, FEATURES]}
         return DecisionNet(part.body_, *_layer(model), per_unit=True), inputs, trials, views
     if modality == "haptic":
-        model = store.load_model(tracker, child, "model", TORCH)
+        model = load("model")
         shape = list(model.input_shape_)
         if keeps:
             return DecisionNet(model.body_, *_layer(model)), {"instances": [None, *shape]}, 1, 0
-        head = store.load_model(tracker, child, "head", TORCH)
+        head = load("head")
         count = combine * FINGERS * int(settings["offsets"])
         inputs = {"instances": [None, count, *shape]}
         return DecisionNet(model.body_, *_layer(head), per_unit=True), inputs, combine, 0
     if keeps:  # visual, one view per row
-        model = store.load_model(tracker, child, "model", TORCH)
+        model = load("model")
         return DecisionNet(nn.Identity(), *_layer(model)), {"features": [None, FEATURES]}, 0, 1
-    head = store.load_model(tracker, child, "head", TORCH)
+    head = load("head")
     inputs = {"views": [None, combine, FEATURES]}
     return DecisionNet(nn.Identity(), *_layer(head), per_unit=True), inputs, 0, combine
 
@@ -186,9 +191,8 @@ def export_job(
 ) -> dict[str, Any]:
     """Write job ``run_id``'s networks, ``manifest.json`` and ``preprocess.npz`` into ``out``;
     return the manifest. PredictError for a job that keeps no network (rows A-F, O)."""
-    tracker = _tracker(tracking_uri, experiment)
-    job_id = _job(tracker, run_id).info.run_id
-    config = _config(tracker, job_id)
+    stored = StoredJob.open(run_id, experiment=experiment, tracking_uri=tracking_uri)
+    job_id, config = stored.id, stored.config
     modality, model_name = str(config["modality"]["name"]), str(config["model"]["name"])
     if modality == "haptic_features" or model_name == "random":
         raise PredictError(
@@ -199,10 +203,9 @@ def export_job(
         )
     combiner, combine = str(config["combine_instances"]["name"]), int(config["combine"])
     keeps = COMBINERS.build(combiner).keeps_instances
-    children = _children(tracker, job_id, adjectives)
+    children = stored.children(adjectives)
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    reader = _Inputs(tracker, data=None, trials=(), object_id=None, photos=None)
     arrays: dict[str, np.ndarray] = {}
     entries: dict[str, Any] = {}
     manifest: dict[str, Any] = {
@@ -217,13 +220,15 @@ def export_job(
     }
     trunk_key: tuple[Any, ...] | None = None
     for adjective, child in children.items():
-        settings, state, where = reader.state(child)
+        where = f"run {child}"
+        saved = stored.folder(child)
+        pipeline = AdjectivePipeline.load(saved, where)
+        settings = pipeline.modality.params  # the modality's hyperparameters, as the job set them
+        state = pipeline.preprocess.get_state()[1]
         haptic = settings.get("haptic") if modality == "multimodal" else settings
         visual = settings.get("visual") if modality == "multimodal" else settings
         try:
-            net, inputs, trials, views = _network(
-                tracker, child, modality, settings, keeps, combine
-            )
+            net, inputs, trials, views = _network(saved, child, modality, settings, keeps, combine)
             if modality != "visual":
                 manifest["haptic"] = _haptic_layout(haptic, trials)
             if modality != "haptic":
@@ -231,7 +236,7 @@ def export_job(
                 key = (visual["size"], visual["layout"], visual["seed"], visual["weights"])
         except (KeyError, TypeError, ValueError) as err:
             raise store.ArtifactError(
-                f"{where}/settings.json: missing or bad entry {err}"
+                f"{where}/pipeline.json: missing or bad entry {err}"
             ) from None
         prefix = "" if modality == "multimodal" else f"{modality}."  # multimodal's are prefixed
         arrays.update({f"{adjective}.{prefix}{k}": np.asarray(v) for k, v in state.items()})

@@ -3,9 +3,9 @@
 ``mlflow_model.log_job`` logs it with the job's stored artifacts beside it (artifact ``job``:
 ``job.json`` with the job's config and its adjectives' child run ids, and ``runs/<child run id>/``
 holding each child's ``preprocess/``, ``model/``, ``head/`` and ``parts/`` folders as the
-tracking store keeps them). Loading runs no stored object: predict's own readers (JSON, npz,
-``torch.load(weights_only=True)``) read those folders, so a corrupt or missing file is predict's
-error, naming the child run and the artifact.
+tracking store keeps them: each adjective's saved ``AdjectivePipeline``). Loading runs no stored
+object: ``AdjectivePipeline.load`` reads JSON, npz and ``torch.load(weights_only=True)``, so a
+corrupt or missing file is its error, naming the child run and the artifact.
 
 Input, one row per trial (``INPUT_COLUMNS``): ``data`` (a PHAC-2-layout HDF5 file) and ``trial``
 (a trial group name) for haptic rows; ``photos`` (a folder of one object's photographs) for
@@ -18,41 +18,17 @@ named as predict names it): ``unit``, each adjective's decision value (> 0: it a
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import mlflow
 import pandas as pd
 from mlflow.pyfunc import PythonModel
 
-from tactile_exp.predict import PredictError, _Inputs, apply_job, unit_labels
+from tactile_exp.pipeline import AdjectivePipeline
+from tactile_exp.predict import PredictError, apply, new_trials
 
 INPUT_COLUMNS = ("data", "trial", "photos")
-
-
-class _Folder:
-    """What predict's artifact readers ask of an MLflow client, over ``runs/<run id>/<path>``."""
-
-    def __init__(self, root: Path) -> None:
-        self.root = root
-
-    def download_artifacts(self, run_id: str, path: str) -> str:
-        local = self.root / run_id / path
-        if not local.exists():
-            raise FileNotFoundError(f"the model holds no {run_id}/{path}")
-        return str(local)
-
-    def list_artifacts(self, run_id: str) -> list[SimpleNamespace]:
-        return [SimpleNamespace(path=p.name) for p in sorted((self.root / run_id).iterdir())]
-
-
-@dataclass
-class _Store:
-    client: _Folder
-    uri: str
-    experiment_id: str = ""
 
 
 def _one(frame: pd.DataFrame, column: str) -> str | None:
@@ -71,7 +47,10 @@ class JobModel(PythonModel):
     def load_context(self, context: Any) -> None:
         folder = Path(context.artifacts["job"])
         self.job = json.loads((folder / "job.json").read_text())
-        self.store = _Store(_Folder(folder / "runs"), uri=str(folder))
+        self.pipelines = {
+            adjective: AdjectivePipeline.load(folder / "runs" / child, f"run {child}")
+            for adjective, child in self.job["adjectives"].items()
+        }
 
     def predict(
         self, context: Any, model_input: pd.DataFrame, params: dict[str, Any] | None = None
@@ -81,12 +60,17 @@ class JobModel(PythonModel):
         if unknown:
             raise PredictError(f"input columns {unknown}: expected among {list(INPUT_COLUMNS)}")
         trials = [str(t) for t in frame["trial"].dropna()] if "trial" in frame else []
-        data, photos = _one(frame, "data"), _one(frame, "photos")
-        given = _Inputs(self.store, data=data, trials=trials, object_id=None, photos=photos)
-        config, children = self.job["config"], self.job["adjectives"]
-        result = apply_job(self.store, self.job["job"], config, children, given)
+        given = new_trials(
+            str(self.job["config"]["modality"]["name"]),
+            data=_one(frame, "data"),
+            trials=trials,
+            object_id=None,
+            photos=_one(frame, "photos"),
+            job=self.job["job"],
+        )
+        result = apply(self.pipelines, given)
         out = pd.DataFrame(result.scores, columns=result.adjectives)
-        out.insert(0, "unit", unit_labels(result.units, config))
+        out.insert(0, "unit", result.units)
         out["predicted"] = [" ".join(chosen) for chosen in result.predicted()]
         return out
 

@@ -26,6 +26,10 @@ class _Chosen:
         return self.dataset.identity()
 
 
+# The checked data set's arrays, shared by every adjective's pipeline in this process.
+_CHECKED: dict[tuple[Any, ...], Any] = {}
+
+
 @MODALITIES.register("haptic")
 class Haptic(Modality):
     """P1-P6: each trial gives 2 fingers x ``offsets`` instances of (32 signals, ``steps``).
@@ -62,20 +66,24 @@ class Haptic(Modality):
         self.pca_components = pca_components
         self.per_finger = per_finger
         self.fit_on = fit_on
-        self._arrays: dict[str, Any] = {}  # data set identity -> its checked HapticArrays
+
+    def _key(self, dataset: Any) -> tuple[Any, ...]:
+        return dataset.identity(), self.steps, self.offsets, self.pac_downsample
 
     def check(self, dataset: Any) -> None:
         from tactile_exp.preprocess.haptic import load_haptic_arrays
 
-        self._arrays[dataset.identity()] = load_haptic_arrays(
+        arrays = load_haptic_arrays(
             dataset, self.steps, self.offsets, self.pac_downsample, cache_dir=self.cache_dir
         )
+        _CHECKED.clear()  # one data set's arrays in memory at a time (they can be large)
+        _CHECKED[self._key(dataset)] = arrays
 
     def arrays(self, trials: Trials) -> Any:
         """The resampled signals holding ``trials``: the checked data set's, else read now."""
         from tactile_exp.preprocess.haptic import compute_haptic_arrays
 
-        checked = self._arrays.get(trials.dataset.identity())
+        checked = _CHECKED.get(self._key(trials.dataset))
         if checked is not None:
             return checked
         chosen = _Chosen(trials.dataset, trials.names)

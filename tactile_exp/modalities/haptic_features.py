@@ -30,6 +30,10 @@ class _Chosen:
         return repr(self.dataset)
 
 
+# The checked data set's feature tables, shared by every adjective's pipeline in this process.
+_CHECKED: dict[tuple[Any, ...], Any] = {}
+
+
 @MODALITIES.register("haptic_features")
 class HapticFeatures(Modality):
     """Chu et al.'s hand-designed features (M5): one vector per trial.
@@ -58,13 +62,15 @@ class HapticFeatures(Modality):
             hmm_grid=hmm_grid, seed=seed,
         )  # fmt: skip
         BaselineFeatures(None, **self.settings)  # its checks, before any run
-        self._tables: dict[str, Any] = {}  # data set identity -> its checked BaselineFeatures
+
+    def _key(self, dataset: Any) -> tuple[Any, ...]:
+        return dataset.identity(), repr(sorted(self.settings.items()))
 
     def _features(self, dataset: Any, names: tuple[str, ...] = ()) -> Any:
         """The feature tables of ``dataset``: the checked ones, else those of ``names``."""
         from tactile_exp.baselines.features import BaselineFeatures
 
-        checked = self._tables.get(dataset.identity())
+        checked = _CHECKED.get(self._key(dataset))
         if checked is not None:
             return checked
         features = BaselineFeatures(_Chosen(dataset, names), **self.settings)
@@ -72,13 +78,12 @@ class HapticFeatures(Modality):
         return features
 
     def check(self, dataset: Any) -> None:
-        features = self._tables[dataset.identity()] = self._build(dataset)
-        features.prepare()
-
-    def _build(self, dataset: Any) -> Any:
         from tactile_exp.baselines.features import BaselineFeatures
 
-        return BaselineFeatures(dataset, cache_dir=self.cache_dir, **self.settings)
+        features = BaselineFeatures(dataset, cache_dir=self.cache_dir, **self.settings)
+        features.prepare()
+        _CHECKED.clear()
+        _CHECKED[self._key(dataset)] = features
 
     def fit(self, trials: Trials) -> Self:
         features = self._features(trials.dataset, trials.names)

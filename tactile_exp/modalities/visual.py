@@ -20,6 +20,10 @@ def view_name(stem: str, view: int) -> str:
     return f"{stem}_v{view:02d}"
 
 
+# The photographs and trunk features in use, shared by every adjective's pipeline in a process.
+_TRUNKS: dict[tuple[Any, ...], Any] = {}
+
+
 @MODALITIES.register("visual")
 class Visual(Modality):
     """V1-V2 and M3's frozen trunk: one instance per photograph, its pooled, L2-normalised
@@ -80,7 +84,6 @@ class Visual(Modality):
         self.seed = seed
         self.batch_size = batch_size
         self.device = device
-        self._trunks: dict[str, Any] = {}  # data set identity -> its VisualFeatures
 
     def max_combine(self, dataset: Any) -> tuple[int, str]:
         """The most views of one object: the largest ``combine`` that groups distinct views."""
@@ -115,17 +118,18 @@ class Visual(Modality):
             load_visual_arrays,
         )
 
-        key = dataset.identity()
-        if key not in self._trunks:
+        key = (dataset.identity(), self.size, self.weights, self.layout, self.seed, self.cache_dir)
+        if key not in _TRUNKS:
             if self.cache_dir is None:
                 arrays = compute_visual_arrays(dataset, self.size)
             else:
                 arrays = load_visual_arrays(dataset, self.size, self.cache_dir)
-            self._trunks[key] = VisualFeatures(
+            _TRUNKS.clear()  # one set of photographs in memory at a time
+            _TRUNKS[key] = VisualFeatures(
                 arrays, cache_dir=self.cache_dir, weights=self.weights, layout=self.layout,
                 seed=self.seed, batch_size=self.batch_size, device=self.device,
             )  # fmt: skip
-        return self._trunks[key]
+        return _TRUNKS[key]
 
     def _layout_mean(self) -> tuple[float, ...]:
         from tactile_exp.models.googlenet import LAYOUT_MEAN_RGB

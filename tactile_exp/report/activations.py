@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import store
 from tactile_exp.data.layout import EPS
 from tactile_exp.preprocess.haptic import N_SCALAR, SIGNALS
 from tactile_exp.report.scores import ReportError, UnitScore, children, read_scores
@@ -94,8 +93,9 @@ def conv3_maps(
 ) -> Fig6Data:
     """The conv3 maps of job ``job_id`` (a ``haptic_cnn`` job) for ``trials`` (test trials of
     every adjective), or ``n_trials`` picked per adjective."""
+    from tactile_exp.data.layout import Trials
     from tactile_exp.data.sources import DATA_SOURCES
-    from tactile_exp.predict import haptic_instances
+    from tactile_exp.pipeline import AdjectivePipeline
 
     config = job_config(tracker, job_id)
     modality, model = config["modality"]["name"], config["model"]["name"]
@@ -124,13 +124,13 @@ def conv3_maps(
         else:
             chosen = pick_units(list(units.values()), n_trials)
         names = [u.unit for u in chosen]
-        instances = haptic_instances(tracker, data=dataset.path, trials=names, child=child)
-        net = store.load_model(tracker, child, "model")
+        folder = Path(tracker.client.download_artifacts(child, ""))
+        pipeline = AdjectivePipeline.load(folder, f"run {child}")
+        instances = pipeline.preprocess.transform(Trials(dataset, tuple(names)))
+        net = pipeline.model_
         first = [int(np.flatnonzero(instances.trial == name)[0]) for name in names]
         conv3 = net.transform(instances.X[first]).reshape(len(first), *net.conv3_shape_)
         maps += [Conv3Map(adjective, u, a) for u, a in zip(chosen, conv3, strict=True)]
-        where = f"run {child}: artifact preprocess"
-        folder = store.download(tracker, child, "preprocess", store.STATE_FILES)
-        signals = signal_names(int(store.read_json(folder, where)["pca_components"]))
+        signals = signal_names(int(pipeline.modality.params["pca_components"]))
     missing = [a for a in adjectives if a not in found]
     return Fig6Data(job_id, maps, signals, missing)
