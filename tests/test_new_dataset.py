@@ -15,7 +15,7 @@ from tactile_exp.config import settings_from_config
 from tactile_exp.data.dataset import Sensor
 from tactile_exp.data.folder import write_folder
 from tactile_exp.experiment import run
-from tactile_exp.predict import main as predict_main
+from tactile_exp.predict.__main__ import main as predict_main
 from tactile_exp.report.scores import read_scores
 from tactile_exp.tracking import Tracker
 

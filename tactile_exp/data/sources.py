@@ -58,6 +58,13 @@ def folder(path: str | Path) -> DataSet:
     return FolderDataSet(path)
 
 
+def open_path(path: str | Path) -> DataSet:
+    """The data set at ``path`` as its source reads it: a folder in the folder layout, else a
+    PHAC-2-layout HDF5 file (what predict is given, or finds in a job's record)."""
+    path = Path(path).expanduser()
+    return FolderDataSet(path) if path.is_dir() else PHAC2(path)
+
+
 def check_source_params(name: str, params: dict[str, Any]) -> None:
     """A source's ``path`` names an existing file or folder, before any data is read:
     ValueError naming the key otherwise."""
