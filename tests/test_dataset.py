@@ -91,18 +91,29 @@ def _runs(uri: str) -> list:
             f"{', '.join(ADJECTIVES)} (or adjectives=null for all of them)",
         ),
         (
-            ["data=folder", "data.path={folder}", "split=published"],
+            ["data=folder", "data.path={folder}", "modality=signals", "split=published"],
             "error: {path}: split=published is PHAC-2's published split and this data set is "
             "not PHAC-2; use split=random or split=folds",
         ),
         (
-            ["data=folder", "data.path={folder}", "split=random", "adjectives=[hard]"],
+            ["data=folder", "data.path={folder}", "split=random"],  # modality=haptic: BioTac's
+            "error: {path}: Haptic reads BioTac (2 fingers) trials, this data set's sensor is "
+            "'glove' (modality=signals reads any sensor's channels)",
+        ),
+        (
+            [
+                "data=folder",
+                "data.path={folder}",
+                "split=random",
+                "modality=signals",
+                "adjectives=[hard]",
+            ],
             "error: adjectives: unknown ['hard'] for the data set {path}; its labels: grippy, "
             "warm, loud (or adjectives=null for all of them)",
         ),
     ],
 )
-def test_unknown_labels_and_a_foreign_split_are_one_error_line_before_any_run(
+def test_unknown_labels_a_foreign_split_or_sensor_are_one_error_line_before_any_run(
     tiny_config, mlflow_uri, folder, capsys, overrides, line
 ) -> None:
     overrides = [o.format(folder=folder.path) for o in overrides]

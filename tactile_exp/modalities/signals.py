@@ -67,7 +67,7 @@ class Signals(Modality):
         self._require_signals(dataset)
         out: dict[str, np.ndarray] = {}
         n = len(dataset.trials)
-        every = max(1, n // PROGRESS_LINES)
+        every = max(1, -(-n // PROGRESS_LINES))  # ceil: at most PROGRESS_LINES lines
         for i, trial in enumerate(dataset.trials, 1):
             out[trial.name] = resample(dataset.signals(trial), self.steps)
             if i % every == 0 or i == n:
