@@ -1,9 +1,9 @@
 """What the framework needs from a data set: the `DataSet` protocol and its `Sensor`.
 
 PHAC-2 (the real file and its synthetic twin, ``data/phac2.py``) is one source, a lab's own
-recordings in the folder layout (``data/folder.py``, docs/data.md) another. Everything above the
-data layer (splits, modalities, the job loop, the report) asks only for what is named here, so a
-new sensor needs a source, not a new engine.
+recordings in the folder layout (``data/folder.py``, docs/extending.md) another. Everything
+above the data layer (splits, modalities, the job loop, the report) asks only for what is named
+here, so a new sensor needs a source, not a new engine.
 """
 
 from __future__ import annotations

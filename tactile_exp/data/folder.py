@@ -1,4 +1,4 @@
-"""Any sensor's recordings in a folder layout a lab can export to (``data=folder``; docs/data.md).
+"""Any sensor's recordings in a folder layout a lab can export to (``data=folder``).
 
 ::
 

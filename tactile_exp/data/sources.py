@@ -15,7 +15,7 @@ DATA_SOURCES: Registry[DataSet] = Registry("data source")
 # A source's data.path and what it must name: checked before any run (`check_source_params`).
 PATHS: dict[str, tuple[str, str]] = {  # source -> (file | folder, what the user should give)
     "phac2": ("file", "the PHAC-2 HDF5 file"),
-    "folder": ("folder", "a data set in the folder layout (docs/data.md)"),
+    "folder": ("folder", "a folder holding dataset.yaml, labels.csv and trials/"),
 }
 
 
