@@ -73,7 +73,7 @@ def test_every_option_composes_and_builds(compose_config, group, option, tmp_pat
         (settings.data, DATA_SOURCES),
         (settings.modality, MODALITIES),
     ):
-        extra = {"dataset": None, "cache_dir": None} if registry is MODALITIES else {}
+        extra = {"cache_dir": None} if registry is MODALITIES else {}
         inspect.signature(registry[component.name]).bind(**extra, **component.params)
     assert cfg.loss.name in LOSSES
 
