@@ -86,7 +86,7 @@ def _runs(uri: str) -> list:
     "overrides,line",
     [
         (
-            ["adjectives=[hard,fluffy,gritty]"],
+            ["data=phac2", "data.path={phac2}", "adjectives=[hard,fluffy,gritty]"],
             "error: adjectives: unknown ['fluffy', 'gritty'] for the data set {path}; its labels: "
             f"{', '.join(ADJECTIVES)} (or adjectives=null for all of them)",
         ),
@@ -114,9 +114,9 @@ def _runs(uri: str) -> list:
     ],
 )
 def test_unknown_labels_a_foreign_split_or_sensor_are_one_error_line_before_any_run(
-    tiny_config, mlflow_uri, folder, capsys, overrides, line
+    tiny_config, mlflow_uri, phac2, folder, capsys, overrides, line
 ) -> None:
-    overrides = [o.format(folder=folder.path) for o in overrides]
+    overrides = [o.format(folder=folder.path, phac2=phac2.path) for o in overrides]
     settings = settings_from_config(tiny_config(overrides, adjectives="null"))
     with pytest.raises(SystemExit) as done, reported():
         run(settings)
