@@ -17,7 +17,6 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.errors import ConfigError
 from tactile_exp.registry import Component
 
@@ -67,7 +66,7 @@ class Settings:
     combiner: str
     combine: int
     split: str
-    adjectives: tuple[str, ...]
+    adjectives: tuple[str, ...] | None  # None: every label of the data set (`select_labels`)
     seed: int
     device: str
     cache_dir: Path
@@ -206,11 +205,14 @@ def _check_missing(node: Any, prefix: str = "") -> None:
 
 
 def _check_data(data: Any) -> None:
-    """The real file must exist before a run is created for it."""
-    if isinstance(data, dict) and data.get("name") == "phac2":
-        path = Path(str(data.get("path"))).expanduser()
-        if not path.is_file():
-            raise ConfigError(f"data.path: {path}: no such file; expected the PHAC-2 HDF5 file")
+    """The data's file or folder must exist before a run is created for it."""
+    from tactile_exp.data.sources import check_source_params
+
+    if isinstance(data, dict):
+        try:
+            check_source_params(str(data.get("name")), data)
+        except ValueError as err:
+            raise ConfigError(f"data.{err}") from err
 
 
 def param_error(group: str, params: dict[str, Any], err: Exception) -> ConfigError:
@@ -246,15 +248,7 @@ def settings_from_config(
     for group in ("data", "modality", "model", "combine_instances", "split"):
         choices.setdefault(group, str(resolved[group]["name"]))
 
-    adjectives = resolved.get("adjectives")
-    if not adjectives:
-        raise ConfigError(f"adjectives: must list at least one of {', '.join(ADJECTIVES)}")
-    adjectives = [str(a) for a in adjectives]
-    unknown = [a for a in adjectives if a not in ADJECTIVES]
-    if unknown:
-        raise ConfigError(f"adjectives: unknown {unknown}; allowed: {', '.join(ADJECTIVES)}")
-    if len(set(adjectives)) != len(adjectives):
-        raise ConfigError(f"adjectives: listed twice in {adjectives}")
+    adjectives = _check_adjectives(resolved.get("adjectives"))
 
     combine = resolved.get("combine")
     if not isinstance(combine, int) or isinstance(combine, bool) or combine < 1:
@@ -294,7 +288,7 @@ def settings_from_config(
         combiner=combiner,
         combine=combine,
         split=str(resolved["split"]["name"]),
-        adjectives=tuple(adjectives),
+        adjectives=adjectives,
         seed=seed,
         device=device,
         cache_dir=Path(str(resolved["cache_dir"])).expanduser(),
@@ -318,6 +312,21 @@ def settings_from_config(
     )
     check_components(settings)
     return settings
+
+
+def _check_adjectives(value: Any) -> tuple[str, ...] | None:
+    """``null`` (every label of the data set) or a list of label names, each once; which names
+    exist is the data set's to say (`tactile_exp.data.dataset.select_labels`, when it opens)."""
+    if value is None:
+        return None
+    if not isinstance(value, list) or not value:
+        raise ConfigError(
+            f"adjectives: must list at least one label, or be null for all of them, got {value!r}"
+        )
+    names = [str(a) for a in value]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"adjectives: listed twice in {names}")
+    return tuple(names)
 
 
 def _check_objective(name: Any) -> str:

@@ -19,6 +19,7 @@ import numpy as np
 from tactile_exp import evaluate, metrics, stats
 from tactile_exp.adjective import AdjectiveResult, key_params, log_data, run_adjective
 from tactile_exp.config import Settings, param_error
+from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
@@ -68,7 +69,7 @@ def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
         )
     splits = {
         a: make_split(dataset, a, settings.split, settings.seed, **settings.split_params)
-        for a in settings.adjectives
+        for a in select_labels(dataset, settings.adjectives)
     }
     return dataset, modality, splits
 
@@ -112,7 +113,10 @@ def run(settings: Settings) -> JobResult:
         )
         _log_config(tracker, parent_id, settings)
         modality.check(dataset)
-        tracker.set_tags(parent_id, {"data.identity": dataset.identity()})
+        tracker.set_tags(
+            parent_id,
+            {"data.identity": dataset.identity(), "data.labels": " ".join(dataset.label_names)},
+        )
         log_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
         headline = metrics.METRICS.build(settings.metrics[0])
@@ -121,7 +125,7 @@ def run(settings: Settings) -> JobResult:
             log.info(
                 "[%d/%d] %s %s %.3f (%.1f s)",
                 i,
-                len(settings.adjectives),
+                len(splits),
                 result.adjective,
                 headline.label,
                 result.metrics[headline.key],
@@ -172,10 +176,10 @@ def _adjectives(
 ) -> Iterator[AdjectiveResult]:
     """Each adjective's result, in order: here, or ``settings.workers`` at a time in worker
     processes (``runtime.workers``) that open the data and the tracking store once each."""
-    n = len(settings.adjectives)
+    n = len(splits)
     processes = min(settings.workers, n)
     if processes == 1:
-        for i, adjective in enumerate(settings.adjectives, start=1):
+        for i, adjective in enumerate(splits, start=1):
             log.info("[%d/%d] %s", i, n, adjective)
             yield run_adjective(settings, tracker, parent_id, dataset, splits[adjective])
         return
@@ -183,7 +187,7 @@ def _adjectives(
     log.info("%d adjectives in %d worker processes", n, processes)
     try:
         with pool:
-            calls = [(i, n, a) for i, a in enumerate(settings.adjectives, start=1)]
+            calls = [(i, n, a) for i, a in enumerate(splits, start=1)]
             yield from pool.map(_adjective_in_worker, calls)
     except BaseException:
         error = "a worker was stopped before it ended this run (the job failed or was terminated)"

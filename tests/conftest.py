@@ -86,9 +86,9 @@ def tiny_config(compose_config, cache_dir: Path, mlflow_uri: str):
     (few epochs: these tests check the plumbing, not the paper's numbers)."""
 
     def _tiny(overrides: list[str] | None = None, adjectives: str = "[hard,soft,smooth]"):
-        real_file = "data=phac2" in (overrides or [])
+        other_data = any(o.startswith("data=") for o in overrides or [])  # not the synthetic
         base = [
-            *([] if real_file else TINY_DATA),
+            *([] if other_data else TINY_DATA),
             f"cache_dir={cache_dir}",
             f"tracking.uri={mlflow_uri}",
             f"adjectives={adjectives}",

@@ -483,3 +483,19 @@ def test_report_of_another_metric_recomputes_it_from_the_pooled_scores(folds_tra
     assert "**Metric: F1** (`--metric f1`, logged as `f1`)" in index
     assert "## Table I: mean F1 over the 8 adjectives run" in index
     assert "Per-adjective F1 of the best haptic configuration" in index
+
+
+def test_label_names_and_their_order_come_from_the_runs(mlflow_uri):
+    """A data set's own labels, in the order its jobs logged them (tag data.labels); a job
+    that trained fewer than the data set has is a variant."""
+    tracker = Tracker(mlflow_uri, "report_labels_test")
+    own = {"data.labels": "warm grippy loud"}
+    _log(tracker, "two", ROW_A, 0, "", False, 0.6, adjectives=["loud", "warm"], search=own)
+    _log(
+        tracker, "all", ROW_I, 0, "", False, 0.7, adjectives=["loud", "grippy", "warm"], search=own
+    )
+    groups = {_hash(g.key): g for g in runs.collect(tracker)}
+    assert list(groups["two"].per_adjective()) == ["warm", "loud"]
+    assert (groups["two"].differences, groups["all"].differences) == (("2 adjectives",), ())
+    assert groups["two"].n_labels == 3
+    assert figures.fig5_adjectives(list(groups.values())) == ["warm", "grippy", "loud"]

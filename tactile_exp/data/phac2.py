@@ -19,12 +19,14 @@ import cv2
 import h5py
 import numpy as np
 
+from tactile_exp.data.dataset import Sensor
 from tactile_exp.data.layout import (
     ADC_MAX,
     ADJECTIVES,
     BIOTAC_CHANNELS,
     EPS,
     FINGERS,
+    ROW_RATE_HZ,
     DataError,
     FingerData,
     TrialData,
@@ -43,6 +45,17 @@ _OPTIONAL_FLOAT = {  # path inside the trial group -> per-row shape
     "transforms/rotation": (4,),
 }
 _ID_TOKEN = re.compile(r"(?<!\d)(\d{3})(?!\d)")
+# Two BioTacs, each 19 electrodes, PAC (22 samples per row: a 2200 Hz stream), PDC, TAC, TDC;
+# one row per BioTac frame (PHAC2_FORMAT.md §1). The haptic modalities know the layout in detail.
+BIOTAC = Sensor(
+    name="BioTac (2 fingers)",
+    channels=tuple(
+        f"{finger}/{channel}"
+        for finger in FINGERS
+        for channel in (*(f"electrode_{i:02d}" for i in range(1, 20)), "pac", "pdc", "tac", "tdc")
+    ),
+    rate_hz=ROW_RATE_HZ,
+)
 
 
 def default_cache_dir() -> Path:
@@ -66,7 +79,11 @@ def _decode_names(ds: h5py.Dataset) -> tuple[str, ...]:
 
 
 class PHAC2:
-    """One PHAC-2 file (real or synthetic) plus its photograph folder."""
+    """One PHAC-2 file (real or synthetic) plus its photograph folder: a `DataSet` whose labels
+    are the 24 adjectives of METHOD D4 in the paper's order."""
+
+    label_names: tuple[str, ...] = ADJECTIVES
+    sensor: Sensor = BIOTAC
 
     def __init__(self, path: str | Path, photo_dir: str | Path | None = None) -> None:
         self.path = Path(path)

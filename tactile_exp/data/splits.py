@@ -9,13 +9,12 @@ object leakage or a one-class side.
 from __future__ import annotations
 
 import warnings
-from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
 
+from tactile_exp.data.dataset import DataSet
 from tactile_exp.data.layout import (
-    ADJECTIVES,
     NEGATIVE_SPLIT_GROUP,
     POSITIVE_SPLIT_GROUP,
     DataError,
@@ -23,10 +22,8 @@ from tactile_exp.data.layout import (
     TrialName,
     published_test_split,
 )
+from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.registry import Registry
-
-if TYPE_CHECKING:
-    from tactile_exp.data.phac2 import PHAC2
 
 TRAIN_RATIO = 0.9  # the authors' 90/10 (the "90_10" in the file name)
 
@@ -34,11 +31,14 @@ SPLITS: Registry[Split] = Registry("split")  # rule(dataset, adjective, seed, **
 
 
 def make_split(
-    dataset: PHAC2, adjective: str, rule: str = "published", seed: int = 0, **params: int
+    dataset: DataSet, adjective: str, rule: str = "published", seed: int = 0, **params: int
 ) -> Split:
-    """One adjective's train/test split by a rule of `SPLITS` (E1, E3; ``folds``: ours)."""
-    if adjective not in ADJECTIVES:
-        raise DataError(f"{dataset.path}: unknown adjective {adjective!r} (expected one of D4)")
+    """One label's train/test split by a rule of `SPLITS` (E1, E3; ``folds``: ours)."""
+    if adjective not in dataset.label_names:
+        raise DataError(
+            f"{dataset.path}: unknown adjective {adjective!r} (expected one of the data set's "
+            f"labels: {', '.join(dataset.label_names)})"
+        )
     return SPLITS[rule](dataset, adjective, seed, **params)
 
 
@@ -97,7 +97,7 @@ def _object(name: str) -> int:
     return TrialName.parse(name).object_id  # type: ignore[union-attr]
 
 
-def _trials_by_object(dataset: PHAC2, adjective: str) -> dict[int, dict[int, list[str]]]:
+def _trials_by_object(dataset: DataSet, adjective: str) -> dict[int, dict[int, list[str]]]:
     """label -> object id -> its trial names (sorted)."""
     labels = dataset.labels()
     out: dict[int, dict[int, list[str]]] = {1: {}, 0: {}}
@@ -106,7 +106,7 @@ def _trials_by_object(dataset: PHAC2, adjective: str) -> dict[int, dict[int, lis
     return out
 
 
-def _make(dataset: PHAC2, adjective: str, train: list[str], test: list[str], rule: str) -> Split:
+def _make(dataset: DataSet, adjective: str, train: list[str], test: list[str], rule: str) -> Split:
     labels = dataset.labels()
     split = Split(
         adjective=adjective,
@@ -118,8 +118,14 @@ def _make(dataset: PHAC2, adjective: str, train: list[str], test: list[str], rul
 
 
 @SPLITS.register("published")
-def published(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
-    """The published split: from the file's split groups, else from the package's table."""
+def published(dataset: DataSet, adjective: str, seed: int = 0) -> Split:
+    """The published split: from the file's split groups, else from the package's table.
+    PHAC-2's own: another data set has no published split to follow."""
+    if not isinstance(dataset, PHAC2):
+        raise DataError(
+            f"{dataset.path}: split=published is PHAC-2's published split and this data set is "
+            "not PHAC-2; use split=random or split=folds"
+        )
     if {POSITIVE_SPLIT_GROUP, NEGATIVE_SPLIT_GROUP} <= dataset.groups:
         with h5py.File(dataset.path, "r") as f:
             found = _read_split_groups(dataset, f, adjective)
@@ -181,9 +187,9 @@ def _trial_no(name: str) -> int:
 
 
 @SPLITS.register("random")
-def random_split(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
+def random_split(dataset: DataSet, adjective: str, seed: int = 0) -> Split:
     """The authors' rule with a seeded object order (§2): 90/10 by object, per class."""
-    rng = np.random.default_rng([seed, ADJECTIVES.index(adjective)])
+    rng = np.random.default_rng([seed, dataset.label_names.index(adjective)])
     train: list[str] = []
     test: list[str] = []
     for _, objs in sorted(_trials_by_object(dataset, adjective).items(), reverse=True):
@@ -202,7 +208,7 @@ def random_split(dataset: PHAC2, adjective: str, seed: int = 0) -> Split:
 
 @SPLITS.register("folds")
 def folds_split(
-    dataset: PHAC2, adjective: str, seed: int = 0, folds: int = 5, fold: int = 0
+    dataset: DataSet, adjective: str, seed: int = 0, folds: int = 5, fold: int = 0
 ) -> Split:
     """Object-grouped, class-stratified K-fold (ours, issue 27): fold ``fold`` of ``folds`` is
     the test side. Over ``fold = 0..folds-1`` of one seed every object is tested exactly once.
@@ -212,7 +218,7 @@ def folds_split(
     differ in size by at most one object.
     """
     check_split_params("folds", {"folds": folds, "fold": fold})
-    rng = np.random.default_rng([seed, ADJECTIVES.index(adjective), 27])
+    rng = np.random.default_rng([seed, dataset.label_names.index(adjective), 27])
     train: list[str] = []
     test: list[str] = []
     start = 0

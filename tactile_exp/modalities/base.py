@@ -16,7 +16,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import Instances, TrialName, Trials
+from tactile_exp.data.layout import DataError, Instances, TrialName, Trials
 from tactile_exp.models.base import Model
 from tactile_exp.registry import Component, Registry
 
@@ -31,12 +31,21 @@ class Modality(ABC):
     # What the data set must give for new trials: trials (signals), photographs, or both.
     takes_trials: bool = True
     takes_photographs: bool = False
+    # The sensors (``Sensor.name``) whose trials it knows how to read; () = any.
+    sensors: tuple[str, ...] = ()
 
     def __init__(self, *, cache_dir: Path | None = None) -> None:
         self.cache_dir = cache_dir
 
     def max_combine(self, dataset: Any) -> tuple[int, str]:
-        """The largest ``combine`` (instances of one object grouped as a unit) and its unit name."""
+        """The largest ``combine`` (instances of one object grouped as a unit) and its unit name.
+        Called when the data opens, before any run: a data set of another sensor stops here."""
+        if self.sensors and dataset.sensor.name not in self.sensors:
+            raise DataError(
+                f"{dataset.path}: {type(self).__name__} reads {' or '.join(self.sensors)} trials, "
+                f"this data set's sensor is {dataset.sensor.name!r} (modality=signals reads any "
+                "sensor's channels)"
+            )
         return int(max(np.bincount([t.object_id for t in dataset.trials]))), "trials"
 
     @abstractmethod
@@ -91,6 +100,7 @@ MODALITIES: Registry[Modality] = Registry(
         "tactile_exp.modalities.haptic",
         "tactile_exp.modalities.haptic_features",
         "tactile_exp.modalities.multimodal",
+        "tactile_exp.modalities.signals",
         "tactile_exp.modalities.visual",
     ),
 )

@@ -9,6 +9,7 @@ from typing import Any, Self
 import numpy as np
 
 from tactile_exp.data.layout import Instances, TrialData, TrialName, Trials
+from tactile_exp.data.phac2 import BIOTAC
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
 
 
@@ -39,6 +40,8 @@ class Haptic(Modality):
     statistics (``preprocess.haptic.HapticPreprocessor``). Trials of a data set that was not
     checked (a new object's, in predict) are read when transformed.
     """
+
+    sensors = (BIOTAC.name,)
 
     def __init__(
         self,

@@ -9,6 +9,7 @@ from typing import Any, Self
 import numpy as np
 
 from tactile_exp.data.layout import Instances, Split, TrialData, TrialName, Trials
+from tactile_exp.data.phac2 import BIOTAC
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
 
 
@@ -43,6 +44,8 @@ class HapticFeatures(Modality):
     ``dynamic_pool="object"`` (row F) appends to each trial the mean dynamic vector of the
     trials of its object among those transformed: one side of a split, or a new object's.
     """
+
+    sensors = (BIOTAC.name,)
 
     def __init__(
         self,

@@ -140,7 +140,7 @@ class HapticCNN(SGDModel):
     ``conv3_shape_`` for a channel x time map.
     """
 
-    modalities = ("haptic",)  # (n, 32 x fingers, time) signals
+    modalities = ("haptic", "signals")  # (n, channels, time): groups must divide channels
 
     def __init__(
         self,

@@ -18,6 +18,7 @@ import numpy as np
 
 from tactile_exp.data.layout import DataError, TrialName, Trials
 from tactile_exp.data.photos import PhotoFolder
+from tactile_exp.data.sources import open_path
 from tactile_exp.jobs import PredictError, StoredJob
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.pipeline import AdjectivePipeline
@@ -71,8 +72,6 @@ def new_trials(
     job: str,
 ) -> Trials:
     """The new object's trials and/or photographs, as job ``job``'s modality takes them."""
-    from tactile_exp.data.phac2 import PHAC2
-
     modality = MODALITIES[modality_name]
     if modality.takes_trials and not (trials or object_id is not None):
         wanted = (
@@ -93,7 +92,7 @@ def new_trials(
     try:
         if not modality.takes_trials:
             return Trials(PhotoFolder(str(photos)), (), object_ids=(0,))
-        dataset: Any = PHAC2(str(data))
+        dataset: Any = open_path(str(data))
         names = [dataset.trial_name(t) for t in trials]
         if object_id is not None:
             names += [t for t in dataset.trials if t.object_id == object_id and t not in names]
@@ -136,7 +135,7 @@ def _data_file(job: StoredJob, data: str | Path | None) -> tuple[str | Path, str
     recorded = job.data_file()
     if recorded is None:
         raise PredictError(f"run {job.id} records no data file: give --data FILE")
-    if not recorded.is_file():
+    if not recorded.exists():
         raise PredictError(f"the job's data file {recorded} is no longer there: give --data FILE")
     return recorded, f"{recorded} (the job's own data file; --data to read another)"
 

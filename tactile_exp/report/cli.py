@@ -38,13 +38,20 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from tactile_exp import stats
-from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.metrics import METRICS
 from tactile_exp.report import comparisons, heldout
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
 from tactile_exp.report.figures import cd_diagram, fig5, fig6, numeric_axis
-from tactile_exp.report.runs import HAPTIC, Group, best, collect, row_group, skipped_cells
+from tactile_exp.report.runs import (
+    HAPTIC,
+    Group,
+    best,
+    collect,
+    label_order,
+    row_group,
+    skipped_cells,
+)
 from tactile_exp.report.runs_table import runs_table
 from tactile_exp.report.scores import THRESHOLD, ReportError
 from tactile_exp.report.table1 import table1, table1_markdown
@@ -87,10 +94,11 @@ def write(
     _write_csv(out / "table1.csv", rows)
     with open(out / "per_adjective.csv", "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["row", "configuration", "method", "row_hash", "n_seeds", *ADJECTIVES])
+        labels = label_order(groups)
+        writer.writerow(["row", "configuration", "method", "row_hash", "n_seeds", *labels])
         for g in groups:
             aucs = _per_adjective(g, evidence[g.key])
-            cells = [f"{aucs[a]:.6f}" if a in aucs else "" for a in ADJECTIVES]
+            cells = [f"{aucs[a]:.6f}" if a in aucs else "" for a in labels]
             writer.writerow([g.row, _configuration(g), g.method, g.row_hash, len(g.seeds), *cells])
     _write_csv(out / "per_adjective_intervals.csv", _interval_rows(groups, evidence, metric))
     paths = [
@@ -384,9 +392,8 @@ def _index(
         if len(counts) == 1
         else "over each configuration's adjectives (column `adj.`)"
     )
-    if len(counts) == 1 and counts[0] < len(ADJECTIVES):
-        names = sorted({a for g in groups for a in g.per_adjective()})
-        over += f" ({', '.join(names)})"
+    if len(counts) == 1 and counts[0] < max(g.n_labels for g in groups):
+        over += f" ({', '.join(label_order(groups))})"
     missing = [g for g in groups if not evidence[g.key].ok]
     lines = [
         "# Gao et al. (ICRA 2016), regenerated from tracked runs",
@@ -477,7 +484,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--fig6-adjective",
         action="append",
-        choices=ADJECTIVES,
         metavar="ADJ",
         help=f"Fig. 6 for this adjective (repeat; default: {' '.join(FIG6_ADJECTIVES)})",
     )

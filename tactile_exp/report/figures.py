@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_exp.data.layout import ADJECTIVES, EPS
+from tactile_exp.data.layout import EPS
 from tactile_exp.metrics import METRICS
 from tactile_exp.report.activations import Conv3Map
-from tactile_exp.report.runs import Group
+from tactile_exp.report.runs import Group, label_order
 from tactile_exp.report.scores import ReportError
 from tactile_exp.stats import Friedman, Interval
 
@@ -80,7 +80,7 @@ def fig5(
 
 def fig5_adjectives(groups: list[Group]) -> list[str]:
     """The adjectives Fig. 5 draws: those any shown group ran (a missing one is no bar, not 0)."""
-    return [a for a in ADJECTIVES if any(a in g.per_adjective() for g in groups)]
+    return label_order(groups)
 
 
 def cd_diagram(result: Friedman, path: Path) -> None:

@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.metrics import METRICS
 from tactile_exp.tracking import Tracker
 
@@ -39,6 +38,9 @@ NEUTRAL_OVERRIDES = (
     "hydra",
 )
 HAPTIC = ("haptic", "haptic_features")
+# Runs logged before jobs tagged their data set's labels (``data.labels``, issue 26) ran on
+# PHAC-2, whose 24 adjectives are in alphabetical order: the order and count assumed for them.
+UNTAGGED_LABELS = 24
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,7 @@ class Run:
     sweep_id: str
     fold: int = -1  # split=folds: the tested fold; -1 for the other split rules
     folds: int = 0  # split=folds: K; 0 otherwise
+    labels: tuple[str, ...] = ()  # every label of its data set, in order (tag data.labels)
 
 
 @dataclass
@@ -98,6 +101,11 @@ class Group:
         return np.array([np.mean([r.mean_auc for r in self.fold_runs(s)]) for s in self.seeds])
 
     @property
+    def n_labels(self) -> int:
+        """How many labels the group's data set has (its runs may have trained fewer)."""
+        return len(self.first_run.labels) or UNTAGGED_LABELS
+
+    @property
     def first_run(self) -> Run:
         """The run of the lowest seed (and fold): the one a per-run view (Fig. 6, Table III)
         shows."""
@@ -110,17 +118,29 @@ class Group:
     def per_adjective(self) -> dict[str, float]:
         runs = self.sorted_runs
         return {
-            a: float(np.mean([r.aucs[a] for r in runs if a in r.aucs]))
-            for a in ADJECTIVES
-            if any(a in r.aucs for r in runs)
+            a: float(np.mean([r.aucs[a] for r in runs if a in r.aucs])) for a in label_order([self])
         }
 
 
-def _differences(params: dict[str, str], overrides: str, n_adjectives: int) -> tuple[str, ...]:
+def label_order(groups: list[Group]) -> list[str]:
+    """The labels the groups' runs were trained on, in their data sets' order (the order the
+    jobs logged; alphabetical for runs logged without it, which is PHAC-2's paper order)."""
+    order: dict[str, int] = {}
+    for g in groups:
+        for r in g.sorted_runs:
+            for a in r.labels:
+                order.setdefault(a, len(order))
+    ran = {a for g in groups for r in g.runs.values() for a in r.aucs}
+    return sorted(ran, key=lambda a: (order.get(a, len(order)), a))
+
+
+def _differences(
+    params: dict[str, str], overrides: str, n_adjectives: int, n_labels: int
+) -> tuple[str, ...]:
     out = []
     if params.get("choice.schedule", "paper") != "paper":
         out.append(f"schedule={params['choice.schedule']}")
-    if n_adjectives != len(ADJECTIVES):
+    if n_adjectives != n_labels:
         out.append(f"{n_adjectives} adjectives")
     for item in overrides.split():
         key = item.lstrip("+~").split("=", 1)[0]
@@ -151,6 +171,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
             continue
         prefix = f"{metric_key}."
         aucs = {k.removeprefix(prefix): v for k, v in metrics.items() if k.startswith(prefix)}
+        labels = tuple(tags.get("data.labels", "").split())
         key = tags.get("row_hash") or tags["config_hash"]  # runs logged before row_hash existed
         row_hash = key
         experiment = params.get("choice.experiment", "None")
@@ -173,7 +194,9 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
                 modality=params.get("modality.name", ""),
                 model=params.get("model.name", ""),
                 n_adjectives=len(aucs),
-                differences=_differences(params, tags.get("overrides", ""), len(aucs))
+                differences=_differences(
+                    params, tags.get("overrides", ""), len(aucs), len(labels) or UNTAGGED_LABELS
+                )
                 + _tuned(tags),
                 params=dict(params),
                 overrides=dict(
@@ -192,6 +215,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
             sweep_id=tags.get("sweep_id", ""),
             fold=int(params.get("split.fold", -1)),
             folds=int(params.get("split.folds", 0)),
+            labels=labels,
         )
         kept = groups[key].runs.get((entry.seed, entry.fold))
         if kept is None or entry.start_time > kept.start_time:

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_exp.data.layout import ADJECTIVES, objects
-from tactile_exp.report.runs import Group, row_group
+from tactile_exp.data.layout import objects
+from tactile_exp.report.runs import Group, label_order, row_group
 from tactile_exp.report.scores import THRESHOLD, UnitScore, read_scores
 from tactile_exp.tracking import Tracker
 
@@ -35,6 +35,7 @@ class RowScores:
     method: str
     run_id: str
     scores: dict[str, dict[int, tuple[float, int]]]  # adjective -> object id -> (score, label)
+    labels: tuple[str, ...] = ()  # the adjectives in the order the job logged them
 
     def tested(self, object_id: int) -> set[str]:
         return {a for a, by_object in self.scores.items() if object_id in by_object}
@@ -64,7 +65,7 @@ def read_rows(tracker: Tracker, groups: list[Group]) -> dict[str, RowScores | No
         scores = {
             a: object_scores(read_scores(tracker, c)) for a, c in tracker.children(run_id).items()
         }
-        out[row] = RowScores(row, group.method, run_id, scores)
+        out[row] = RowScores(row, group.method, run_id, scores, tuple(label_order([group])))
     return out
 
 
@@ -85,7 +86,8 @@ def table3(rows: dict[str, RowScores | None], object_ids: list[int]) -> list[dic
     ran = [r for r in rows.values() if r is not None]
     lines = []
     for object_id in object_ids:
-        tested = [a for a in ADJECTIVES if ran and all(a in r.tested(object_id) for r in ran)]
+        order = [*ran[0].labels, *sorted(set(ran[0].scores) - set(ran[0].labels))] if ran else []
+        tested = [a for a in order if all(a in r.tested(object_id) for r in ran)]
         truth = [a for a in tested if ran[0].scores[a][object_id][1] == 1]
         for row, modality in ROWS.items():
             scores = rows[row]
