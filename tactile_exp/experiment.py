@@ -443,7 +443,7 @@ def _run_adjective(
 
 def _unkeyed(params: dict[str, Any]) -> dict[str, Any]:
     """The model settings a reused model takes from this job (not from where it was trained)."""
-    return {k: params[k] for k in store.MODEL_UNKEYED if k in params}
+    return store.unkeyed(params)
 
 
 def _part_provider(

@@ -364,8 +364,8 @@ def test_hmm_settings_are_chosen_by_held_out_likelihood(small_grid, monkeypatch)
 
 def test_svm_cross_validation_never_splits_an_object(monkeypatch):
     """C is chosen on folds that hold out whole objects (groups = the instances' object ids)."""
-    from tactile_exp.baselines import svm
     from tactile_exp.data.layout import Instances
+    from tactile_exp.models import linear_svm as svm
 
     rng = np.random.default_rng(0)
     objects = np.repeat(np.arange(12), 5)

@@ -146,7 +146,13 @@ def test_experiments_read_like_table1(compose_config):
 def test_defaults_are_the_paper_settings(compose_config):
     s = settings_from_config(compose_config())
     p = s.model.params
-    assert (p["epochs"], p["batch_size"], p["lr"], p["momentum"]) == (200, 1000, 0.01, 0.9)
+    step = p["schedule"]
+    assert (step["epochs"], step["batch_size"], step["lr"], step["momentum"]) == (
+        200,
+        1000,
+        0.01,
+        0.9,
+    )
     assert (p["loss"], p["pretrain_loss"]) == ("hinge", "logistic")
     assert len(s.adjectives) == 24
     assert s.run_name == "haptic_cnn-concat-c1-s0"
@@ -167,10 +173,10 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("adjectives=[]", "adjectives: must list at least one"),
         ("adjectives=[hard,fluffy]", "adjectives: unknown ['fluffy']"),
         ("device=tpu", "device: must be auto, cpu, cuda or cuda:N"),
-        ("model.lr=0", "model.lr: "),
-        ("model.lr=-1", "lr"),
-        ("model.epochs=0", "epochs"),
-        ("schedule.head.lr=0", "head_schedule.lr must be > 0"),
+        ("schedule.lr=0", "schedule.lr: lr must be > 0"),
+        ("schedule.lr=-1", "schedule.lr: "),
+        ("schedule.epochs=0", "schedule.epochs: epochs must be an int >= 1, got 0"),
+        ("schedule.head.lr=0", "schedule.head.lr: lr must be > 0"),
         ("modality=visual", "modality: model=haptic_cnn takes modality haptic, got 'visual'"),
     ],
 )
@@ -248,7 +254,7 @@ def test_run_name_short_forms():
     s = _job(
         [
             "experiment=table1_i_haptic_cnn_1trial",
-            "model.lr=0.001",
+            "schedule.lr=0.001",
             "seed=3",
             "adjectives=[hard,soft,smooth,thick]",
             "cache_dir=/tmp/c",
@@ -259,4 +265,4 @@ def test_run_name_short_forms():
     # the Table I row, then each axis short; the seed once, last; cache_dir says nothing
     assert s.run_name.startswith("table1_i_haptic_cnn_1trial-lr=0.001-4adj-")
     assert s.run_name.endswith("-phac2-path=test_config-s3")
-    assert s.axes["model.lr"] == "0.001" and "cache_dir" not in s.axes
+    assert s.axes["schedule.lr"] == "0.001" and "cache_dir" not in s.axes

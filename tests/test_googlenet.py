@@ -16,6 +16,7 @@ from tactile_exp.models.googlenet import (
     pooled_features,
     xavier_init,
 )
+from tactile_exp.models.schedule import Schedule
 
 # torchvision's GoogLeNet(aux_logits=False): module names and parameter count (DEPS.md section 5)
 INCEPTIONS = ("3a", "3b", "4a", "4b", "4c", "4d", "4e", "5a", "5b")
@@ -146,7 +147,9 @@ def _features(n: int, seed: int) -> Instances:
 
 
 def test_loss_layer_learns_on_l2_features_and_rejects_other_rows():
-    model = MODELS.build("visual_googlenet", epochs=60, finetune_epochs=20, batch_size=64)
+    model = MODELS.build(
+        "visual_googlenet", schedule=Schedule(epochs=60, finetune_epochs=20, batch_size=64)
+    )
     train, test = _features(200, 0), _features(100, 1)
     history = model.fit(train)
     assert len(history["train_loss"]) == 60 and len(history["finetune_loss"]) == 20

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 
-from tactile_exp.baselines.svm import ObjectCVLinearSVM
 from tactile_exp.config import ConfigError, settings_from_config
 from tactile_exp.data.layout import DataError
 from tactile_exp.experiment import run
+from tactile_exp.models.linear_svm import ObjectCVLinearSVM
 from tactile_exp.tracking import Tracker, TrackingError, process_tags
 
 # 5 objects x 3 trials: absorbent 2 positive objects, squishy 3, cool none.
@@ -50,15 +50,22 @@ def _all_runs(uri: str):
     "override,line",
     [
         ("seed=-1", "seed: must be a whole number in 0..2**32-1, got -1"),
-        ("model.epochs=0", "model.epochs: epochs must be an int >= 1, got 0"),
-        ("model.lr=0", "model.lr: "),
+        ("schedule.epochs=0", "schedule.epochs: epochs must be an int >= 1, got 0"),
+        ("schedule.lr=0", "schedule.lr: lr must be > 0 and finite, got 0"),
+        ("schedule.head.batch_size=0", "schedule.head.batch_size: batch_size must be an int >= 1"),
+        ("+schedule.epoch=2", "schedule.epoch: unknown key; allowed: epochs, finetune_epochs,"),
+        (
+            "model=visual_googlenet modality=visual model.schedule.lr=0",
+            "model.schedule.lr: lr must be > 0 and finite, got 0",
+        ),
         ("model.kernel_sizes=[5,0,5]", "model.kernel_sizes: kernel_sizes must be >= 1"),
         ("data=phac2", "data.path: missing; set it on the command line"),
         ("data.path=/no/such.h5", "data.path: /no/such.h5: no such file"),
     ],
 )
 def test_impossible_values_name_the_key_typed(compose_config, override, line):
-    overrides = ["data=phac2", override] if override.startswith("data.path") else [override]
+    overrides = override.split()
+    overrides = ["data=phac2", *overrides] if override.startswith("data.path") else overrides
     with pytest.raises(ConfigError) as err:
         settings_from_config(compose_config(overrides))
     assert str(err.value).startswith(line)
