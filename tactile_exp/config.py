@@ -343,7 +343,7 @@ def check_components(settings: Settings) -> None:
     from tactile_exp.data.splits import SPLITS, check_split_params
     from tactile_exp.modalities import MODALITIES
     from tactile_exp.models.registry import MODELS
-    from tactile_exp.models.schedule import ScheduleError
+    from tactile_exp.models.schedule import STEPS, ScheduleError
 
     if settings.device.startswith("cuda"):
         from tactile_exp.train import resolve_device
@@ -366,6 +366,13 @@ def check_components(settings: Settings) -> None:
         check_split_params(settings.split, settings.split_params)
     except ValueError as err:
         raise ConfigError(f"split.{err}") from err
+    schedule = settings.model.params.get("schedule")
+    if isinstance(schedule, dict) and not set(STEPS) <= set(schedule):
+        missing = ", ".join(k for k in STEPS if k not in schedule)
+        raise ConfigError(  # e.g. ++model.schedule.lr=0.5 replaced the whole ${schedule} node
+            f"model.schedule: missing {missing}; the model takes the schedule node whole: set "
+            "schedule.<key> (e.g. schedule.lr=0.05), not model.schedule.<key>"
+        )
     try:
         model = MODELS.build(settings.model.name, **settings.model.params)
     except ScheduleError as err:  # a model's own schedule (visual_googlenet's step)

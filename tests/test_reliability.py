@@ -54,6 +54,10 @@ def _all_runs(uri: str):
         ("schedule.lr=0", "schedule.lr: lr must be > 0 and finite, got 0"),
         ("schedule.head.batch_size=0", "schedule.head.batch_size: batch_size must be an int >= 1"),
         ("+schedule.epoch=2", "schedule.epoch: unknown key; allowed: epochs, finetune_epochs,"),
+        (  # Hydra's ++ replaces the interpolated node: refused, not trained for 200 epochs
+            "++model.schedule.lr=0.5",
+            "model.schedule: missing epochs, finetune_epochs, batch_size, momentum; the model",
+        ),
         (
             "model=visual_googlenet modality=visual model.schedule.lr=0",
             "model.schedule.lr: lr must be > 0 and finite, got 0",

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import pickle
 
 import pytest
 import yaml
@@ -45,6 +46,8 @@ def test_a_bad_value_names_its_key(node, key, line):
     with pytest.raises(ScheduleError) as err:
         Schedule.of(node)
     assert err.value.key == key and str(err.value).startswith(line)
+    again = pickle.loads(pickle.dumps(err.value))  # as a worker process hands it back
+    assert (again.key, str(again)) == (key, str(err.value))
 
 
 def test_a_schedule_stored_as_json_reads_back_equal():

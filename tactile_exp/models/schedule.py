@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-STEPS = ("epochs", "finetune_epochs", "batch_size", "lr", "momentum")  # one stage's settings
+STEPS = ("epochs", "finetune_epochs", "batch_size", "lr", "momentum")  # all but the head
 
 
 def _finite(value: object) -> bool:
@@ -32,6 +32,9 @@ class ScheduleError(ValueError):
         super().__init__(f"schedule{'.' if key else ''}{key}: {message}")
         self.key = key
         self.message = message
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # pickled whole (worker processes)
+        return type(self), (self.key, self.message)
 
 
 @dataclass(frozen=True)
