@@ -42,11 +42,11 @@ from tactile_exp.baselines import dynamic as dyn
 from tactile_exp.baselines import features as feat
 from tactile_exp.baselines.dynamic import DynamicFeatures
 from tactile_exp.baselines.features import FEATURE_KINDS, BaselineFeatures
-from tactile_exp.baselines.svm import ObjectCVLinearSVM
 from tactile_exp.data.layout import ADJECTIVES, Split, TrialName
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.splits import make_split
 from tactile_exp.data.synthetic import default_file
+from tactile_exp.models.linear_svm import ObjectCVLinearSVM
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from baselines_oracles import plain_paths  # noqa: E402 (the oracles live beside the tests)

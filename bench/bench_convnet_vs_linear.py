@@ -42,6 +42,7 @@ from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import make_split
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.validation import take_trials, validation_split
 
 
@@ -109,8 +110,7 @@ def run_split(args, dataset, haptic, rule: str, seed: int, out) -> None:
 
         cnn = MODELS.build(
             "haptic_cnn",
-            epochs=args.epochs,
-            finetune_epochs=args.finetune,
+            schedule=Schedule(epochs=args.epochs, finetune_epochs=args.finetune),
             seed=seed,
             device=args.device,
         )
@@ -118,14 +118,14 @@ def run_split(args, dataset, haptic, rule: str, seed: int, out) -> None:
         rows["cnn"] = _aucs(cnn.decision_function, sets)
         rows["cnn"]["loss"] = history["train_loss"][-1]
         conv3 = {k: cnn.transform(s.X) for k, s in sets.items()}
-        new = dict(
+        new = Schedule(
             epochs=args.head_epochs,
             finetune_epochs=args.head_finetune,
             batch_size=args.head_batch,
             lr=args.head_lr,
             momentum=0.9,
         )
-        old = dict(
+        old = Schedule(
             epochs=args.epochs,
             finetune_epochs=args.finetune,
             batch_size=1000,
@@ -136,7 +136,7 @@ def run_split(args, dataset, haptic, rule: str, seed: int, out) -> None:
         for row, combine in (("I", 1), ("J", 10)):
             units = {k: concat(conv3[k], s, combine) for k, s in sets.items()}
             for tag, schedule in (("old", old), ("new", new)):
-                head = MODELS.build("linear", **schedule, seed=seed, device=args.device)
+                head = MODELS.build("linear", schedule=schedule, seed=seed, device=args.device)
                 curves = head.fit(units["train"])
                 rows[f"{row}-{tag}"] = _aucs(head.decision_function, units)
                 rows[f"{row}-{tag}"]["loss"] = curves["train_loss"][-1]

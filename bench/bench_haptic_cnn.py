@@ -44,10 +44,11 @@ from tactile_exp.data.layout import Instances
 from tactile_exp.models import grouped_conv_numba as kernels
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet, HapticCNN
 from tactile_exp.models.losses import LOSSES
+from tactile_exp.models.schedule import Schedule
 
 N_TRAIN, CHANNELS, STEPS, BATCH = 5300, 32, 150, 1000
 ADJECTIVES, EPOCHS, FINETUNE_EPOCHS = 24, 200, 100
-HEAD_SCHEDULE = dict(epochs=200, finetune_epochs=100, batch_size=32, lr=0.001)  # schedule.head
+HEAD_SCHEDULE = Schedule(epochs=200, finetune_epochs=100, batch_size=32, lr=0.001)  # schedule.head
 IMPLS = ("torch", "compiled")
 
 
@@ -232,7 +233,7 @@ def row_estimate(
     # The first fit pays one-off allocations; epochs and fine-tuning epochs are differences of
     # fits 5 and 50 epochs apart, so one slow epoch moves them little.
     for epochs, finetune in ((1, 0), (1, 0), (6, 0), (1, 50)):
-        model = HapticCNN(impl=impl, epochs=epochs, finetune_epochs=finetune, seed=0, device="cpu")
+        model = HapticCNN(impl=impl, schedule=Schedule(epochs, finetune), seed=0, device="cpu")
         start = time.perf_counter()
         model.fit(train)
         timings[(epochs, finetune)] = time.perf_counter() - start
@@ -259,7 +260,7 @@ def head_fit(rng: np.random.Generator, impl: str) -> float:
     units = N_TRAIN // 10
     X = np.maximum(rng.standard_normal((units, 10 * 2432), dtype=np.float32), 0)  # ReLU'd
     train = Instances(X, (rng.random(units) > 0.8).astype(int), np.zeros(units), np.zeros(units))
-    head = HapticCNN(impl=impl, device="cpu", head_schedule=HEAD_SCHEDULE).head()
+    head = HapticCNN(impl=impl, device="cpu", schedule=Schedule(head=HEAD_SCHEDULE)).head()
     start = time.perf_counter()
     head.fit(train)
     return time.perf_counter() - start
@@ -273,7 +274,9 @@ def auc_equivalence(rng: np.random.Generator, figures: dict[str, float]) -> None
     train = Instances(X[:300], y[:300], np.zeros(300), np.zeros(300, dtype=int))
     aucs = {}
     for impl in IMPLS:
-        model = HapticCNN(impl=impl, epochs=5, finetune_epochs=5, batch_size=100, device="cpu")
+        model = HapticCNN(
+            impl=impl, schedule=Schedule(epochs=5, finetune_epochs=5, batch_size=100), device="cpu"
+        )
         model.fit(train)
         aucs[impl] = roc_auc_score(y[300:], model.decision_function(X[300:]))
     diff = abs(aucs["compiled"] - aucs["torch"])
@@ -312,7 +315,7 @@ def plain_torch(epochs: int) -> float:
 def compiled_fit(train: Instances, epochs: int) -> float:
     """Seconds of a compiled ``HapticCNN`` fit of ``epochs`` epochs (no fine-tuning): a row H
     job's training."""
-    model = HapticCNN(impl="compiled", epochs=epochs, finetune_epochs=0, seed=0, device="cpu")
+    model = HapticCNN(impl="compiled", schedule=Schedule(epochs, 0), seed=0, device="cpu")
     start = time.perf_counter()
     model.fit(train)
     return time.perf_counter() - start

@@ -91,7 +91,7 @@ def _key(settings: Settings, dataset: Any, modality: Component, model: Component
 
 def _unkeyed(params: dict[str, Any]) -> dict[str, Any]:
     """The model settings a reused model takes from this job (not from where it was trained)."""
-    return {k: params[k] for k in store.MODEL_UNKEYED if k in params}
+    return store.unkeyed(params)
 
 
 def _sides(settings: Settings, dataset: Any, split: Split) -> dict[str, Trials]:

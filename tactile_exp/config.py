@@ -104,7 +104,7 @@ def config_hash(resolved: dict[str, Any]) -> str:
 
 def axes(overrides: tuple[str, ...]) -> dict[str, str]:
     """What this job sets apart from the defaults: ``{"model": "haptic_lstm", "combine": "10",
-    "model.lr": "0.01"}`` from its command-line overrides (a sweep's swept values are among
+    "schedule.lr": "0.01"}`` from its command-line overrides (a sweep's swept values are among
     them), without those that only say where results go (``UNNAMED``)."""
     out = {}
     for item in overrides:
@@ -204,6 +204,17 @@ def _check_missing(node: Any, prefix: str = "") -> None:
         raise ConfigError(f"{key}: missing; set it on the command line, e.g. {key}=...")
 
 
+def _check_schedule(node: Any) -> None:
+    """The ``schedule`` node the SGD-trained models take whole (``schedule: ${schedule}``),
+    checked where the user sets it: ``schedule.lr``, not the model's copy."""
+    from tactile_exp.models.schedule import Schedule, ScheduleError
+
+    try:
+        Schedule.of(node)
+    except ScheduleError as err:
+        raise ConfigError(str(err)) from err
+
+
 def _check_data(data: Any) -> None:
     """The data's file or folder must exist before a run is created for it."""
     from tactile_exp.data.sources import check_source_params
@@ -270,6 +281,7 @@ def settings_from_config(
         raise ConfigError(f"workers: must be a whole number of processes >= 1, got {workers!r}")
     _check_missing(resolved)
     _check_data(resolved["data"])
+    _check_schedule(resolved.get("schedule"))
 
     fraction = (resolved.get("validation") or {}).get("fraction", 0.0)
     if isinstance(fraction, bool) or not isinstance(fraction, int | float) or not 0 <= fraction < 1:
@@ -392,6 +404,7 @@ def check_components(settings: Settings) -> None:
     from tactile_exp.data.splits import SPLITS, check_split_params
     from tactile_exp.modalities import MODALITIES
     from tactile_exp.models.registry import MODELS
+    from tactile_exp.models.schedule import STEPS, ScheduleError
 
     if settings.device.startswith("cuda"):
         from tactile_exp.train import resolve_device
@@ -414,12 +427,21 @@ def check_components(settings: Settings) -> None:
         check_split_params(settings.split, settings.split_params)
     except ValueError as err:
         raise ConfigError(f"split.{err}") from err
+    schedule = settings.model.params.get("schedule")
+    if isinstance(schedule, dict) and not set(STEPS) <= set(schedule):
+        missing = ", ".join(k for k in STEPS if k not in schedule)
+        raise ConfigError(  # e.g. ++model.schedule.lr=0.5 replaced the whole ${schedule} node
+            f"model.schedule: missing {missing}; the model takes the schedule node whole: set "
+            "schedule.<key> (e.g. schedule.lr=0.05), not model.schedule.<key>"
+        )
     try:
         model = MODELS.build(settings.model.name, **settings.model.params)
+    except ScheduleError as err:  # a model's own schedule (visual_googlenet's step)
+        raise ConfigError(f"model.{err}") from err
     except (TypeError, ValueError) as err:
         raise param_error("model", settings.model.params, err) from err
     steps = settings.modality.params.get("steps")
-    if hasattr(model, "check_steps") and isinstance(steps, int) and steps >= 1:
+    if isinstance(steps, int) and steps >= 1:
         try:
             model.check_steps(steps)
         except ValueError as err:

@@ -156,7 +156,7 @@ def generate(conf: Path = CONF, method: Path = METHOD) -> str:
         "",
         f"Generated from `conf/` by `{COMMAND}` (a test fails when this page is stale). Every",
         "value can be overridden on the command line: `group=option` picks a file of a group,",
-        "`key=value` sets a value (`model.epochs=20`, `adjectives=[hard,soft]`).",
+        "`key=value` sets a value (`schedule.epochs=20`, `adjectives=[hard,soft]`).",
         "`python -m tactile_exp --cfg job` prints the resolved config and",
         "`--info defaults-tree` where each value comes from. Method items (P1, T3, ...) are the",
         'paper\'s numbered steps in [the method](method.md); "ours" marks a value the paper does',

@@ -18,6 +18,7 @@ waits for that run's model (``await_trained``) instead of training it again.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import logging
@@ -38,8 +39,9 @@ from tactile_exp.tracking import Tracker
 log = logging.getLogger(__name__)
 
 FORMAT = 1  # bump when the artifact layout changes: older artifacts then no longer match keys
-# Model settings that change neither the representation nor the instance classifier.
-MODEL_UNKEYED = ("head_schedule", "impl", "device")
+# Model settings that change neither the representation nor the instance classifier; a dotted
+# key is a value inside a setting (the T4 head's schedule inside the model's ``schedule``).
+MODEL_UNKEYED = ("schedule.head", "impl", "device")
 # Modality settings that change only where or how fast features are computed.
 MODALITY_UNKEYED = ("device", "batch_size")
 MODEL_FILES = ("settings.json", "weights.pt", "arrays.npz")
@@ -80,7 +82,33 @@ def training_key(
 
 
 def _without(params: Mapping[str, Any], dropped: tuple[str, ...]) -> dict[str, Any]:
-    return {k: v for k, v in params.items() if k not in dropped}
+    """``params`` less the (dotted) keys ``dropped``; ``params`` itself is left as it is."""
+    out = dict(params)
+    for path in dropped:
+        *parents, leaf = path.split(".")
+        node = out
+        for parent in parents:
+            if not isinstance(node.get(parent), Mapping):
+                break
+            node[parent] = node = dict(node[parent])
+        else:
+            node.pop(leaf, None)
+    return out
+
+
+def unkeyed(params: Mapping[str, Any]) -> dict[str, Any]:
+    """The settings of ``MODEL_UNKEYED`` in a job's model ``params``, by dotted key: what a model
+    it reuses takes from it (``read_model``'s overrides). A schedule without a head gives
+    ``schedule.head`` None: the head then trains like the model, as in the job."""
+    out = {}
+    for path in MODEL_UNKEYED:
+        *parents, leaf = path.split(".")
+        node: Any = params
+        for parent in parents:
+            node = node.get(parent) if isinstance(node, Mapping) else None
+        if isinstance(node, Mapping) and (parents or leaf in node):
+            out[path] = node.get(leaf)
+    return out
 
 
 def find_trained(tracker: Tracker, key: str) -> str | None:
@@ -208,7 +236,9 @@ def write_state(folder: Path, settings: Mapping[str, Any], arrays: Mapping[str, 
 
 
 def jsonable(value: Any) -> Any:
-    """``json.dumps``' ``default`` for numpy values and tuples."""
+    """``json.dumps``' ``default`` for numpy values, tuples and a model's ``Schedule``."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):  # a model's Schedule
+        return dataclasses.asdict(value)
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, tuple | np.ndarray):
@@ -255,7 +285,8 @@ def read_model(folder: Path, where: str, overrides: Mapping[str, Any] | None = N
     """The fitted model stored in ``folder`` (``where`` names it in errors: run id and path).
 
     ``overrides``: settings that change no learned weight (``MODEL_UNKEYED``: the head's schedule,
-    the kernels, the device) taken from the caller instead of the stored ones."""
+    the kernels, the device; dotted keys as ``unkeyed`` gives them) taken from the caller
+    instead of the stored ones."""
     import torch
 
     from tactile_exp.models.registry import MODELS
@@ -267,7 +298,12 @@ def read_model(folder: Path, where: str, overrides: Mapping[str, Any] | None = N
         shape = tuple(int(n) for n in settings["input_shape"])
     except (KeyError, TypeError, ValueError) as err:
         raise ArtifactError(f"{where}/settings.json: missing or bad entry ({err})") from None
-    params.update(overrides or {})
+    for path, value in (overrides or {}).items():
+        *parents, leaf = path.split(".")
+        node = params
+        for parent in parents:
+            node[parent] = node = dict(node.get(parent) or {})
+        node[leaf] = value
     try:
         tensors = torch.load(folder / "weights.pt", map_location="cpu", weights_only=True)
     except Exception as err:

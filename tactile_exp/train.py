@@ -6,7 +6,6 @@ import cycle; the two-stage schedule that uses it lives in ``models/sgd.py`` (``
 
 from __future__ import annotations
 
-import math
 import random
 from collections.abc import Callable, Collection
 
@@ -70,45 +69,13 @@ def seed_everything(seed: int) -> torch.Generator:
     return torch.Generator().manual_seed(seed)
 
 
-def _finite(value: object) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def validate_sgd_args(
-    *,
-    epochs: int,
-    finetune_epochs: int,
-    batch_size: int,
-    lr: float,
-    momentum: float,
-    loss: str,
-    pretrain_loss: str | None,
-    known_losses: Collection[str],
-    where: str = "",
-) -> None:
-    """Raise ValueError naming the first bad argument (after ``where``) and what is allowed."""
+def validate_losses(*, loss: str, pretrain_loss: str | None, known_losses: Collection[str]) -> None:
+    """Raise ValueError naming the bad loss argument and the registered losses."""
     losses = ", ".join(sorted(known_losses))
-    checks = [
-        (isinstance(epochs, int) and epochs >= 1, f"epochs must be an int >= 1, got {epochs!r}"),
-        (
-            isinstance(finetune_epochs, int) and finetune_epochs >= 0,
-            f"finetune_epochs must be an int >= 0, got {finetune_epochs!r}",
-        ),
-        (
-            isinstance(batch_size, int) and batch_size >= 1,
-            f"batch_size must be an int >= 1, got {batch_size!r}",
-        ),
-        (_finite(lr) and lr > 0, f"lr must be > 0 and finite, got {lr!r}"),
-        (_finite(momentum) and 0 <= momentum < 1, f"momentum must be in [0, 1), got {momentum!r}"),
-        (loss in known_losses, f"loss must be one of {losses}, got {loss!r}"),
-        (
-            pretrain_loss is None or pretrain_loss in known_losses,
-            f"pretrain_loss must be one of {losses} or None, got {pretrain_loss!r}",
-        ),
-    ]
-    for ok, message in checks:
-        if not ok:
-            raise ValueError(where + message)
+    if loss not in known_losses:
+        raise ValueError(f"loss must be one of {losses}, got {loss!r}")
+    if pretrain_loss is not None and pretrain_loss not in known_losses:
+        raise ValueError(f"pretrain_loss must be one of {losses} or None, got {pretrain_loss!r}")
 
 
 def sgd_epochs(

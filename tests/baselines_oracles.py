@@ -16,8 +16,9 @@ from contextlib import contextmanager
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 
-from tactile_exp.baselines import dynamic, shortcuts, static, svm
+from tactile_exp.baselines import dynamic, shortcuts, static
 from tactile_exp.baselines.static import FILL, N_ELECTRODE_PCS, PHASES, POLY_DEGREE
+from tactile_exp.models import linear_svm as svm
 
 
 def pc_polyfit(poly: np.ndarray, mean: np.ndarray, axes: np.ndarray) -> np.ndarray:

@@ -15,8 +15,8 @@ from test_baselines_dynamic import TINY_GRID, _generated
 from tactile_exp.baselines import dynamic as dyn
 from tactile_exp.baselines import features as feat
 from tactile_exp.baselines import static as st
-from tactile_exp.baselines.svm import ObjectCVLinearSVM
 from tactile_exp.data.layout import TrialName
+from tactile_exp.models.linear_svm import ObjectCVLinearSVM
 
 
 def _table() -> st.StaticTable:

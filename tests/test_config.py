@@ -227,7 +227,13 @@ def test_experiments_read_like_table1(compose_config):
 def test_defaults_are_the_paper_settings(compose_config):
     s = settings_from_config(compose_config())
     p = s.model.params
-    assert (p["epochs"], p["batch_size"], p["lr"], p["momentum"]) == (200, 1000, 0.01, 0.9)
+    step = p["schedule"]
+    assert (step["epochs"], step["batch_size"], step["lr"], step["momentum"]) == (
+        200,
+        1000,
+        0.01,
+        0.9,
+    )
     assert (p["loss"], p["pretrain_loss"]) == ("hinge", "logistic")
     assert s.adjectives is None  # every label of the data set: PHAC-2's 24 adjectives
     assert s.run_name == "haptic_cnn-concat-c1-s0"
@@ -248,10 +254,10 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("adjectives=hard", "adjectives: must list at least one label, or be null"),
         ("adjectives=[hard,soft,hard]", "adjectives: listed twice"),
         ("device=tpu", "device: must be auto, cpu, cuda or cuda:N"),
-        ("model.lr=0", "model.lr: lr must be > 0 and finite, got 0"),
-        ("model.lr=-1", "model.lr: lr must be > 0 and finite, got -1"),
-        ("model.epochs=0", "model.epochs: epochs must be an int >= 1, got 0"),
-        ("schedule.head.lr=0", "model: head_schedule.lr must be > 0"),
+        ("schedule.lr=0", "schedule.lr: lr must be > 0 and finite, got 0"),
+        ("schedule.lr=-1", "schedule.lr: lr must be > 0 and finite, got -1"),
+        ("schedule.epochs=0", "schedule.epochs: epochs must be an int >= 1, got 0"),
+        ("schedule.head.lr=0", "schedule.head.lr: lr must be > 0"),
         (
             "modality=visual",
             "modality: model=haptic_cnn takes modality haptic or signals, got 'visual'",
@@ -260,6 +266,16 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("model.kernel_sizes=[5,0,5]", "model.kernel_sizes: kernel_sizes must be >= 1"),
         ("data=phac2", "data.path: missing; set it on the command line"),
         ("data=phac2 data.path=/no/such.h5", "data.path: /no/such.h5: no such file"),
+        ("schedule.head.batch_size=0", "schedule.head.batch_size: batch_size must be an int >= 1"),
+        ("+schedule.epoch=2", "schedule.epoch: unknown key; allowed: epochs, finetune_epochs,"),
+        (  # Hydra's ++ replaces the interpolated node: refused, not trained for 200 epochs
+            "++model.schedule.lr=0.5",
+            "model.schedule: missing epochs, finetune_epochs, batch_size, momentum; the model",
+        ),
+        (
+            "model=visual_googlenet modality=visual model.schedule.lr=0",
+            "model.schedule.lr: lr must be > 0 and finite, got 0",
+        ),
     ],
 )
 def test_impossible_values_fail_naming_the_key(compose_config, override, message):
@@ -342,7 +358,7 @@ def test_run_name_short_forms():
     s = _job(
         [
             "experiment=table1_i_haptic_cnn_1trial",
-            "model.lr=0.001",
+            "schedule.lr=0.001",
             "seed=3",
             "adjectives=[hard,soft,smooth,thick]",
             "cache_dir=/tmp/c",
@@ -353,7 +369,7 @@ def test_run_name_short_forms():
     # the Table I row, then each axis short; the seed once, last; cache_dir says nothing
     assert s.run_name.startswith("table1_i_haptic_cnn_1trial-lr=0.001-4adj-")
     assert s.run_name.endswith("-phac2-path=test_config-s3")
-    assert s.axes["model.lr"] == "0.001" and "cache_dir" not in s.axes
+    assert s.axes["schedule.lr"] == "0.001" and "cache_dir" not in s.axes
 
 
 # moved from test_behaviour.py / test_reliability.py (issue 26)

@@ -95,17 +95,17 @@ def _one_broken(valid: dict[str, st.SearchStrategy], wild: dict[str, st.SearchSt
 
 SCHEDULE = _one_broken(
     valid={
-        "model.epochs": st.integers(1, 3),
-        "model.lr": st.floats(1e-4, 0.5),
-        "model.momentum": st.floats(0.0, 0.95),
-        "model.batch_size": st.integers(4, 20),
+        "schedule.epochs": st.integers(1, 3),
+        "schedule.lr": st.floats(1e-4, 0.5),
+        "schedule.momentum": st.floats(0.0, 0.95),
+        "schedule.batch_size": st.integers(4, 20),
         "combine": st.integers(1, 2),
     },
     wild={
-        "model.epochs": st.integers(-1, 3),
-        "model.lr": REAL,
-        "model.momentum": REAL,
-        "model.batch_size": st.integers(-1, 20),
+        "schedule.epochs": st.integers(-1, 3),
+        "schedule.lr": REAL,
+        "schedule.momentum": REAL,
+        "schedule.batch_size": st.integers(-1, 20),
         "combine": st.integers(-1, 3),
     },
 )

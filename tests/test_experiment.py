@@ -38,7 +38,7 @@ def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri):
     assert len(parents) == 1 and len(children) == 3
     parent = parents[0]
     assert parent.info.status == "FINISHED" and parent.info.run_name == "haptic_cnn-concat-c1-s11"
-    assert parent.data.params["model.epochs"] == "2"
+    assert parent.data.params["model.schedule.epochs"] == "2"
     assert parent.data.params["choice.model"] == "haptic_cnn"
     assert parent.data.tags["device"] == device_name("auto")  # "cpu" here, the GPU on one
     assert {c.data.tags["mlflow.parentRunId"] for c in children} == {parent.info.run_id}
@@ -200,7 +200,7 @@ def test_sigterm_marks_the_runs_failed(cache_dir, mlflow_uri):
         f"cache_dir={cache_dir}",
         f"tracking.uri={mlflow_uri}",
         "adjectives=[hard]",
-        "model.epochs=100000",
+        "schedule.epochs=100000",
         "seed=31",
         f"hydra.run.dir={cache_dir / 'sigterm_run'}",
     ]

@@ -14,6 +14,9 @@ from sklearn.metrics import roc_auc_score
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances
 from tactile_exp.models import MODELS
+from tactile_exp.models.schedule import Schedule
+
+ONE_EPOCH = Schedule(epochs=1, finetune_epochs=0)
 
 
 def _unit_norm_features(n: int, seed: int, views: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -68,7 +71,8 @@ def test_visual_schedule_learns_on_unit_norm_features(visual_model_params):
     assert history["train_loss"][-1] < 0.6 * entropy  # it left the intercept
     assert history["finetune_loss"][-1] < 0.1
     # T3's step (lr 0.01, batch 1000 = full batch) on the same rows learns only the intercept
-    t3 = MODELS.build("visual_googlenet", **{**visual_model_params, "lr": 0.01, "batch_size": 1000})
+    t3_step = {**visual_model_params["schedule"], "lr": 0.01, "batch_size": 1000}
+    t3 = MODELS.build("visual_googlenet", **{**visual_model_params, "schedule": t3_step})
     assert t3.fit(_instances(X, y))["train_loss"][-1] > 0.9 * entropy
 
 
@@ -82,13 +86,13 @@ def test_row_l_head_learns_on_concatenated_unit_norm_views(visual_model_params):
 
 def test_visual_head_puts_the_loss_directly_on_the_features():
     X, y = _unit_norm_features(40, seed=2, views=2)
-    head = MODELS.build("visual_googlenet", epochs=1, finetune_epochs=0, device="cpu").head()
+    head = MODELS.build("visual_googlenet", schedule=ONE_EPOCH, device="cpu").head()
     head.fit(_instances(X, y))
     np.testing.assert_array_equal(head._preprocess(X), X)  # no standardisation
-    linear = MODELS.build("linear", epochs=1, finetune_epochs=0, device="cpu")
+    linear = MODELS.build("linear", schedule=ONE_EPOCH, device="cpu")
     linear.fit(_instances(X, y))
     assert not np.allclose(linear._preprocess(X), X)  # the haptic heads keep standardising
-    assert MODELS.build("haptic_cnn", epochs=1, device="cpu").head().standardize is True
+    assert MODELS.build("haptic_cnn", schedule=ONE_EPOCH, device="cpu").head().standardize is True
     with pytest.raises(ValueError, match="standardize"):
         MODELS.build("linear", standardize="no")
 
@@ -103,7 +107,9 @@ def _features(n: int, seed: int) -> Instances:
 
 
 def test_loss_layer_learns_on_l2_features_and_rejects_other_rows():
-    model = MODELS.build("visual_googlenet", epochs=60, finetune_epochs=20, batch_size=64)
+    model = MODELS.build(
+        "visual_googlenet", schedule=Schedule(epochs=60, finetune_epochs=20, batch_size=64)
+    )
     train, test = _features(200, 0), _features(100, 1)
     history = model.fit(train)
     assert len(history["train_loss"]) == 60 and len(history["finetune_loss"]) == 20

@@ -12,6 +12,7 @@ from sklearn.metrics import roc_auc_score
 from test_models import FAST, easy_case
 
 from tactile_exp.models import MODELS
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.preprocess.trunk import build_trunk, pooled_features
 from tactile_exp.store import read_model, write_model
 from tactile_exp.train import device_name
@@ -29,8 +30,8 @@ def test_auto_names_the_gpu_for_the_runs_device_tag():
 @pytest.mark.parametrize(
     ("name", "steps", "schedule"),
     [
-        ("haptic_cnn", 60, {}),
-        ("haptic_lstm", 20, dict(epochs=15, finetune_epochs=5, batch_size=25, lr=0.05)),
+        ("haptic_cnn", 60, FAST["schedule"]),
+        ("haptic_lstm", 20, Schedule(epochs=15, finetune_epochs=5, batch_size=25, lr=0.05)),
     ],
 )
 def test_auto_trains_on_the_gpu_and_scores_as_the_cpu_does(name, steps, schedule):
@@ -40,7 +41,7 @@ def test_auto_trains_on_the_gpu_and_scores_as_the_cpu_does(name, steps, schedule
     train, test = easy_case(120, steps=steps), easy_case(60, steps=steps, seed=1)
     scores = {}
     for device in ("cpu", "auto"):
-        model = MODELS.build(name, seed=3, **{**GPU, **schedule, "device": device})
+        model = MODELS.build(name, seed=3, **{**GPU, "schedule": schedule, "device": device})
         model.fit(train)
         scores[device] = model.decision_function(test.X)
         params = [*model.body_.parameters(), *model.classifier_.parameters()]

@@ -37,7 +37,7 @@ def _job(cache_dir: Path, uri: str, run_dir: Path, *extra: str) -> list[str]:
         f"cache_dir={cache_dir}",
         f"tracking.uri={uri}",
         "schedule=tiny",
-        "model.epochs=50",  # soft trains for seconds after its first epoch line: time to kill
+        "schedule.epochs=50",  # soft trains for seconds after its first epoch line: time to kill
         "adjectives=[hard,soft,smooth]",
         "seed=41",
         f"hydra.run.dir={run_dir}",
@@ -115,7 +115,7 @@ def test_sigterm_to_a_parallel_sweep_stops_its_workers(cache_dir, mlflow_uri, tm
         f"tracking.uri={mlflow_uri}",
         "adjectives=[hard]",
         "schedule=tiny",
-        "model.epochs=100000",
+        "schedule.epochs=100000",
         "seed=51,52,53",
         "hydra/launcher=joblib",
         "hydra.launcher.n_jobs=2",
@@ -154,7 +154,7 @@ def test_sigterm_to_a_parallel_sweep_stops_its_workers(cache_dir, mlflow_uri, tm
 def test_a_stopped_job_stops_its_adjective_workers(sig, cache_dir, mlflow_uri, tmp_path):
     """workers=2, both training: SIGTERM to the job passes it on (the workers' runs end FAILED);
     SIGKILL takes the workers with it (the parent-death signal: their runs end FAILED too)."""
-    args = _job(cache_dir, mlflow_uri, tmp_path / "job", "workers=2", "model.epochs=100000")
+    args = _job(cache_dir, mlflow_uri, tmp_path / "job", "workers=2", "schedule.epochs=100000")
     job = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     started = set()
     try:

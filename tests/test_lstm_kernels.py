@@ -10,6 +10,7 @@ from torch import nn
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_lstm import LSTMBody
 from tactile_exp.models.lstm_kernels import lstm_last_hidden
+from tactile_exp.models.schedule import Schedule
 
 
 @pytest.mark.parametrize(
@@ -35,7 +36,8 @@ def test_compiled_matches_nn_lstm_forward_and_gradients(batch, channels, steps, 
 
 def test_short_training_matches_torch_impl():
     train, test = easy_case(120, steps=30, seed=1), easy_case(60, steps=30, seed=2)
-    settings = dict(epochs=6, finetune_epochs=3, batch_size=40, lr=0.05, device="cpu", seed=3)
+    schedule = Schedule(epochs=6, finetune_epochs=3, batch_size=40, lr=0.05)
+    settings = dict(schedule=schedule, device="cpu", seed=3)
     runs = {}
     for impl in ("torch", "compiled"):
         model = MODELS.build("haptic_lstm", impl=impl, **settings)
@@ -49,7 +51,9 @@ def test_short_training_matches_torch_impl():
 
 def test_impl_choice():
     assert MODELS.build("haptic_lstm", device="cpu").impl == "auto"
-    model = MODELS.build("haptic_lstm", device="cpu", epochs=1, finetune_epochs=0, batch_size=8)
+    model = MODELS.build(
+        "haptic_lstm", device="cpu", schedule=Schedule(epochs=1, finetune_epochs=0, batch_size=8)
+    )
     model.fit(easy_case(16, steps=5))
     assert model.body_.impl == "compiled"  # auto on CPU
     with pytest.raises(ValueError, match="impl must be one of"):

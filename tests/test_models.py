@@ -1,5 +1,7 @@
 """Haptic CNN, LSTM, linear head and random guess: shapes, grouping, schedule, learning."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -10,8 +12,15 @@ from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
 from tactile_exp.models.linear import LinearModel
 from tactile_exp.models.random_guess import RandomGuess
+from tactile_exp.models.schedule import Schedule
 
-FAST = dict(epochs=3, finetune_epochs=2, batch_size=50, device="cpu")
+FAST_SCHEDULE = Schedule(epochs=3, finetune_epochs=2, batch_size=50)
+FAST = dict(schedule=FAST_SCHEDULE, device="cpu")
+
+
+def fast(**changes) -> dict:
+    """FAST with some of its schedule's values changed."""
+    return {**FAST, "schedule": dataclasses.replace(FAST_SCHEDULE, **changes)}
 
 
 def easy_case(n: int, channels: int = 32, steps: int = 150, seed: int = 0, noise: float = 1.0):
@@ -27,7 +36,9 @@ def easy_case(n: int, channels: int = 32, steps: int = 150, seed: int = 0, noise
 @pytest.mark.parametrize("channels", [32, 64])
 def test_cnn_shapes(channels):
     train = easy_case(40, channels)
-    model = MODELS.build("haptic_cnn", epochs=1, finetune_epochs=1, batch_size=20, device="cpu")
+    model = MODELS.build(
+        "haptic_cnn", schedule=Schedule(epochs=1, finetune_epochs=1, batch_size=20), device="cpu"
+    )
     model.fit(train)
     assert model.conv3_shape_ == (128, 19)
     assert model.transform(train.X[:7]).shape == (7, 128 * 19)
@@ -37,7 +48,9 @@ def test_cnn_shapes(channels):
 
 def test_lstm_shapes_and_transform_is_relu_fc10():
     train = easy_case(30, steps=20)
-    model = MODELS.build("haptic_lstm", epochs=1, finetune_epochs=1, batch_size=10, device="cpu")
+    model = MODELS.build(
+        "haptic_lstm", schedule=Schedule(epochs=1, finetune_epochs=1, batch_size=10), device="cpu"
+    )
     model.fit(train)
     features = model.transform(train.X)
     assert features.shape == (30, 10) and (features >= 0).all()
@@ -86,7 +99,7 @@ def test_compiled_and_torch_training_give_the_same_auc():
 
 def test_logistic_then_hinge_schedule_reports_every_epoch_and_lowers_loss():
     calls = []
-    model = MODELS.build("haptic_cnn", **{**FAST, "epochs": 6, "finetune_epochs": 4})
+    model = MODELS.build("haptic_cnn", **fast(epochs=6, finetune_epochs=4))
     history = model.fit(easy_case(100, steps=60), lambda e, n, m: calls.append((e, n, *m)))
     assert [c[:2] for c in calls] == [(e, 10) for e in range(1, 11)]
     assert [c[2] for c in calls] == ["train_loss"] * 6 + ["finetune_loss"] * 4
@@ -96,10 +109,10 @@ def test_logistic_then_hinge_schedule_reports_every_epoch_and_lowers_loss():
 
 
 def test_finetune_moves_only_the_classifier():
-    model = MODELS.build("haptic_cnn", **{**FAST, "epochs": 1, "finetune_epochs": 0})
+    model = MODELS.build("haptic_cnn", **fast(epochs=1, finetune_epochs=0))
     model.fit(easy_case(60))
     body_after_stage1 = [p.detach().clone() for p in model.body_.parameters()]
-    tuned = MODELS.build("haptic_cnn", **{**FAST, "epochs": 1, "finetune_epochs": 3})
+    tuned = MODELS.build("haptic_cnn", **fast(epochs=1, finetune_epochs=3))
     tuned.fit(easy_case(60))
     for a, b in zip(body_after_stage1, tuned.body_.parameters(), strict=True):
         assert torch.equal(a, b)
@@ -123,16 +136,16 @@ def test_same_seed_same_scores(name):
 
 
 @pytest.mark.parametrize(
-    ("name", "steps", "kwargs"),
+    ("name", "steps", "schedule"),
     [
-        ("haptic_cnn", 150, dict(epochs=10, finetune_epochs=5, batch_size=50)),
-        ("haptic_lstm", 20, dict(epochs=15, finetune_epochs=5, batch_size=25, lr=0.05)),
-        ("linear", 150, dict(epochs=10, finetune_epochs=5, batch_size=50)),
+        ("haptic_cnn", 150, Schedule(epochs=10, finetune_epochs=5, batch_size=50)),
+        ("haptic_lstm", 20, Schedule(epochs=15, finetune_epochs=5, batch_size=25, lr=0.05)),
+        ("linear", 150, Schedule(epochs=10, finetune_epochs=5, batch_size=50)),
     ],
 )
-def test_learns_easy_case_well_above_chance(name, steps, kwargs):
+def test_learns_easy_case_well_above_chance(name, steps, schedule):
     train, test = easy_case(300, steps=steps), easy_case(200, steps=steps, seed=1)
-    model = MODELS.build(name, device="cpu", **kwargs)
+    model = MODELS.build(name, device="cpu", schedule=schedule)
     model.fit(train)
     assert roc_auc_score(test.y, model.decision_function(test.X)) > 0.9
 
@@ -141,7 +154,9 @@ def test_linear_standardises_so_feature_scale_does_not_matter():
     train, test = easy_case(200), easy_case(100, seed=1)
     aucs = []
     for scale in (1.0, 1000.0):
-        model = LinearModel(epochs=5, finetune_epochs=2, batch_size=50, device="cpu")
+        model = LinearModel(
+            schedule=Schedule(epochs=5, finetune_epochs=2, batch_size=50), device="cpu"
+        )
         model.fit(Instances(train.X * scale, train.y, train.trial, train.object_id))
         aucs.append(roc_auc_score(test.y, model.decision_function(test.X * scale)))
     assert min(aucs) > 0.9
@@ -149,10 +164,11 @@ def test_linear_standardises_so_feature_scale_does_not_matter():
 
 
 def test_head_is_a_linear_model_with_the_same_settings():
-    model = MODELS.build("haptic_cnn", lr=0.05, seed=4, loss="logistic", **FAST)
+    model = MODELS.build("haptic_cnn", seed=4, loss="logistic", **fast(lr=0.05))
     head = model.head()
     assert isinstance(head, LinearModel)
-    assert (head.lr, head.seed, head.loss, head.epochs) == (0.05, 4, "logistic", 3)
+    assert (head.seed, head.loss) == (4, "logistic")
+    assert head.schedule == dataclasses.replace(FAST_SCHEDULE, lr=0.05)
     features = easy_case(40).X.reshape(40, -1)[:, :200]
     head.fit(Instances(features, easy_case(40).y, np.zeros(40), np.zeros(40)))
     assert head.decision_function(features).shape == (40,)
@@ -174,16 +190,17 @@ def test_random_guess_is_chance_and_seeded():
 @pytest.mark.parametrize(
     ("name", "kwargs", "argument"),
     [
-        ("haptic_cnn", dict(lr=0), "lr"),
-        ("haptic_cnn", dict(epochs=0), "epochs"),
-        ("haptic_cnn", dict(batch_size=0), "batch_size"),
+        ("haptic_cnn", dict(schedule={"lr": 0}), "schedule.lr: lr must be > 0"),
+        ("haptic_cnn", dict(schedule={"epochs": 0}), "schedule.epochs: epochs must be"),
+        ("haptic_cnn", dict(schedule={"batch_size": 0}), "schedule.batch_size: batch_size"),
+        ("haptic_cnn", dict(schedule={"head": {"lr": -1}}), "schedule.head.lr: lr must be"),
         ("haptic_cnn", dict(loss="squared"), "loss"),
         ("haptic_cnn", dict(pretrain_loss="squared"), "pretrain_loss"),
         ("haptic_cnn", dict(impl="cuda_magic"), "impl"),
         ("haptic_cnn", dict(widths=(4, 0, 4)), "widths"),
         ("haptic_cnn", dict(kernel_sizes=(5, 5)), "kernel_sizes"),
         ("haptic_lstm", dict(hidden=0), "hidden"),
-        ("linear", dict(momentum=-0.1), "momentum"),
+        ("linear", dict(schedule={"momentum": -0.1}), "schedule.momentum: momentum must be"),
         ("linear", dict(device="tpu"), "device"),
     ],
 )
@@ -197,7 +214,7 @@ def test_bad_inputs_raise_clear_errors():
     with pytest.raises(RuntimeError, match="not fitted"):
         model.decision_function(np.zeros((2, 32, 150), dtype=np.float32))
     bad = easy_case(10)
-    with pytest.raises(ValueError, match="multiple of 32"):
+    with pytest.raises(ValueError, match="multiple of groups=32"):
         model.fit(Instances(bad.X[:, :30], bad.y, bad.trial, bad.object_id))
     model.fit(easy_case(20))
     with pytest.raises(ValueError, match=r"fitted on rows of shape \(32, 150\)"):
@@ -228,12 +245,17 @@ def test_every_registered_model_keeps_the_contract(compose_config, name):
     overrides += [f"modality={declared[0]}"] if declared else []
     params = settings_from_config(compose_config(overrides)).model.params
     model = MODELS.build(name, **params)
+    if "schedule" in params:  # the schedule node, held as one Schedule value
+        params = {**params, "schedule": Schedule.of(params["schedule"])}
     assert model.get_params() == params  # explicit keywords, held under their own names
+    assert model.input_shape_ is None
     train = _contract_case(EXAMPLE_ROWS.get(declared[0] if declared else "", (24,)))
     history = model.fit(train)
     assert all(len(v) >= 1 for v in history.values())
     scores = model.decision_function(train.X)
     assert scores.shape == (len(train),) and np.isfinite(scores).all()
+    if declared == ("haptic",):
+        model.check_steps(train.X.shape[-1])  # the steps it was just fitted on are fine
 
     twin = clone(model)
     assert type(twin) is type(model) and twin.get_params() == model.get_params()
@@ -248,12 +270,76 @@ def test_every_registered_model_keeps_the_contract(compose_config, name):
     assert head.decision_function(pairs).shape == (len(units),)
 
 
-def test_head_schedule_is_its_own():
+@pytest.mark.parametrize("name", MODELS.names())
+def test_every_registered_model_declares_what_the_engine_reads(tmp_path, name):
+    """What the store, the config check and the report read is declared on ``Model`` with a
+    default, never probed: the capabilities' types, ``input_shape_``, ``check_steps`` and, for a
+    storable model, ``state``/``restore`` that give back the same scores (store.py's round trip);
+    a model that is not storable says so."""
+    from tactile_exp import store
+    from tactile_exp.modalities import MODALITIES
+
+    cls = MODELS[name]
+    assert isinstance(cls.learns_representation, bool) and isinstance(cls.storable, bool)
+    assert isinstance(cls.modalities, tuple) and set(cls.modalities) <= set(MODALITIES.names())
+    assert cls.input_shape_ is None
+    declared = cls.modalities
+    shape = EXAMPLE_ROWS.get(declared[0] if declared else "", (24,))
     model = MODELS.build(
-        "haptic_cnn", head_schedule={"epochs": 7, "batch_size": 64, "lr": 0.1}, **FAST
+        name, **({"schedule": TINY, "device": "cpu"} if "schedule" in _parameters(cls) else {})
     )
+    train = _contract_case(shape)
+    model.fit(train)
+    if not cls.storable:
+        with pytest.raises(NotImplementedError, match=f"{cls.__name__} is not storable"):
+            model.state()
+        return
+    assert model.input_shape_ == shape
+    store.write_model(tmp_path, name, model)
+    loaded = store.read_model(tmp_path, "here")
+    assert type(loaded) is cls and loaded.input_shape_ == shape
+    np.testing.assert_array_equal(
+        loaded.decision_function(train.X), model.decision_function(train.X)
+    )
+
+
+def _parameters(cls) -> set[str]:
+    import inspect
+
+    return set(inspect.signature(cls.__init__).parameters)
+
+
+TINY = Schedule(epochs=1, finetune_epochs=1, batch_size=16)
+
+
+@pytest.mark.parametrize("name", ["haptic_cnn", "haptic_lstm", "linear"])
+def test_haptic_models_take_any_sensor(name):
+    """Another sensor's instances (6 channels x 40 steps, e.g. 50 Hz for 0.8 s): the ConvNet with
+    one group per channel, the LSTM and the linear model fit one epoch and score them."""
+    rng = np.random.default_rng(0)
+    n = 24
+    y = np.arange(n) % 2
+    X = rng.standard_normal((n, 6, 40)).astype(np.float32) + y[:, None, None]
+    train = Instances(X, y, np.array([f"t{i}" for i in range(n)], dtype=object), np.arange(n))
+    extra = {"groups": 6} if name == "haptic_cnn" else {}
+    model = MODELS.build(name, schedule=TINY, device="cpu", **extra)
+    history = model.fit(train)
+    assert len(history["train_loss"]) == 1
+    scores = model.decision_function(X)
+    assert scores.shape == (n,) and np.isfinite(scores).all()
+    assert model.input_shape_ == (6, 40)
+    if name == "haptic_cnn":
+        assert model.conv3_shape_ == (6 * 4, 5)  # 4 maps per signal; 40 -> 20 -> 10 -> 5 steps
+        assert model.transform(X).shape == (n, 6 * 4 * 5)
+
+
+def test_head_schedule_is_its_own():
+    head = {"epochs": 7, "batch_size": 64, "lr": 0.1}
+    own = {"epochs": 3, "finetune_epochs": 2, "momentum": 0.5}
+    model = MODELS.build("haptic_cnn", schedule={**own, "head": head})
     head = model.head()
-    assert (head.epochs, head.batch_size, head.lr) == (7, 64, 0.1)
-    assert (head.finetune_epochs, head.momentum, head.seed) == (2, 0.9, model.seed)
-    with pytest.raises(ValueError, match="head_schedule: unknown keys"):
-        MODELS.build("haptic_cnn", head_schedule={"epoch": 7})
+    assert head.schedule == Schedule(7, 2, 64, 0.1, 0.5)  # what the head's node lacks: the model's
+    assert head.seed == model.seed and head.head().schedule == head.schedule
+    assert MODELS.build("haptic_cnn", **FAST).head().schedule == FAST_SCHEDULE  # no head: its own
+    with pytest.raises(ValueError, match=r"^schedule.head.epoch: unknown key; allowed: epochs,"):
+        MODELS.build("haptic_cnn", schedule={"head": {"epoch": 7}})

@@ -15,9 +15,16 @@ from sklearn.preprocessing import StandardScaler
 from tactile_exp.data.layout import Instances
 from tactile_exp.models import sgd
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import FinetuneWarning
 
 SCHEDULES = Path(__file__).resolve().parents[1] / "conf" / "schedule"
+
+
+def _paper_head() -> Schedule:
+    """A one-epoch network whose head trains by paper.yaml's ``head`` schedule."""
+    head = yaml.safe_load((SCHEDULES / "paper.yaml").read_text())["head"]
+    return Schedule.of({"epochs": 1, "head": head})
 
 
 @pytest.fixture(autouse=True)
@@ -38,8 +45,7 @@ def _separable(n: int, d: int, seed: int = 0) -> Instances:
 
 @pytest.mark.parametrize("n,d", [(120, 2000), (30, 6000)])  # ~combine=1 and ~combine=10 shapes
 def test_head_reaches_logistic_regression_training_loss(n, d):
-    head_schedule = yaml.safe_load((SCHEDULES / "paper.yaml").read_text())["head"]
-    network = MODELS.build("linear", epochs=1, head_schedule=head_schedule, device="cpu")
+    network = MODELS.build("linear", schedule=_paper_head(), device="cpu")
     head = network.head()
     units = _separable(n, d)
     with pytest.warns(FinetuneWarning):  # separable: the hinge stage cannot move the layer
@@ -60,16 +66,14 @@ def test_hinge_finetuning_is_a_no_op_on_separable_units_and_warns(n, d, separabl
     """Why loss=hinge and loss=logistic heads can score identically: after the logistic stage on
     separable units every margin is >= 1, hinge's gradient is zero, the layer does not move.
     Where a margin stays below 1 the hinge stage changes the scores, and nothing warns."""
-    head_schedule = yaml.safe_load((SCHEDULES / "paper.yaml").read_text())["head"]
     units, test = _separable(n, d), _separable(200, d, seed=1)
     scores, caught = {}, {}
     for loss, pretrain in (("hinge", "logistic"), ("logistic", None)):
         network = MODELS.build(
             "linear",
-            epochs=1,
+            schedule=_paper_head(),
             loss=loss,
             pretrain_loss=pretrain,
-            head_schedule=head_schedule,
             device="cpu",
         )
         head = network.head()
@@ -91,8 +95,7 @@ def test_hinge_finetuning_is_a_no_op_on_separable_units_and_warns(n, d, separabl
 
 def test_the_finetune_warning_is_shown_once_per_process_not_per_adjective():
     """A job fits one head per adjective: 24 identical warnings would flood its log."""
-    head_schedule = yaml.safe_load((SCHEDULES / "paper.yaml").read_text())["head"]
-    network = MODELS.build("linear", epochs=1, head_schedule=head_schedule, device="cpu")
+    network = MODELS.build("linear", schedule=_paper_head(), device="cpu")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for seed in (0, 1, 2):

@@ -26,6 +26,7 @@ from tactile_exp.data.layout import Instances
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import HapticCNN
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.runtime.processes import process_tags
 from tactile_exp.tracking import Tracker
 
@@ -48,19 +49,26 @@ def _instances(n: int = 40, shape: tuple[int, ...] = (64, 20), seed: int = 0) ->
     ],
 )
 def test_saved_model_loads_with_identical_scores(tmp_path, name, shape, params):
-    model = MODELS.build(name, epochs=2, finetune_epochs=2, batch_size=16, **params)
+    schedule = Schedule(epochs=2, finetune_epochs=2, batch_size=16, head=Schedule(lr=0.5))
+    model = MODELS.build(name, schedule=schedule, **params)
     data = _instances(shape=shape)
     model.fit(data)
     store.write_model(tmp_path, name, model)
+    stored = json.loads((tmp_path / "settings.json").read_text())["params"]
+    assert stored["schedule"]["head"]["lr"] == 0.5  # the Schedule value kept as its JSON node
     loaded = store.read_model(tmp_path, "here")
     assert type(loaded) is type(model)
-    assert loaded.get_params() == json.loads(json.dumps(model.get_params()))
+    assert loaded.schedule == model.schedule
+    as_json = [json.dumps(m.get_params(), default=store._jsonable) for m in (loaded, model)]
+    assert as_json[0] == as_json[1]  # every setting back (tuples as the JSON lists they were)
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
     np.testing.assert_array_equal(loaded.transform(data.X), model.transform(data.X))
 
 
 def test_corrupt_or_missing_model_files_name_the_file(tmp_path):
-    model = HapticCNN(widths=(2, 2, 2), epochs=1, finetune_epochs=0, impl="torch")
+    model = HapticCNN(
+        widths=(2, 2, 2), schedule=Schedule(epochs=1, finetune_epochs=0), impl="torch"
+    )
     model.fit(_instances())
     store.write_model(tmp_path, "haptic_cnn", model)
     (tmp_path / "weights.pt").write_bytes(b"not a state dict")
@@ -108,7 +116,7 @@ def test_training_settings_retrain_while_head_settings_reuse(tiny_config, mlflow
         assert child.data.tags["training_key"] == key, head_only
         assert child.data.tags["reused_from"] == trained.info.run_id, head_only
 
-    for training in (["model.lr=0.02"], ["schedule.epochs=1"], ["seed=3"], ["split=random"]):
+    for training in (["schedule.lr=0.02"], ["schedule.epochs=1"], ["seed=3"], ["split=random"]):
         job = run(settings_from_config(tiny_config(REPEAT + training, ONE)))
         child = _children(mlflow_uri, job.run_id)["hard"]
         assert child.data.tags["training_key"] != key, training
@@ -235,9 +243,14 @@ def test_training_key_changes_with_what_trains_the_model_and_nothing_else():
     same = [
         _key(modality=Component("haptic", {"steps": 150, "device": "cuda", "batch_size": 64})),
         _key(model=Component("haptic_cnn", {"lr": 0.01, "impl": "numba", "device": "cuda"})),
-        _key(model=Component("haptic_cnn", {"lr": 0.01, "head_schedule": {"epochs": 3}})),
     ]
-    assert same == [key] * 3
+    assert same == [key] * 2
+    # The head's schedule inside the model's schedule is not keyed; the model's own steps are.
+    schedule = {"epochs": 2, "lr": 0.01}
+    scheduled = _key(model=Component("haptic_cnn", {"schedule": schedule}))
+    head = {"schedule": {**schedule, "head": {"epochs": 3, "lr": 0.5}}}
+    assert _key(model=Component("haptic_cnn", head)) == scheduled
+    assert _key(model=Component("haptic_cnn", {"schedule": {**schedule, "lr": 0.02}})) != scheduled
     odd = Component("haptic_cnn", {"weights": Path("w.pt")})  # not JSON: hashed as its text
     assert _key(model=odd) == _key(model=Component("haptic_cnn", {"weights": "w.pt"}))
 
@@ -278,7 +291,7 @@ def test_visual_units_are_row_l_units_never_padded_beyond_an_object_with_fewer_v
 
 # ---------------------------------------------------------------- store functions, direct
 def _linear():
-    model = MODELS.build("linear", epochs=2, batch_size=16)
+    model = MODELS.build("linear", schedule=Schedule(epochs=2, batch_size=16))
     data = _instances(shape=(7,))
     model.fit(data)
     return model, data
@@ -639,3 +652,24 @@ def test_two_jobs_side_by_side_train_a_shared_model_once(
 def _parent_combine(tracker: Tracker, child) -> str:
     parent = tracker.client.get_run(child.data.tags["mlflow.parentRunId"])
     return parent.data.params["combine"]
+
+
+def test_a_reused_model_takes_the_head_schedule_kernels_and_device_of_the_job(tmp_path):
+    """What ``MODEL_UNKEYED`` names comes from the job that reuses a model (dotted keys: the
+    head inside the schedule), everything keyed from where it was trained."""
+    trained = {"schedule": {"epochs": 2, "batch_size": 16, "head": {"lr": 0.5}}, "impl": "torch"}
+    model = MODELS.build("linear", **trained)
+    data = _instances(shape=(7,))
+    model.fit(data)
+    store.write_model(tmp_path, "linear", model)
+    job = {"schedule": {"epochs": 2, "batch_size": 16, "head": {"lr": 0.1}}, "impl": "auto"}
+    assert store.unkeyed(job) == {"schedule.head": {"lr": 0.1}, "impl": "auto"}
+    loaded = store.read_model(tmp_path, "here", store.unkeyed(job | {"device": "cpu"}))
+    assert (loaded.impl, loaded.device) == ("auto", "cpu")
+    assert loaded.schedule == Schedule.of(job["schedule"]) != model.schedule
+    assert loaded.head().schedule.lr == 0.1
+    np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
+    # a job whose schedule has no head: the reused model's head trains like the model, as there
+    plain = store.read_model(tmp_path, "here", store.unkeyed({"schedule": {"epochs": 2}}))
+    assert plain.schedule.head is None
+    assert store.unkeyed({"Cs": None, "seed": 0}) == {}  # linear_svm: nothing unkeyed

@@ -94,7 +94,7 @@ def test_visual_rows_run_end_to_end(visual_config, mlflow_uri, row, combine):
         assert r.sizes["n_train_instances"] == VIEWS * r.sizes["n_train_objects"]
         assert [LABELS[o][r.adjective] for o in r.objects] == list(r.y)
         assert len(client.get_metric_history(child.info.run_id, "train_loss")) == (
-            settings.model.params["epochs"] if combine == 1 else 0  # row L: only the head trains
+            settings.model.params["schedule"]["epochs"] if combine == 1 else 0  # row L: head only
         )
     aucs = [r.auc for r in result.results.values()]
     assert parent.data.metrics["mean_auc"] == pytest.approx(np.mean(aucs))

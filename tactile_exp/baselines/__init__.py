@@ -1,9 +1,8 @@
-"""Chu et al.'s hand-designed baselines (Table I rows A-F): static and HMM features, linear SVM.
+"""Chu et al.'s hand-designed baselines (Table I rows A-F): static and HMM features.
 
-Importing this package registers the ``linear_svm`` model in `tactile_exp.models.MODELS`.
+Their classifier, the linear SVM, is the ``linear_svm`` model (`tactile_exp.models.linear_svm`).
 """
 
 from tactile_exp.baselines.features import BaselineFeatures
-from tactile_exp.baselines.svm import LinearSVMModel, ObjectCVLinearSVM
 
-__all__ = ["BaselineFeatures", "LinearSVMModel", "ObjectCVLinearSVM"]
+__all__ = ["BaselineFeatures"]

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import inspect
 from abc import ABC, abstractmethod
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, Self
 
 import numpy as np
 
@@ -36,6 +36,8 @@ class Model(ABC):
     modalities: tuple[str, ...] = ()
     # storable: ``state()``/``restore()`` keep the fitted model as tensors and arrays (store.py).
     storable: bool = False
+    # Fitted (storable models): the shape of one training row, what ``restore`` rebuilds for.
+    input_shape_: tuple[int, ...] | None = None
 
     def get_params(self) -> dict[str, Any]:
         """The constructor's keyword arguments as this model holds them."""
@@ -57,6 +59,26 @@ class Model(ABC):
     def head(self) -> Model:
         """A fresh classifier for combined features (T4: retrain only the loss layer)."""
         raise NotImplementedError(f"{type(self).__name__} cannot classify combined instances")
+
+    def check_steps(self, n_steps: int) -> None:
+        """Raise ValueError when instances of ``n_steps`` time steps do not suit this model:
+        checked against ``modality.steps`` before any run. Any length, unless overridden."""
+        return None
+
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """The fitted model as tensors (a flat ``state_dict``) and arrays: what ``restore``
+        takes. Storable models (``storable``) override it and ``restore``."""
+        raise NotImplementedError(f"{type(self).__name__} is not storable")
+
+    def restore(
+        self,
+        input_shape: tuple[int, ...],
+        tensors: Mapping[str, Any],
+        arrays: Mapping[str, np.ndarray],
+    ) -> Self:
+        """This (unfitted) model made the fitted one ``state()`` described, for rows of
+        ``input_shape``; raises ValueError when a tensor or array does not fit."""
+        raise NotImplementedError(f"{type(self).__name__} is not storable")
 
 
 def clone(model: Model) -> Model:

@@ -21,6 +21,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import IMPLS, SGDModel
 from tactile_exp.train import caffe_xavier_
 
@@ -141,6 +142,8 @@ class HapticCNN(SGDModel):
     """
 
     modalities = ("haptic", "signals")  # (n, channels, time): groups must divide channels
+    # Fitted: conv3's (channels, time), the map each row of ``transform`` flattens (Fig. 6)
+    conv3_shape_: tuple[int, int] | None = None
 
     def __init__(
         self,
@@ -150,26 +153,16 @@ class HapticCNN(SGDModel):
         strides: Sequence[int] = (2, 2, 2),
         groups: int = 32,
         impl: str = "auto",
-        epochs: int = 200,
-        finetune_epochs: int = 100,
-        batch_size: int = 1000,
-        lr: float = 0.01,
-        momentum: float = 0.9,
+        schedule: Schedule | Mapping[str, Any] | None = None,
         loss: str = "hinge",
         pretrain_loss: str | None = "logistic",
-        head_schedule: Mapping[str, Any] | None = None,
         seed: int = 0,
         device: str = "auto",
     ) -> None:
         super().__init__(
-            epochs=epochs,
-            finetune_epochs=finetune_epochs,
-            batch_size=batch_size,
-            lr=lr,
-            momentum=momentum,
+            schedule=schedule,
             loss=loss,
             pretrain_loss=pretrain_loss,
-            head_schedule=head_schedule,
             impl=impl,
             seed=seed,
             device=device,
@@ -184,7 +177,6 @@ class HapticCNN(SGDModel):
             impl=impl,
         )
         self.check_steps(150)  # validate the architecture now (P3's 150 steps)
-        self.conv3_shape_: tuple[int, int] | None = None
 
     def check_steps(self, n_steps: int) -> None:
         """Raise ValueError unless the conv stack leaves time steps of an ``n_steps`` input."""
@@ -195,7 +187,7 @@ class HapticCNN(SGDModel):
         if X.ndim != 3 or X.shape[1] % groups:
             raise ValueError(
                 f"haptic_cnn expects X of shape (n, channels, time) with channels a multiple "
-                f"of {groups} (32 signals per finger), got {X.shape}"
+                f"of groups={groups} (one group per signal), got {X.shape}"
             )
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:

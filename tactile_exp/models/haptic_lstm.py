@@ -16,6 +16,7 @@ from torch import nn
 
 from tactile_exp.models.lstm_kernels import lstm_last_hidden
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import SGDModel
 from tactile_exp.train import caffe_xavier_
 
@@ -55,12 +56,12 @@ class LSTMBody(nn.Module):
 class HapticLSTM(SGDModel):
     """Haptic LSTM (M2) trained by the two-stage schedule of ``SGDModel``.
 
-    All C input signals (32, or 64 with both fingers) enter the LSTM at every time step. Stage 1
-    trains everything with ``pretrain_loss``; stage 2 fine-tunes only the final FC(1) with
-    ``loss``. ``transform`` returns the FC(10) activations after the ReLU.
+    All C input signals (PHAC-2: 32, or 64 with both fingers) enter the LSTM at every time
+    step. Stage 1 trains everything with ``pretrain_loss``; stage 2 fine-tunes only the final
+    FC(1) with ``loss``. ``transform`` returns the FC(10) activations after the ReLU.
     """
 
-    modalities = ("haptic",)  # (n, 32 x fingers, time) signals
+    modalities = ("haptic",)  # (n, channels, time) signals: 32 x fingers for PHAC-2
 
     def __init__(
         self,
@@ -68,26 +69,16 @@ class HapticLSTM(SGDModel):
         hidden: int = 10,
         fc_width: int = 10,
         impl: str = "auto",
-        epochs: int = 200,
-        finetune_epochs: int = 100,
-        batch_size: int = 1000,
-        lr: float = 0.01,
-        momentum: float = 0.9,
+        schedule: Schedule | Mapping[str, Any] | None = None,
         loss: str = "hinge",
         pretrain_loss: str | None = "logistic",
-        head_schedule: Mapping[str, Any] | None = None,
         seed: int = 0,
         device: str = "auto",
     ) -> None:
         super().__init__(
-            epochs=epochs,
-            finetune_epochs=finetune_epochs,
-            batch_size=batch_size,
-            lr=lr,
-            momentum=momentum,
+            schedule=schedule,
             loss=loss,
             pretrain_loss=pretrain_loss,
-            head_schedule=head_schedule,
             impl=impl,
             seed=seed,
             device=device,

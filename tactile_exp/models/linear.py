@@ -11,6 +11,7 @@ import numpy as np
 from torch import nn
 
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import SGDModel
 
 
@@ -32,14 +33,9 @@ class LinearModel(SGDModel):
         self,
         *,
         standardize: bool = True,
-        epochs: int = 200,
-        finetune_epochs: int = 100,
-        batch_size: int = 1000,
-        lr: float = 0.01,
-        momentum: float = 0.9,
+        schedule: Schedule | Mapping[str, Any] | None = None,
         loss: str = "hinge",
         pretrain_loss: str | None = "logistic",
-        head_schedule: Mapping[str, Any] | None = None,
         impl: str = "auto",
         seed: int = 0,
         device: str = "auto",
@@ -48,14 +44,9 @@ class LinearModel(SGDModel):
             raise ValueError(f"standardize must be true or false, got {standardize!r}")
         self.standardize = standardize
         super().__init__(
-            epochs=epochs,
-            finetune_epochs=finetune_epochs,
-            batch_size=batch_size,
-            lr=lr,
-            momentum=momentum,
+            schedule=schedule,
             loss=loss,
             pretrain_loss=pretrain_loss,
-            head_schedule=head_schedule,
             impl=impl,
             seed=seed,
             device=device,

@@ -8,11 +8,11 @@ MODELS: Registry[Model] = Registry(
     "model",
     Model,
     modules=(
-        "tactile_exp.baselines.svm",  # linear_svm, Chu et al.'s classifier
         "tactile_exp.models.googlenet",
         "tactile_exp.models.haptic_cnn",
         "tactile_exp.models.haptic_lstm",
         "tactile_exp.models.linear",
+        "tactile_exp.models.linear_svm",  # Chu et al.'s classifier (rows A-F)
         "tactile_exp.models.random_guess",
     ),
 )

@@ -12,7 +12,7 @@ in two stages:
    lets stage 2 run on features computed once.
 
 ``head()`` gives the ``linear`` model (``models/linear.py``) for combined instances, trained by
-its own schedule (``head_schedule``, the ``schedule.head`` config node): combined units are ~10x
+its own schedule (``Schedule.head``, the ``schedule.head`` config node): combined units are ~10x
 fewer than instances.
 
 ``impl`` picks the kernels: ``compiled`` trains the classification layer alone (stage 2, and
@@ -42,17 +42,17 @@ from tactile_exp.data.layout import Instances
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.losses import LOSSES
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.schedule import Schedule
 from tactile_exp.train import (
     caffe_xavier_,
     resolve_device,
     seed_everything,
     sgd_epochs,
-    validate_sgd_args,
+    validate_losses,
 )
 
 INFERENCE_BATCH = 4096
 IMPLS = ("auto", "compiled", "torch")
-HEAD_KEYS = ("epochs", "finetune_epochs", "batch_size", "lr", "momentum")  # its own schedule
 
 
 class FinetuneWarning(UserWarning):
@@ -74,30 +74,18 @@ class SGDModel(Model):
     def __init__(
         self,
         *,
-        epochs: int = 200,
-        finetune_epochs: int = 100,
-        batch_size: int = 1000,
-        lr: float = 0.01,
-        momentum: float = 0.9,
+        schedule: Schedule | Mapping[str, Any] | None = None,
         loss: str = "hinge",
         pretrain_loss: str | None = "logistic",
-        head_schedule: Mapping[str, Any] | None = None,
         impl: str = "auto",
         seed: int = 0,
         device: str = "auto",
     ) -> None:
-        """``head_schedule``: how ``head()`` trains the classification layer on combined instances
-        (T4), keys among ``HEAD_KEYS``; None or a missing key: this model's own value."""
-        validate_sgd_args(
-            epochs=epochs,
-            finetune_epochs=finetune_epochs,
-            batch_size=batch_size,
-            lr=lr,
-            momentum=momentum,
-            loss=loss,
-            pretrain_loss=pretrain_loss,
-            known_losses=LOSSES.names(),
-        )
+        """``schedule``: how both stages train, and in its ``head`` how ``head()`` trains the
+        classification layer on combined instances (T4); a mapping is the ``schedule`` config
+        node (``Schedule.of``), None the paper's schedule."""
+        self.schedule = Schedule.of(schedule)
+        validate_losses(loss=loss, pretrain_loss=pretrain_loss, known_losses=LOSSES.names())
         self.device_ = resolve_device(device)
         self.device = device
         if impl not in IMPLS:
@@ -110,30 +98,11 @@ class SGDModel(Model):
             for name in {loss, pretrain_loss or loss}:
                 check_loss(name)
         self.impl = impl
-        self.head_schedule = None if head_schedule is None else dict(head_schedule)
-        unknown = sorted(set(self.head_schedule or {}) - set(HEAD_KEYS))
-        if unknown:
-            raise ValueError(
-                f"head_schedule: unknown keys {unknown}; allowed: {', '.join(HEAD_KEYS)}"
-            )
-        self.epochs = epochs
-        self.finetune_epochs = finetune_epochs
-        self.batch_size = batch_size
-        self.lr = lr
-        self.momentum = momentum
         self.loss = loss
         self.pretrain_loss = pretrain_loss
         self.seed = seed
-        validate_sgd_args(
-            **self._head_settings(),
-            loss=loss,
-            pretrain_loss=pretrain_loss,
-            known_losses=LOSSES.names(),
-            where="head_schedule.",
-        )
         self.body_: nn.Module | None = None
         self.classifier_: nn.Linear | None = None
-        self.input_shape_: tuple[int, ...] | None = None
 
     @abstractmethod
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
@@ -184,8 +153,9 @@ class SGDModel(Model):
         Xt = self._tensor(X)
         yt = torch.as_tensor(np.asarray(train.y), dtype=torch.float32, device=self.device_)
 
-        finetune = self.pretrain_loss is not None and self.finetune_epochs > 0
-        n_epochs = self.epochs + (self.finetune_epochs if finetune else 0)
+        schedule = self.schedule
+        finetune = self.pretrain_loss is not None and schedule.finetune_epochs > 0
+        n_epochs = schedule.epochs + (schedule.finetune_epochs if finetune else 0)
         done = 0
 
         def reporter(metric: str) -> Callable[[float], None]:
@@ -199,13 +169,16 @@ class SGDModel(Model):
 
         body_, classifier_ = self.body_, self.classifier_
         common = dict(
-            batch_size=self.batch_size, lr=self.lr, momentum=self.momentum, generator=generator
+            batch_size=schedule.batch_size,
+            lr=schedule.lr,
+            momentum=schedule.momentum,
+            generator=generator,
         )
         body_.train()
         stage1_loss, report = self.pretrain_loss or self.loss, reporter("train_loss")
         if isinstance(body_, nn.Identity):  # no body: stage 1 trains the layer alone too
             train_loss = self._layer_epochs(
-                Xt, yt, loss=stage1_loss, epochs=self.epochs, report=report, **common
+                Xt, yt, loss=stage1_loss, epochs=schedule.epochs, report=report, **common
             )
         else:
             train_loss = sgd_epochs(
@@ -214,7 +187,7 @@ class SGDModel(Model):
                 Xt,
                 yt,
                 loss=LOSSES[stage1_loss],
-                epochs=self.epochs,
+                epochs=schedule.epochs,
                 report=report,
                 **common,
             )
@@ -225,7 +198,7 @@ class SGDModel(Model):
                 self._features(Xt),
                 yt,
                 loss=self.loss,
-                epochs=self.finetune_epochs,
+                epochs=schedule.finetune_epochs,
                 report=reporter("finetune_loss"),
                 **common,
             )
@@ -321,15 +294,12 @@ class SGDModel(Model):
         self.input_shape_ = tuple(input_shape)
         return self
 
-    def _head_settings(self) -> dict[str, Any]:
-        return {key: (self.head_schedule or {}).get(key, getattr(self, key)) for key in HEAD_KEYS}
-
     def head(self) -> Model:
         """A fresh ``linear`` model with the head's schedule, for combined features (T4)."""
         return MODELS.build(
             "linear",
             standardize=self.head_standardize,
-            **self._head_settings(),
+            schedule=self.schedule.for_head(),
             loss=self.loss,
             pretrain_loss=self.pretrain_loss,
             impl=self.impl,

@@ -9,14 +9,14 @@ import pytest
 from sklearn.metrics import roc_auc_score
 from sklearn.svm import LinearSVC
 
-from tactile_exp.baselines.svm import (
+from tactile_exp.data.layout import Instances
+from tactile_exp.models import MODELS
+from tactile_exp.models.linear_svm import (
     LeavePObjectsOut,
     LinearSVMModel,
     ObjectCVLinearSVM,
     SquaredHingeSVM,
 )
-from tactile_exp.data.layout import Instances
-from tactile_exp.models import MODELS
 
 
 def _objects_data(n_objects=20, trials=5, shift=1.5, seed=0):
@@ -91,7 +91,7 @@ def test_model_adapter_is_registered_and_heads_are_fresh_copies():
 
 
 def test_authors_c_grid_is_selectable_by_name():
-    from tactile_exp.baselines.svm import AUTHORS_CS, LinearSVMModel
+    from tactile_exp.models.linear_svm import AUTHORS_CS, LinearSVMModel
 
     assert LinearSVMModel(Cs="authors").svm.Cs == AUTHORS_CS
     with pytest.raises(ValueError, match="'authors'"):
@@ -216,7 +216,7 @@ def test_stored_svm_restores_exactly_and_rejects_wrong_shapes():
 
 
 def test_c_grid_settings():
-    from tactile_exp.baselines.svm import DEFAULT_CS
+    from tactile_exp.models.linear_svm import DEFAULT_CS
 
     defaults = {"Cs": None, "n_draws": 20, "p_out": 3, "seed": 0, "solver": "newton"}
     assert LinearSVMModel().get_params() == defaults

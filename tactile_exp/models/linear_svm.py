@@ -1,4 +1,5 @@
-"""The baselines' classifier: StandardScaler -> linear SVM, C chosen by leave-3-objects-out CV.
+"""The baselines' classifier (`linear_svm`, rows A-F): StandardScaler -> linear SVM, C chosen by
+leave-3-objects-out CV.
 
 On a small data set, where no draw of 3 held-out objects keeps both classes in training and
 gives both among the held-out objects, fewer objects are held out (2, then 1), with a warning; that
