@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, Phase, event, given, settings
 from hypothesis import strategies as st
 
 from tactile_exp.config import settings_from_config
-from tactile_exp.data.layout import ADJECTIVES, Instances
+from tactile_exp.data.layout import ADJECTIVES, DataError, Instances
 from tactile_exp.errors import ConfigError
 from tactile_exp.experiment import open_data
 from tactile_exp.pipeline import AdjectivePipeline
@@ -150,7 +150,8 @@ def test_adjectives_and_seed(compose_config, cache_dir, adjectives, seed):
     overrides = [f"adjectives={_fmt(adjectives)}", f"seed={seed}"]
     try:
         s = settings_from_config(compose_config(overrides))
-    except ConfigError as err:
+        open_data(s)  # the names are checked against the data set's labels when it opens
+    except (ConfigError, DataError) as err:
         assert str(err).split(":", 1)[0] in ("adjectives", "seed"), str(err)
         return
     assert list(s.adjectives) == adjectives and s.seed == seed

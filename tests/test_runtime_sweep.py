@@ -468,7 +468,7 @@ def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
 TERMINATE = """
 import os, subprocess, sys
 from multiprocessing import resource_tracker
-from tactile_exp.runtime import sweep
+from tactile_exp.runtime import processes, sweep
 
 class NoRuns:
     def end_runs_of(self, pids, *, error):
@@ -477,14 +477,14 @@ class NoRuns:
 sweep.WORKER_GRACE_S = 5.0
 resource_tracker.ensure_running()  # a child that ignores SIGTERM, as loky's does
 worker = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
-before = sweep._children(os.getpid())
-trackers = sorted(p for p in before if sweep._resource_tracker(p))
+before = processes.children(os.getpid())
+trackers = sorted(p for p in before if processes.is_resource_tracker(p))
 try:
     sweep.terminate_workers(15, None, tracker=NoRuns())
 except SystemExit as stop:
     print("exit", stop.code)
 print("before", *sorted(before))
-print("alive", *sorted(p for p in before if not sweep._gone(p)))
+print("alive", *sorted(p for p in before if processes.process_alive(p)))
 print("worker", worker.pid)
 print("trackers", *trackers)
 """

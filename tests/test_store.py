@@ -59,7 +59,7 @@ def test_saved_model_loads_with_identical_scores(tmp_path, name, shape, params):
     loaded = store.read_model(tmp_path, "here")
     assert type(loaded) is type(model)
     assert loaded.schedule == model.schedule
-    as_json = [json.dumps(m.get_params(), default=store._jsonable) for m in (loaded, model)]
+    as_json = [json.dumps(m.get_params(), default=store.jsonable) for m in (loaded, model)]
     assert as_json[0] == as_json[1]  # every setting back (tuples as the JSON lists they were)
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
     np.testing.assert_array_equal(loaded.transform(data.X), model.transform(data.X))

@@ -12,12 +12,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from tactile_exp.data.dataset import DataSet
 
 
 class DataError(ValueError):
@@ -194,7 +191,7 @@ class Split:
         names = self.train if part == "train" else self.test
         return {TrialName.parse(n).object_id for n in names}  # type: ignore[union-attr]
 
-    def trials(self, part: str, dataset: DataSet, names: tuple[str, ...] | None = None) -> Trials:
+    def trials(self, part: str, dataset: Any, names: tuple[str, ...] | None = None) -> Trials:
         """One side (``train`` or ``test``) as labelled ``Trials``; ``names``: a subset of it
         (validation). An object split by trial records both sides' trial counts (``shared``)."""
         names = (self.train if part == "train" else self.test) if names is None else names
