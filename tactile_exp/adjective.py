@@ -150,7 +150,8 @@ def run_adjective(
         )
         test = pipeline.preprocess.transform(sides["test"])
         scores, units = pipeline.score(test)
-        scored = {"train": pipeline.train_scores_, "test": (scores, units)}
+        # Test, training, validation: the order the scores are drawn in (row O's are random).
+        scored = {"test": (scores, units), "train": pipeline.train_scores()}
         if "val" in sides:
             scored["val"] = pipeline.decision_function(sides["val"])
         values = metrics.compute(settings.metrics, units.y, scores)

@@ -96,13 +96,20 @@ class AdjectivePipeline:
         self.model_ = model
         self.head_: Model | None = None
         if self.keeps_instances:
-            self.train_scores_ = (model.decision_function(instances.X), instances)
+            self.train_units_ = instances
             return history
         units = self._units(instances)
         self.head_ = model.head()
         history |= {f"head_{k}": v for k, v in self.head_.fit(units).items()}
-        self.train_scores_ = (self.head_.decision_function(units.X), units)
+        self.train_units_ = units
         return history
+
+    def train_scores(self) -> tuple[np.ndarray, Instances]:
+        """Scores of the units the pipeline was fitted on (the training AUC), without
+        preprocessing them again; ``train_units_`` is kept for this and never saved."""
+        units = self.train_units_
+        scorer = self.model_ if self.head_ is None else self.head_
+        return scorer.decision_function(units.X), units
 
     def _units(self, instances: Instances) -> Instances:
         features = self.model_.transform(instances.X)
