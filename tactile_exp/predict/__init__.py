@@ -16,15 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp.data.layout import DataError, TrialName, Trials
+from tactile_exp.data.layout import DataError, Trials
 from tactile_exp.data.photos import PhotoFolder
 from tactile_exp.data.sources import open_path
 from tactile_exp.jobs import PredictError, StoredJob
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.pipeline import AdjectivePipeline
-from tactile_exp.predict.prediction import Prediction, unit_names
-
-__all__ = ["PredictError", "Prediction", "apply", "new_trials", "predict"]
+from tactile_exp.predict.prediction import Prediction, object_of, true_labels, unit_names
 
 
 def predict(
@@ -54,11 +52,11 @@ def predict(
     chosen = "" if run_id is not None else (
         f"no run id given: the newest FINISHED job of experiment {experiment!r}"
     )  # fmt: skip
-    objects = [_object_of(u) for u in scored.units]
+    objects = [object_of(u) for u in scored.units]
     names = {o: given.dataset.object_name(o) for o in objects if o is not None}
     return replace(
         scored, run_id=job.id, job=job.describe(), chosen=chosen, data=data_line, objects=objects,
-        object_names=names, labels=_labels(given, objects, scored.adjectives),
+        object_names=names, labels=true_labels(given, objects, scored.adjectives),
     )  # fmt: skip
 
 
@@ -138,24 +136,3 @@ def _data_file(job: StoredJob, data: str | Path | None) -> tuple[str | Path, str
     if not recorded.exists():
         raise PredictError(f"the job's data file {recorded} is no longer there: give --data FILE")
     return recorded, f"{recorded} (the job's own data file; --data to read another)"
-
-
-def _object_of(unit: str) -> int | None:
-    """The object of a unit named by a trial (``<object>_<id>_<trial>[#k]``), else None."""
-    name = TrialName.parse(unit.split("#", 1)[0])
-    return None if name is None else name.object_id
-
-
-def _labels(
-    given: Trials, objects: list[int | None], adjectives: list[str]
-) -> dict[int, list[str]]:
-    """The true adjectives of ``objects`` where the data file has labels; {} where not."""
-    try:
-        labels = given.dataset.labels()
-    except (DataError, OSError, KeyError, ValueError):
-        return {}
-    return {
-        o: [a for a in adjectives if labels[o].get(a) == 1]
-        for o in dict.fromkeys(objects)
-        if o is not None and o in labels
-    }

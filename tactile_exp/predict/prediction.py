@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tactile_exp.data.layout import Instances, TrialName
+from tactile_exp.data.layout import DataError, Instances, TrialName, Trials
 
 
 @dataclass
@@ -122,3 +122,24 @@ def unit_names(units: Instances, *, by_object: bool) -> list[str]:
         else:
             out.append(f"{name}#{seen[name] - (0 if by_object else 1)}")
     return out
+
+
+def object_of(unit: str) -> int | None:
+    """The object of a unit named by a trial (``<object>_<id>_<trial>[#k]``), else None."""
+    name = TrialName.parse(unit.split("#", 1)[0])
+    return None if name is None else name.object_id
+
+
+def true_labels(
+    given: Trials, objects: list[int | None], adjectives: list[str]
+) -> dict[int, list[str]]:
+    """The true adjectives of ``objects`` where the data file has labels; {} where not."""
+    try:
+        labels = given.dataset.labels()
+    except (DataError, OSError, KeyError, ValueError):
+        return {}
+    return {
+        o: [a for a in adjectives if labels[o].get(a) == 1]
+        for o in dict.fromkeys(objects)
+        if o is not None and o in labels
+    }
