@@ -1,13 +1,13 @@
 """The haptic LSTM (M2): 10 recurrent units over time -> FC(10) + ReLU -> FC(1).
 
 ``impl`` picks how the recurrence runs: ``torch`` is ``nn.LSTM`` (cuDNN on a GPU), ``compiled``
-the numba kernels of ``lstm_kernels`` (CPU only, ~4x faster there, same parameters), ``auto``
-the compiled kernels on CPU and ``nn.LSTM`` elsewhere.
+the numba kernels of ``lstm_kernels`` (CPU only, same parameters; ``bench/bench_lstm.py``
+measures them), ``auto`` the compiled kernels on CPU and ``nn.LSTM`` elsewhere.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -44,10 +44,13 @@ class LSTMBody(nn.Module):
         caffe_xavier_(self.fc.weight, hidden)
         nn.init.zeros_(self.fc.bias)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, rows: torch.Tensor | None = None) -> torch.Tensor:
+        """Features of ``x[rows]`` (all rows by default); the compiled kernels read the rows in
+        place, so a training batch is never copied out of the training set."""
         if self.impl == "compiled":
-            last = lstm_last_hidden(x, self.lstm)
+            last = lstm_last_hidden(x, self.lstm, rows)
         else:
+            x = x if rows is None else x[rows]
             last = self.lstm(x.transpose(1, 2))[1][0][-1]
         return self.fc(last).relu()
 
@@ -91,6 +94,11 @@ class HapticLSTM(SGDModel):
     def _check_input(self, X: np.ndarray) -> None:
         if X.ndim != 3:
             raise ValueError(f"haptic_lstm expects X of shape (n, channels, time), got {X.shape}")
+
+    def _train_scores(
+        self, body: nn.Module, classifier: nn.Linear
+    ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+        return lambda X, index: classifier(body(X, index)).squeeze(1)
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         impl = self.impl

@@ -2,10 +2,16 @@
 
 ``nn.LSTM`` on CPU runs a few small library calls per time step on a (batch, 10) state, so at
 the paper's sizes (hidden 10, 150 steps) it is bound by per-call overhead, not arithmetic. Here
-the input projection of all time steps is one matrix product up front, and the recurrence
-forward and backward are two numba loops over time with the batch as the innermost, contiguous
-axis (layout (feature, time, batch)), so every gate update is one vector FMA over the batch.
-The weight gradients are again one matrix product each, after the loop.
+a batch is cut into chunks of ``CHUNK`` instances, and each chunk runs forward and backward
+through time inside one numba loop, with the chunk as the innermost, contiguous axis (layout
+(feature, time, chunk)), so every gate update is one vector FMA over the chunk. A chunk's
+arrays (~5 MB at C=32) stay in cache: the input projection, the recurrence and the
+weight gradients are computed there instead of as whole-batch matrix products through memory,
+which made the earlier kernels memory-bound (they gathered, transposed and multiplied
+(feature, time, batch) arrays of ~25 MB each per step). Chunks run in parallel on numba's
+threads. The forward pass keeps nothing: backward recomputes a chunk's forward in cache, which
+costs less than writing and re-reading the activations. Each chunk's weight gradient is summed
+on its own and the chunks' in a fixed order, so results do not depend on the thread count.
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
@@ -20,13 +26,17 @@ import numpy as np
 import torch
 
 from tactile_exp.models.numba_setup import numba
-from tactile_exp.models.scratch import scratch
 
 # error_model="numpy": no ZeroDivisionError check inside the loops, which blocks vectorisation.
 _JIT = dict(fastmath=True, error_model="numpy", cache=True)
 _CLAMP = np.float32(7.90531110763549805)  # tanh is 1 - 2e-7 here: the approximation's range
+_ZERO = np.float32(0.0)
 _HALF = np.float32(0.5)
 _ONE = np.float32(1.0)
+# Gradients through time shrink by the forget gate (~1/2) each step, to ~1e-45 after 150 steps:
+# float32 denormals, which the CPU handles ~100x slower (they made backward 10x slower). The
+# carried gradients are set to 0 below this, ~1e-27 of any gradient that moves a weight.
+_TINY = np.float32(1e-30)
 
 
 @numba.njit(inline="always", fastmath=True, error_model="numpy")
@@ -48,67 +58,192 @@ def _tanh(x):
     return x * p / q
 
 
+# Instances per chunk: ~5 MB of arrays at C=32, T=150. Measured at 16, 32, 64, 128 (the bench's
+# step on a shared 2-core Xeon): 64 fastest, 128 ~1.6x slower (the chunk leaves the cache).
+CHUNK = 64
+
+
 @numba.njit(**_JIT)
-def _to_feature_time_batch(x, out):
-    """(B, C, T) -> (C, T, B), in blocks of 16 rows so reads and writes stay in cache."""
-    B, C, T = x.shape
-    for b0 in range(0, B, 16):
-        b1 = min(b0 + 16, B)
-        for c in range(C):
+def _gather(X, rows, start, inputs):
+    """``inputs[:C]`` (C, T, CHUNK) <- X[rows[start:start + CHUNK]] (rows, C, T), transposed;
+    lanes past the last row are zero, so they carry zeros through forward and backward."""
+    _, C, T = X.shape
+    n = min(CHUNK, len(rows) - start)
+    for c in range(C):  # input by input: a (T, CHUNK) block of 38 KB, transposed in L1
+        for b in range(n):
+            r = rows[start + b]
             for t in range(T):
-                for b in range(b0, b1):
-                    out[c, t, b] = x[b, c, t]
+                inputs[c, t, b] = X[r, c, t]
+        for t in range(T):
+            for b in range(n, CHUNK):
+                inputs[c, t, b] = 0
 
 
 @numba.njit(**_JIT)
-def _forward(acts, w_hh, c_prev, tanh_c, h_prev, h_last):
-    """Run the recurrence on the input projection in ``acts`` (4H, T, B), gates in nn.LSTM's
-    order (i, f, g, o), overwriting it with the gate activations. Fills the state before each
-    step ``c_prev``/``h_prev`` (H, T, B), ``tanh_c`` = tanh(c_t) (H, T, B) and ``h_last`` (H, B)."""
-    G, T, B = acts.shape
+def _project(w, bias, inputs, C, out):
+    """The input projection of every time step at once: ``out`` (4H, n) = bias + ``w[:, :C]`` @
+    ``inputs[:C]`` (C, n), in blocks of four gates x four inputs (one load and store of an
+    output per sixteen FMAs: the projection is most of the forward pass's arithmetic)."""
+    G, n = out.shape
+    for gate in range(G):
+        bg = bias[gate]
+        for m in range(n):
+            out[gate, m] = bg
+    c4 = C - C % 4
+    for g in range(0, G, 4):
+        o0, o1, o2, o3 = out[g], out[g + 1], out[g + 2], out[g + 3]
+        for k in range(0, c4, 4):
+            x0, x1, x2, x3 = inputs[k], inputs[k + 1], inputs[k + 2], inputs[k + 3]
+            a0, a1, a2, a3 = w[g, k], w[g, k + 1], w[g, k + 2], w[g, k + 3]
+            b0, b1, b2, b3 = w[g + 1, k], w[g + 1, k + 1], w[g + 1, k + 2], w[g + 1, k + 3]
+            c0, c1, c2, c3 = w[g + 2, k], w[g + 2, k + 1], w[g + 2, k + 2], w[g + 2, k + 3]
+            d0, d1, d2, d3 = w[g + 3, k], w[g + 3, k + 1], w[g + 3, k + 2], w[g + 3, k + 3]
+            for m in range(n):
+                y0, y1, y2, y3 = x0[m], x1[m], x2[m], x3[m]
+                o0[m] += a0 * y0 + a1 * y1 + a2 * y2 + a3 * y3
+                o1[m] += b0 * y0 + b1 * y1 + b2 * y2 + b3 * y3
+                o2[m] += c0 * y0 + c1 * y1 + c2 * y2 + c3 * y3
+                o3[m] += d0 * y0 + d1 * y1 + d2 * y2 + d3 * y3
+        for k in range(c4, C):
+            x = inputs[k]
+            a0, b0, c0, d0 = w[g, k], w[g + 1, k], w[g + 2, k], w[g + 3, k]
+            for m in range(n):
+                y = x[m]
+                o0[m] += a0 * y
+                o1[m] += b0 * y
+                o2[m] += c0 * y
+                o3[m] += d0 * y
+
+
+@numba.njit(**_JIT)
+def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
+    """Run the LSTM over one gathered chunk. ``w`` (4H, C + H) is ``[weight_ih | weight_hh]``,
+    gates in nn.LSTM's order (i, f, g, o), ``inputs`` (C + H, T, CHUNK) the inputs x_t above the
+    states h_{t-1}, which this fills. Keeps the gate activations ``acts`` (4H, T, CHUNK), c_{t-1}
+    ``c_prev`` and tanh(c_t) ``tanh_c`` (H, T, CHUNK) for backward; ends with h_T, c_T in h, c."""
+    G, K = w.shape
     H = G // 4
-    acc = np.empty(B, acts.dtype)
-    c = np.zeros((H, B), acts.dtype)
-    h = np.zeros((H, B), acts.dtype)
+    C = K - H
+    T = inputs.shape[1]
+    n = T * CHUNK
+    _project(w, bias, inputs.reshape(K, n), C, acts.reshape(G, n))
+    h[:] = 0
+    c[:] = 0
     for t in range(T):
         for j in range(H):
-            for b in range(B):
+            for b in range(CHUNK):
                 c_prev[j, t, b] = c[j, b]
-                h_prev[j, t, b] = h[j, b]
+                inputs[C + j, t, b] = h[j, b]
+        # four states at a time, then gate by gate: one load and store of a gate's sum per four
+        # FMAs, and consecutive FMAs update different gates, so none waits for the last
+        k4 = K - (K - C) % 4
+        for k in range(C, k4, 4):
+            for gate in range(G):
+                w0, w1, w2, w3 = w[gate, k], w[gate, k + 1], w[gate, k + 2], w[gate, k + 3]
+                for b in range(CHUNK):
+                    acts[gate, t, b] += (
+                        w0 * inputs[k, t, b]
+                        + w1 * inputs[k + 1, t, b]
+                        + w2 * inputs[k + 2, t, b]
+                        + w3 * inputs[k + 3, t, b]
+                    )
+        for k in range(k4, K):
+            for gate in range(G):
+                wk = w[gate, k]
+                for b in range(CHUNK):
+                    acts[gate, t, b] += wk * inputs[k, t, b]
         for gate in range(G):
-            for b in range(B):
-                acc[b] = acts[gate, t, b]
-            for k in range(H):
-                w = w_hh[gate, k]
-                for b in range(B):
-                    acc[b] += w * h[k, b]
             if 2 * H <= gate < 3 * H:
-                for b in range(B):
-                    acts[gate, t, b] = _tanh(acc[b])
+                for b in range(CHUNK):
+                    acts[gate, t, b] = _tanh(acts[gate, t, b])
             else:
-                for b in range(B):
-                    acts[gate, t, b] = _HALF * _tanh(_HALF * acc[b]) + _HALF
+                for b in range(CHUNK):
+                    acts[gate, t, b] = _HALF * _tanh(_HALF * acts[gate, t, b]) + _HALF
         for j in range(H):
-            for b in range(B):
+            for b in range(CHUNK):
                 cv = acts[H + j, t, b] * c[j, b] + acts[j, t, b] * acts[2 * H + j, t, b]
                 tc = _tanh(cv)
                 c[j, b] = cv
                 tanh_c[j, t, b] = tc
                 h[j, b] = acts[3 * H + j, t, b] * tc
-    h_last[:] = h
 
 
 @numba.njit(**_JIT)
-def _backward(dh_last, w_hh, acts, c_prev, tanh_c, d_gates):
-    """Back-propagate d loss / d h_T (H, B) through time into the gate pre-activation
-    gradients ``d_gates`` (4H, T, B)."""
-    G, T, B = acts.shape
+def _weight_grad(d_gates, inputs, d_w):
+    """``d_w`` (4H, K) = ``d_gates`` (4H, n) @ ``inputs`` (K, n).T, in blocks of four gates x four
+    inputs: sixteen running sums per eight loads."""
+    G, n = d_gates.shape
+    K = inputs.shape[0]
+    k4 = K - K % 4
+    for g in range(0, G, 4):
+        e0, e1, e2, e3 = d_gates[g], d_gates[g + 1], d_gates[g + 2], d_gates[g + 3]
+        for k in range(0, k4, 4):
+            x0, x1, x2, x3 = inputs[k], inputs[k + 1], inputs[k + 2], inputs[k + 3]
+            s00 = s01 = s02 = s03 = s10 = s11 = s12 = s13 = np.float32(0)
+            s20 = s21 = s22 = s23 = s30 = s31 = s32 = s33 = np.float32(0)
+            for m in range(n):
+                f0, f1, f2, f3 = e0[m], e1[m], e2[m], e3[m]
+                y0, y1, y2, y3 = x0[m], x1[m], x2[m], x3[m]
+                s00 += f0 * y0
+                s01 += f0 * y1
+                s02 += f0 * y2
+                s03 += f0 * y3
+                s10 += f1 * y0
+                s11 += f1 * y1
+                s12 += f1 * y2
+                s13 += f1 * y3
+                s20 += f2 * y0
+                s21 += f2 * y1
+                s22 += f2 * y2
+                s23 += f2 * y3
+                s30 += f3 * y0
+                s31 += f3 * y1
+                s32 += f3 * y2
+                s33 += f3 * y3
+            d_w[g, k], d_w[g, k + 1], d_w[g, k + 2], d_w[g, k + 3] = s00, s01, s02, s03
+            d_w[g + 1, k], d_w[g + 1, k + 1], d_w[g + 1, k + 2], d_w[g + 1, k + 3] = (
+                s10,
+                s11,
+                s12,
+                s13,
+            )
+            d_w[g + 2, k], d_w[g + 2, k + 1], d_w[g + 2, k + 2], d_w[g + 2, k + 3] = (
+                s20,
+                s21,
+                s22,
+                s23,
+            )
+            d_w[g + 3, k], d_w[g + 3, k + 1], d_w[g + 3, k + 2], d_w[g + 3, k + 3] = (
+                s30,
+                s31,
+                s32,
+                s33,
+            )
+        for k in range(k4, K):
+            x = inputs[k]
+            s0 = s1 = s2 = s3 = np.float32(0)
+            for m in range(n):
+                y = x[m]
+                s0 += e0[m] * y
+                s1 += e1[m] * y
+                s2 += e2[m] * y
+                s3 += e3[m] * y
+            d_w[g, k], d_w[g + 1, k], d_w[g + 2, k], d_w[g + 3, k] = s0, s1, s2, s3
+
+
+@numba.njit(**_JIT)
+def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_w, d_b):
+    """Back-propagate d loss / d h_T ``dh`` (H, CHUNK) through one chunk's forward into the gate
+    pre-activation gradients ``d_gates`` (4H, T, CHUNK) and the chunk's weight and bias
+    gradients ``d_w`` (4H, C + H), ``d_b`` (4H). ``dh`` and ``dc`` are overwritten."""
+    G, K = w.shape
     H = G // 4
-    dh = dh_last.copy()
-    dc = np.zeros_like(dh)
+    C = K - H
+    T = inputs.shape[1]
+    dc[:] = 0
     for t in range(T - 1, -1, -1):
         for j in range(H):
-            for b in range(B):
+            for b in range(CHUNK):
                 i = acts[j, t, b]
                 f = acts[H + j, t, b]
                 g = acts[2 * H + j, t, b]
@@ -120,60 +255,154 @@ def _backward(dh_last, w_hh, acts, c_prev, tanh_c, d_gates):
                 d_gates[H + j, t, b] = dcv * c_prev[j, t, b] * f * (_ONE - f)
                 d_gates[2 * H + j, t, b] = dcv * i * (_ONE - g * g)
                 d_gates[3 * H + j, t, b] = d * tc * o * (_ONE - o)
-                dc[j, b] = dcv * f
+                dcn = dcv * f
+                dc[j, b] = dcn if abs(dcn) >= _TINY else _ZERO
+        dh[:] = 0
+        for gate in range(0, G, 4):  # four gates at a time, as in the forward pass
+            for k in range(H):
+                w0, w1, w2, w3 = (
+                    w[gate, C + k],
+                    w[gate + 1, C + k],
+                    w[gate + 2, C + k],
+                    w[gate + 3, C + k],
+                )
+                for b in range(CHUNK):
+                    dh[k, b] += (
+                        w0 * d_gates[gate, t, b]
+                        + w1 * d_gates[gate + 1, t, b]
+                        + w2 * d_gates[gate + 2, t, b]
+                        + w3 * d_gates[gate + 3, t, b]
+                    )
         for k in range(H):
-            for b in range(B):
-                dh[k, b] = 0
-            for gate in range(G):
-                w = w_hh[gate, k]
-                for b in range(B):
-                    dh[k, b] += w * d_gates[gate, t, b]
+            for b in range(CHUNK):
+                dh[k, b] = dh[k, b] if abs(dh[k, b]) >= _TINY else _ZERO
+    n = T * CHUNK
+    flat_d = d_gates.reshape(G, n)
+    flat_in = inputs.reshape(K, n)
+    _weight_grad(flat_d, flat_in, d_w)
+    for gate in range(G):
+        s = np.float32(0)
+        for m in range(n):
+            s += flat_d[gate, m]
+        d_b[gate] = s
+
+
+@numba.njit(parallel=True, **_JIT)
+def _forward(X, rows, w, bias, h_last, parts):
+    """h_T (len(rows), H) of the instances ``X[rows]`` (N, C, T), chunks shared by ``parts``
+    threads."""
+    G, K = w.shape
+    H = G // 4
+    T = X.shape[2]
+    n_chunks = (len(rows) + CHUNK - 1) // CHUNK
+    for p in numba.prange(parts):
+        inputs = np.empty((K, T, CHUNK), np.float32)
+        acts = np.empty((G, T, CHUNK), np.float32)
+        c_prev = np.empty((H, T, CHUNK), np.float32)
+        tanh_c = np.empty((H, T, CHUNK), np.float32)
+        h = np.empty((H, CHUNK), np.float32)
+        c = np.empty((H, CHUNK), np.float32)
+        for chunk in range(p, n_chunks, parts):
+            start = chunk * CHUNK
+            _gather(X, rows, start, inputs)
+            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
+            for b in range(min(CHUNK, len(rows) - start)):
+                for j in range(H):
+                    h_last[start + b, j] = h[j, b]
+
+
+@numba.njit(parallel=True, **_JIT)
+def _backward(X, rows, w, bias, dh_last, d_w, d_b, dx, parts):
+    """Gradients of the loss through h_T: each chunk's weight and bias gradients in ``d_w``
+    (n_chunks, 4H, C + H) and ``d_b`` (n_chunks, 4H) (the caller sums them in order), and d loss
+    / d X[rows] in ``dx`` (len(rows), C, T) unless ``dx`` is empty; as ``_forward``."""
+    G, K = w.shape
+    H = G // 4
+    C = K - H
+    T = X.shape[2]
+    n_chunks = d_w.shape[0]
+    for p in numba.prange(parts):
+        inputs = np.empty((K, T, CHUNK), np.float32)
+        acts = np.empty((G, T, CHUNK), np.float32)
+        c_prev = np.empty((H, T, CHUNK), np.float32)
+        tanh_c = np.empty((H, T, CHUNK), np.float32)
+        d_gates = np.empty((G, T, CHUNK), np.float32)
+        h = np.empty((H, CHUNK), np.float32)
+        c = np.empty((H, CHUNK), np.float32)
+        for chunk in range(p, n_chunks, parts):
+            start = chunk * CHUNK
+            n = min(CHUNK, len(rows) - start)
+            _gather(X, rows, start, inputs)
+            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
+            h[:] = 0  # now d loss / d h_T; lanes past the last row stay zero
+            for b in range(n):
+                for j in range(H):
+                    h[j, b] = dh_last[start + b, j]
+            _chunk_backward(w, inputs, acts, c_prev, tanh_c, h, c, d_gates, d_w[chunk], d_b[chunk])
+            if dx.shape[0] > 0:
+                for b in range(n):
+                    for ch in range(C):
+                        for t in range(T):
+                            s = np.float32(0)
+                            for gate in range(G):
+                                s += w[gate, ch] * d_gates[gate, t, b]
+                            dx[start + b, ch, t] = s
+
+
+def _parts(n_rows: int) -> int:
+    """Threads for ``n_rows`` instances: numba's, at most one per chunk (the kernels take it as
+    an argument: calling ``numba.get_num_threads`` inside would keep them out of the cache)."""
+    return max(1, min(-(-n_rows // CHUNK), numba.get_num_threads()))
 
 
 class LSTMLastHidden(torch.autograd.Function):
-    """The last hidden state (B, H) of a one-layer LSTM over (B, C, T) float32 CPU input, with
-    ``nn.LSTM``'s parameters (weight_ih (4H, C), weight_hh (4H, H), bias_ih, bias_hh)."""
+    """The last hidden state (B, H) of a one-layer LSTM over the rows ``rows`` of (N, C, T)
+    float32 CPU input, with ``nn.LSTM``'s parameters (weight_ih (4H, C), weight_hh (4H, H),
+    bias_ih, bias_hh)."""
 
     @staticmethod
-    def forward(ctx, x, w_ih, w_hh, b_ih, b_hh):  # type: ignore[override]
-        B, C, T = x.shape
-        H = w_hh.shape[1]
-        inputs = scratch(C + H, T, B)  # x and h_{t-1}, stacked: one gemm for both gradients
-        xs, h_prev = inputs[:C], inputs[C:]
-        acts = scratch(4 * H, T, B)
-        c_prev, tanh_c = scratch(H, T, B), scratch(H, T, B)
-        h_last = np.empty((H, B), np.float32)
-        _to_feature_time_batch(x.detach().contiguous().numpy(), xs)
-        torch.addmm(
-            (b_ih + b_hh)[:, None],
-            w_ih,
-            torch.from_numpy(xs).view(C, T * B),
-            out=torch.from_numpy(acts).view(4 * H, T * B),
-        )
-        _forward(acts, w_hh.detach().numpy(), c_prev, tanh_c, h_prev, h_last)
-        ctx.save_for_backward(w_ih, w_hh)
-        ctx.arrays = (inputs, acts, c_prev, tanh_c)
-        return torch.from_numpy(h_last).t()
+    def forward(ctx, x, rows, w_ih, w_hh, b_ih, b_hh):  # type: ignore[override]
+        w = torch.cat([w_ih, w_hh], 1).detach().contiguous()
+        bias = (b_ih + b_hh).detach().contiguous()
+        h_last = np.empty((len(rows), w_hh.shape[1]), np.float32)
+        X = x.detach().numpy()
+        _forward(X, rows.numpy(), w.numpy(), bias.numpy(), h_last, _parts(len(rows)))
+        ctx.save_for_backward(x, rows)
+        ctx.weights = (w, bias)
+        return torch.from_numpy(h_last)
 
     @staticmethod
     def backward(ctx, dh):  # type: ignore[override]
-        w_ih, w_hh = ctx.saved_tensors
-        inputs, acts, c_prev, tanh_c = ctx.arrays
-        G, T, B = acts.shape
-        d_gates = scratch(G, T, B)
-        dh = dh.t().contiguous().numpy()
-        _backward(dh, w_hh.detach().numpy(), acts, c_prev, tanh_c, d_gates)
-        flat = torch.from_numpy(d_gates).view(G, T * B)
-        d_w = flat @ torch.from_numpy(inputs).view(-1, T * B).t()
-        d_w_ih, d_w_hh = d_w[:, : w_ih.shape[1]], d_w[:, w_ih.shape[1] :]
-        d_b = flat.sum(1)
-        dx = (w_ih.t() @ flat).view(-1, T, B).permute(2, 0, 1) if ctx.needs_input_grad[0] else None
-        return dx, d_w_ih, d_w_hh, d_b, d_b
+        x, rows = ctx.saved_tensors
+        w, bias = ctx.weights
+        G, K = w.shape
+        n_chunks = (len(rows) + CHUNK - 1) // CHUNK
+        d_w = np.empty((n_chunks, G, K), np.float32)
+        d_b = np.empty((n_chunks, G), np.float32)
+        dx = np.empty((len(rows) if ctx.needs_input_grad[0] else 0, *x.shape[1:]), np.float32)
+        X = x.detach().numpy()
+        dh_last = dh.contiguous().numpy()
+        parts = _parts(len(rows))
+        _backward(X, rows.numpy(), w.numpy(), bias.numpy(), dh_last, d_w, d_b, dx, parts)
+        d_w_all = torch.from_numpy(d_w.sum(0))
+        d_b_all = torch.from_numpy(d_b.sum(0))
+        C = x.shape[1]
+        d_x = None
+        if ctx.needs_input_grad[0]:
+            d_x = torch.zeros_like(x).index_add_(0, rows, torch.from_numpy(dx))
+        return d_x, None, d_w_all[:, :C], d_w_all[:, C:], d_b_all, d_b_all
 
 
-def lstm_last_hidden(x: torch.Tensor, lstm: torch.nn.LSTM) -> torch.Tensor:
-    """``lstm(x.transpose(1, 2))``'s last hidden state (B, H), computed by the compiled kernels."""
+def lstm_last_hidden(
+    x: torch.Tensor, lstm: torch.nn.LSTM, rows: torch.Tensor | None = None
+) -> torch.Tensor:
+    """``lstm(x[rows].transpose(1, 2))``'s last hidden state (B, H), computed by the compiled
+    kernels; ``rows`` (default: all) are read in place, never copied out as a batch."""
     if x.device.type != "cpu" or x.dtype != torch.float32:
         raise ValueError(f"compiled LSTM: expects float32 CPU input, got {x.dtype} on {x.device}")
+    x = x.contiguous()
+    rows = torch.arange(len(x)) if rows is None else rows.to(torch.int64).contiguous()
+    if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(x):
+        raise IndexError(f"compiled LSTM: rows must lie in [0, {len(x)}), the rows of x")
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
-    return LSTMLastHidden.apply(x, *params)
+    return LSTMLastHidden.apply(x, rows, *params)

@@ -1,4 +1,4 @@
-"""Reusable float32 scratch arrays for the compiled CPU kernels (haptic ConvNet and LSTM).
+"""Reusable float32 scratch arrays for the compiled CPU kernels of the haptic ConvNet.
 
 A training step at batch 1000 needs 100-150 MB of activations and gradients. Freshly allocated
 memory is page-faulted and zeroed by the OS on its first touch, every step, which cost more than
@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-POOL_BYTES = 512 * 2**20  # ours: a training step of either model, both batch sizes of an epoch
+POOL_BYTES = 512 * 2**20  # ours: a ConvNet training step, both batch sizes of an epoch
 _POOL: list[np.ndarray] = []
 
 
