@@ -1,100 +1,160 @@
-"""Haptic LSTM (Table I row G) training speed on CPU: compiled kernels vs ``nn.LSTM``.
+"""Haptic LSTM (Table I row G): one adjective's training at the paper's settings, the compiled
+kernels before issue 31 (``bench/lstm_before.py``) and now, side by side in one run.
 
-Both implementations train the same network from the same init at the paper's settings (hidden
-10, FC(10), batch 1000, 5,300 x C x 150 instances per split); each is timed for whole epochs of
-forward, backward and SGD step, alternating in one run so the ratio holds on a noisy machine
-(the best of ``--repeats``). Prints per-epoch seconds, their ratio, the row G estimate they imply
-(24 adjectives x 200 epochs; the 100 fine-tuning epochs train the output layer alone on features
-computed once and are left out) and the largest difference in the loss curve of a short run.
+Both train ``haptic_lstm`` (``impl=compiled``, seed 0) at the paper's settings (hidden 10,
+FC(10), 200 logistic + 100 hinge epochs, batch 1000, lr 0.01, momentum 0.9) on the same data of
+one adjective's size (5,300 training and 700 test instances x C x 150; positives, ~17%, carry a
+level shift of one signal in noise), then score the test instances: what the engine does per
+adjective. Prints each one's wall and CPU seconds, their ratios, both test AUCs and the largest
+differences of the scores and the loss curves. On a shared machine the seconds vary from run
+to run; the two are timed back to back (alternating with ``--repeats``, best of), so compare
+their ratio.
 
-Run: ``.venv/bin/python bench/bench_lstm.py [--repeats 2] [--threads N] [--channels 32 64]
-[--json OUT]``
+The two kernels sum in different orders, so their gradients differ by float rounding (~4e-7
+relative), and 200 epochs of SGD with momentum amplify that: the loss curves part after some
+tens of epochs and the test AUCs differ by more than rounding. To show the size of that spread,
+a third run trains the kernels from before on the training data moved by one float32 ulp
+(``np.nextafter``): the AUC difference between the kernels is to be read against it.
+
+Run: ``.venv/bin/python bench/bench_lstm.py [--repeats 1] [--channels 32] [--epochs 200]
+[--finetune-epochs 100] [--json OUT]``
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
+import lstm_before
 import numpy as np
 import torch
+from sklearn.metrics import roc_auc_score
 
-from tactile_exp.models.haptic_lstm import LSTMBody
-from tactile_exp.models.losses import LOSSES
-from tactile_exp.train import sgd_epochs
+from tactile_exp.data.layout import Instances
+from tactile_exp.models import MODELS, haptic_lstm
 
-N_TRAIN, STEPS, BATCH, ADJECTIVES, EPOCHS = 5300, 150, 1000, 24, 200
-IMPLS = ("torch", "compiled")
+N_TRAIN, N_TEST, STEPS, POSITIVE = 5300, 700, 150, 0.17
+KERNELS = ("before", "now")
+NUDGED = "before, data + 1 ulp"
+
+
+def instances(n: int, channels: int, rng: np.random.Generator) -> Instances:
+    X = rng.standard_normal((n, channels, STEPS), dtype=np.float32)
+    y = (rng.random(n) < POSITIVE).astype(int)
+    X[y == 1, 3, STEPS * 3 // 4 :] += 0.5
+    return Instances(X, y, np.array([f"t{i}" for i in range(n)]), np.arange(n) // 100)
+
+
+@contextmanager
+def kernels(which: str) -> Iterator[None]:
+    """Train with the kernels before issue 31 (the batch copied out of the training set, as
+    the engine did then) or with the package's own."""
+    if which == "now":
+        yield
+        return
+    package = haptic_lstm.lstm_last_hidden
+
+    def before(x: torch.Tensor, lstm: torch.nn.LSTM, rows: torch.Tensor | None = None):
+        return lstm_before.lstm_last_hidden(x if rows is None else x[rows], lstm)
+
+    haptic_lstm.lstm_last_hidden = before
+    try:
+        yield
+    finally:
+        haptic_lstm.lstm_last_hidden = package
 
 
 def train(
-    impl: str, X: torch.Tensor, y: torch.Tensor, epochs: int
-) -> tuple[float, list[float], torch.Tensor]:
-    """Seconds per epoch, the loss curve of ``epochs`` epochs from a fixed init and the trained
-    network's scores of the first 100 rows."""
-    torch.manual_seed(0)
-    body = LSTMBody(X.shape[1], impl=impl)
-    head = torch.nn.Linear(10, 1)
-    start = time.perf_counter()
-    curve = sgd_epochs(
-        lambda X_, index: head(body(X_[index])).squeeze(1),
-        [*body.parameters(), *head.parameters()],
-        X,
-        y,
-        loss=LOSSES["logistic"],
-        epochs=epochs,
-        batch_size=BATCH,
-        lr=0.01,
-        momentum=0.9,
-        generator=torch.Generator().manual_seed(0),
+    which: str, train_set: Instances, test: Instances, epochs: int, finetune: int
+) -> tuple[float, float, dict[str, list[float]], np.ndarray]:
+    """Wall and CPU seconds of fit + scoring, the training history and the test scores."""
+    model = MODELS.build(
+        "haptic_lstm", impl="compiled", device="cpu", epochs=epochs, finetune_epochs=finetune
     )
-    seconds = (time.perf_counter() - start) / epochs
-    with torch.no_grad():
-        return seconds, curve, head(body(X[:100])).squeeze(1)
+    with kernels(which):
+        wall, cpu = time.perf_counter(), time.process_time()
+        history = model.fit(train_set)
+        scores = model.decision_function(test.X)
+        return time.perf_counter() - wall, time.process_time() - cpu, history, scores
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=2)
-    parser.add_argument("--threads", type=int, default=None, help="torch threads (default: all)")
-    parser.add_argument("--channels", type=int, nargs="+", default=[32, 64])
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--channels", type=int, default=32)
+    parser.add_argument("--epochs", type=int, default=200)
+    parser.add_argument("--finetune-epochs", type=int, default=100)
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
-    if args.threads:
-        torch.set_num_threads(args.threads)
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     rng = np.random.default_rng(0)
-    figures: dict[str, float] = {}
-    for channels in args.channels:
-        X = torch.as_tensor(rng.standard_normal((N_TRAIN, channels, STEPS), dtype=np.float32))
-        y = torch.as_tensor((rng.random(N_TRAIN) < 0.5).astype(np.float32))
-        small = slice(0, 2 * BATCH)
-        runs = {impl: train(impl, X[small], y[small], epochs=3) for impl in IMPLS}  # + warm-up
-        (_, curve_a, scores_a), (_, curve_b, scores_b) = runs.values()
-        loss_gap = max(abs(a - b) for a, b in zip(curve_a, curve_b, strict=True))
-        score_gap = float((scores_a - scores_b).abs().max())
-        best = dict.fromkeys(IMPLS, float("inf"))
-        for _ in range(args.repeats):
-            for impl in IMPLS:
-                best[impl] = min(best[impl], train(impl, X, y, epochs=1)[0])
-        for impl in IMPLS:
-            hours = ADJECTIVES * EPOCHS * best[impl] / 3600
-            print(f"C={channels} {impl:>8}: {best[impl]:.2f} s/epoch -> row G ~{hours:.1f} h")
-        print(
-            f"C={channels} compiled is x{best['torch'] / best['compiled']:.1f} faster; "
-            f"after 3 epochs on 2,000 instances the loss curves differ by at most {loss_gap:.1e}, "
-            f"the scores by {score_gap:.1e}"
-        )
-        for impl in IMPLS:
-            figures[f"C={channels} {impl}, s/epoch"] = round(best[impl], 3)
-        figures[f"C={channels} torch / compiled"] = round(best["torch"] / best["compiled"], 2)
-        figures[f"C={channels} loss curve difference, 3 epochs"] = float(f"{loss_gap:.1e}")
+    train_set, test = instances(N_TRAIN, args.channels, rng), instances(N_TEST, args.channels, rng)
+    small = Instances(
+        train_set.X[:200], train_set.y[:200], train_set.trial[:200], train_set.object_id[:200]
+    )
+    for which in KERNELS:  # compile (or load the compiled code) before timing
+        train(which, small, test, epochs=1, finetune=1)
+    best = {k: (float("inf"), float("inf")) for k in KERNELS}
+    runs = {}
+    for _ in range(args.repeats):
+        for which in KERNELS:
+            wall, cpu, history, scores = train(
+                which, train_set, test, args.epochs, args.finetune_epochs
+            )
+            best[which] = (min(best[which][0], wall), min(best[which][1], cpu))
+            runs[which] = (history, scores)
+    nudged = Instances(
+        np.nextafter(train_set.X, np.float32(np.inf)),
+        train_set.y,
+        train_set.trial,
+        train_set.object_id,
+    )
+    runs[NUDGED] = train("before", nudged, test, args.epochs, args.finetune_epochs)[2:]
+    aucs = {k: roc_auc_score(test.y, runs[k][1]) for k in runs}
+    score_gap = float(np.abs(runs["before"][1] - runs["now"][1]).max())
+    curve_gap = max(
+        float(np.abs(np.subtract(runs["before"][0][key], runs["now"][0][key])).max())
+        for key in runs["now"][0]
+    )
+    print(
+        f"one adjective, C={args.channels}, {args.epochs}+{args.finetune_epochs} epochs, "
+        f"numba {lstm_before.numba.get_num_threads()} / torch {torch.get_num_threads()} threads"
+    )
+    for which in KERNELS:
+        wall, cpu = best[which]
+        print(f"{which:>6}: {wall:7.1f} s wall, {cpu:7.1f} s CPU, test AUC {aucs[which]:.4f}")
+    wall_ratio = best["before"][0] / best["now"][0]
+    cpu_ratio = best["before"][1] / best["now"][1]
+    print(f"before / now: x{wall_ratio:.2f} wall, x{cpu_ratio:.2f} CPU")
+    spread = abs(aucs["before"] - aucs[NUDGED])
+    print(
+        f"test AUCs differ by {abs(aucs['before'] - aucs['now']):.1e}, scores by at most "
+        f"{score_gap:.1e}, loss curves by at most {curve_gap:.1e}; the kernels from before on "
+        f"data moved by 1 ulp: test AUC {aucs[NUDGED]:.4f}, {spread:.1e} from theirs"
+    )
     if args.json:
         from record import write
 
-        threads = torch.get_num_threads()
-        write(args.json, "bench_lstm", figures, f"best of {args.repeats}, {threads} threads")
+        figures = {
+            "before, s wall": round(best["before"][0], 1),
+            "now, s wall": round(best["now"][0], 1),
+            "before / now, wall": round(wall_ratio, 2),
+            "before / now, CPU": round(cpu_ratio, 2),
+            "test AUC before": round(aucs["before"], 4),
+            "test AUC now": round(aucs["now"], 4),
+            "test AUC difference": float(f"{abs(aucs['before'] - aucs['now']):.1e}"),
+            "largest score difference": float(f"{score_gap:.1e}"),
+            "largest loss-curve difference": float(f"{curve_gap:.1e}"),
+            "test AUC before, data + 1 ulp": round(aucs[NUDGED], 4),
+            "test AUC difference, before vs before on data + 1 ulp": float(f"{spread:.1e}"),
+        }
+        notes = (
+            f"one adjective at C={args.channels}, {args.epochs}+{args.finetune_epochs} epochs, "
+            f"best of {args.repeats}; shared machine: compare the ratios"
+        )
+        write(args.json, "bench_lstm", figures, notes)
 
 
 if __name__ == "__main__":

@@ -3,13 +3,15 @@
 import numpy as np
 import pytest
 import torch
+from numba import config as numba_config
+from numba import get_num_threads, set_num_threads
 from sklearn.metrics import roc_auc_score
 from test_models import easy_case
 from torch import nn
 
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_lstm import LSTMBody
-from tactile_exp.models.lstm_kernels import lstm_last_hidden
+from tactile_exp.models.lstm_kernels import CHUNK, lstm_last_hidden
 from tactile_exp.models.schedule import Schedule
 
 
@@ -32,6 +34,57 @@ def test_compiled_matches_nn_lstm_forward_and_gradients(batch, channels, steps, 
     torch.testing.assert_close(outputs[1], outputs[0], atol=2e-6, rtol=1e-5)
     for got, want in zip(grads[1], grads[0], strict=True):
         torch.testing.assert_close(got, want, atol=2e-5, rtol=1e-4)
+
+
+def _paper_sized_step(rows: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+    """h_T and the gradients of (x, every LSTM parameter) at the paper's sizes (C=32, T=150,
+    H=10, the model's init), the rows ``rows`` of 400 instances read in place."""
+    torch.manual_seed(0)
+    body = LSTMBody(32, impl="compiled")
+    x = torch.randn(400, 32, 150, requires_grad=True)
+    weights = torch.randn(len(rows), 10)
+    out = lstm_last_hidden(x, body.lstm, rows)
+    (out * weights).sum().backward()
+    return out.detach(), [x.grad] + [p.grad for p in body.lstm.parameters()]
+
+
+def test_paper_sized_rows_match_nn_lstm():
+    """Several chunks and a partial one, rows read in place out of order, 150 steps (gradients
+    through time decay past float32's normal range: the flush to zero must not show)."""
+    rows = torch.randperm(400, generator=torch.Generator().manual_seed(1))[: 2 * CHUNK + 22]
+    out, grads = _paper_sized_step(rows)
+    torch.manual_seed(0)
+    body = LSTMBody(32, impl="torch")
+    x = torch.randn(400, 32, 150, requires_grad=True)
+    weights = torch.randn(len(rows), 10)
+    want = body.lstm(x[rows].transpose(1, 2))[1][0][-1]
+    (want * weights).sum().backward()
+    torch.testing.assert_close(out, want.detach(), atol=1e-5, rtol=0)
+    wanted = [x.grad] + [p.grad for p in body.lstm.parameters()]
+    for name, got, ref in zip(["x", "w_ih", "w_hh", "b_ih", "b_hh"], grads, wanted, strict=True):
+        scale = float(ref.abs().max())
+        assert scale > 0, name
+        assert float((got - ref).abs().max()) <= 1e-5 * scale, name
+    assert float(grads[0][rows].abs().sum((1, 2)).min()) > 0  # every read row gets a gradient
+    others = torch.ones(400, dtype=torch.bool)
+    others[rows] = False
+    assert not grads[0][others].any()  # rows not read get none
+
+
+@pytest.mark.skipif(numba_config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")
+def test_results_do_not_depend_on_the_thread_count():
+    rows = torch.arange(3 * CHUNK + 5)
+    threads = get_num_threads()
+    try:
+        set_num_threads(1)
+        one = _paper_sized_step(rows)
+        set_num_threads(2)
+        two = _paper_sized_step(rows)
+    finally:
+        set_num_threads(threads)
+    assert torch.equal(one[0], two[0])
+    for a, b in zip(one[1], two[1], strict=True):
+        assert torch.equal(a, b)
 
 
 def test_short_training_matches_torch_impl():
@@ -60,5 +113,7 @@ def test_impl_choice():
         MODELS.build("haptic_lstm", impl="cudnn", device="cpu")
     with pytest.raises(ValueError, match="compiled"):
         LSTMBody(4, impl="fast")
+    with pytest.raises(IndexError, match="rows must lie in"):
+        lstm_last_hidden(torch.zeros(2, 4, 3), nn.LSTM(4, 2, batch_first=True), torch.tensor([2]))
     with pytest.raises(ValueError, match="float32 CPU"):
         lstm_last_hidden(torch.zeros(2, 4, 3, dtype=torch.float64), nn.LSTM(4, 2, batch_first=True))
