@@ -175,22 +175,20 @@ def test_returned_objective_is_the_validation_mean_not_the_test_mean(
 ):
     """Test objects made easy (each replaced by a training instance of its label, which the
     model has fitted), validation objects as they are: the study receives the validation mean."""
-    real_instances, real_take = Haptic.instances, experiment.take_trials
+    real_transform = Haptic.transform
     fitted: list[Instances] = []
 
-    def keep_train(self, split):
-        train, rest = real_instances(self, split)
-        fitted.append(train)
-        return train, rest
+    def easy_test(self, trials):
+        instances = real_transform(self, trials)
+        if trials.side == "train":  # what the model is fitted on
+            fitted.append(instances)
+        elif trials.side == "test":
+            train = fitted[-1]
+            rows = [np.flatnonzero(train.y == label)[i] for i, label in enumerate(instances.y)]
+            instances = Instances(train.X[rows], instances.y, instances.trial, instances.object_id)
+        return instances
 
-    def easy_test(instances: Instances, trials: tuple[str, ...]):
-        val, test = real_take(instances, trials)
-        train = fitted[-1]
-        rows = [np.flatnonzero(train.y == label)[i] for i, label in enumerate(test.y)]
-        return val, Instances(train.X[rows], test.y, test.trial, test.object_id)
-
-    monkeypatch.setattr(Haptic, "instances", keep_train)
-    monkeypatch.setattr(experiment, "take_trials", easy_test)
+    monkeypatch.setattr(Haptic, "transform", easy_test)
     _search(monkeypatch, tmp_path, cache_dir, mlflow_uri, "hydra.sweeper.n_trials=1")
     (trial,) = _study(mlflow_uri).trials
     (parent,) = _parents(mlflow_uri)
