@@ -21,6 +21,8 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from types import TracebackType
 from typing import Any
@@ -31,6 +33,7 @@ log = logging.getLogger(__name__)
 
 GRACE_S = 30.0  # how long stopped workers get to end their runs before SIGKILL
 _PR_SET_PDEATHSIG = 1  # prctl(2)
+ORPHAN_POLL_S = 1.0  # how often a worker looks whether its job is still its parent
 
 
 def cores() -> int:
@@ -111,6 +114,16 @@ def _call(fn: Callable[..., Any], *args: Any) -> Any:
             os._exit(128 + signum)  # the job is gone (killed): its runs are ended
 
 
+def _watch_job(job_pid: int) -> None:
+    """SIGTERM to this worker once its job is gone, then exit if it has not: the parent-death
+    signal alone once left a worker of a SIGKILLed job running, idle between adjectives."""
+    while os.getppid() == job_pid:
+        time.sleep(ORPHAN_POLL_S)
+    os.kill(os.getpid(), signal.SIGTERM)  # the main thread ends its runs FAILED and exits
+    time.sleep(GRACE_S)
+    os._exit(128 + signal.SIGTERM)
+
+
 def _start(
     records: Any,
     level: int,
@@ -123,6 +136,7 @@ def _start(
     _job["pid"] = os.getppid()
     if sys.platform == "linux":  # SIGTERM when the job dies, even by SIGKILL
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    threading.Thread(target=_watch_job, args=(_job["pid"],), daemon=True).start()
     root = logging.getLogger()
     root.handlers[:] = [logging.handlers.QueueHandler(records)]
     root.setLevel(level)
