@@ -260,14 +260,22 @@ def split_photographs(
         if n_test == 0 or n_train == 0:
             (train if n_test == 0 else test).append(views)
             continue
-        if len(views) < 2:
-            raise ValueError(
-                f"visual split of {split.adjective!r}: object {obj} is split by trial "
-                f"({n_train} train, {n_test} test) but has {len(views)} photograph(s); "
-                "at least 2 are needed to put views on both sides"
-            )
-        k = min(len(views) - 1, max(1, round(len(views) * n_train / (n_train + n_test))))
-        train.append(views[:k])
-        test.append(views[k:])
+        first, rest = divide_views(views, n_train, n_test, f"{split.adjective!r}: object {obj}")
+        train.append(first)
+        test.append(rest)
     empty = np.zeros(0, dtype=np.int64)
     return np.concatenate(train or [empty]), np.concatenate(test or [empty]), labels
+
+
+def divide_views(
+    views: np.ndarray, n_train: int, n_test: int, where: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """The photographs (in view order) of an object whose trials a split puts on both sides,
+    divided in the proportion of its trials: first views to training, at least one per side."""
+    if len(views) < 2:
+        raise ValueError(
+            f"visual split of {where} is split by trial ({n_train} train, {n_test} test) but "
+            f"has {len(views)} photograph(s); at least 2 are needed to put views on both sides"
+        )
+    k = min(len(views) - 1, max(1, round(len(views) * n_train / (n_train + n_test))))
+    return views[:k], views[k:]

@@ -9,6 +9,7 @@ from typing import Any, Self
 import numpy as np
 
 from tactile_exp.data.layout import Instances, Trials
+from tactile_exp.data.splits import divide_views
 from tactile_exp.modalities.base import MODALITIES, Modality
 
 log = logging.getLogger(__name__)
@@ -144,15 +145,10 @@ class Visual(Modality):
             views = np.flatnonzero(arrays.object_id == obj)
             views = views[np.argsort(arrays.view[views], kind="stable")]
             if obj in trials.shared:
-                n_train, n_test = trials.shared[obj]
-                if len(views) < 2:
-                    raise ValueError(
-                        f"visual split of {trials.label!r}: object {obj} is split by trial "
-                        f"({n_train} train, {n_test} test) but has {len(views)} photograph(s); "
-                        "at least 2 are needed to put views on both sides"
-                    )
-                k = min(len(views) - 1, max(1, round(len(views) * n_train / (n_train + n_test))))
-                views = views[:k] if trials.side == "train" else views[k:]
+                first, rest = divide_views(
+                    views, *trials.shared[obj], f"{trials.label!r}: object {obj}"
+                )
+                views = first if trials.side == "train" else rest
             rows.append(views)
         return np.concatenate(rows) if rows else np.zeros(0, np.int64)
 
