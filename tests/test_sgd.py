@@ -101,3 +101,29 @@ def test_the_finetune_warning_is_shown_once_per_process_not_per_adjective():
         for seed in (0, 1, 2):
             network.head().fit(_separable(60, 500, seed))
     assert [issubclass(w.category, FinetuneWarning) for w in caught].count(True) == 1
+
+
+@pytest.mark.parametrize("name", ["haptic_lstm", "haptic_cnn"])
+def test_compiled_training_does_not_depend_on_torch_threads(name):
+    """The compiled kernels sum in a fixed order whatever numba's thread count; the torch layers
+    around them (the LSTM's FC(10)) must not reintroduce a thread-dependent sum: a joblib grid
+    runs each job on one thread (loky sets OMP_NUM_THREADS), a plain grid on all cores."""
+    import torch
+
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((1100, 32, 12)).astype(np.float32)
+    y = (rng.random(1100) < 0.3).astype(int)
+    X[y == 1, 3] += 0.5
+    data = Instances(X, y, np.array([f"t{i}" for i in range(1100)]), np.arange(1100) // 10)
+    schedule = Schedule(epochs=3, finetune_epochs=2, batch_size=1000, lr=0.05)
+    threads, scores = torch.get_num_threads(), []
+    try:
+        for n in (1, 2):
+            torch.set_num_threads(n)
+            model = MODELS.build(name, impl="compiled", schedule=schedule, device="cpu", seed=1)
+            model.fit(data)
+            scores.append(model.decision_function(X))
+    finally:
+        torch.set_num_threads(threads)
+    assert torch.get_num_threads() == threads
+    np.testing.assert_array_equal(scores[0], scores[1])

@@ -12,7 +12,7 @@ from phac2_fixture import OBJECTS, published_groups, write_file
 
 from tactile_exp.data.layout import ADJECTIVES, Split, published_test_split
 from tactile_exp.data.phac2 import PHAC2, DataError
-from tactile_exp.data.splits import SPLITS, check_split, make_split, split_photographs
+from tactile_exp.data.splits import SPLITS, check_split, divide_views, make_split
 
 ALL = tuple(OBJECTS)
 # PHAC2_FORMAT §2: trial counts of the published split (train, test).
@@ -163,23 +163,6 @@ def test_unknown_rule_and_adjective(full: PHAC2) -> None:
         make_split(full, "gritty")
 
 
-def _photo_split(train: list[str], test: list[str], labels: list[int]) -> Split:
-    names = [*train, *test]
-    return Split("soft", tuple(train), tuple(test), dict(zip(names, labels, strict=True)))
-
-
-def test_photographs_follow_their_objects_trials() -> None:
-    split = _photo_split(
-        ["a_101_01", "a_101_02", "c_508_01"], ["b_410_01", "d_211_01"], [1, 1, 0, 1, 0]
-    )
-    photos = np.array([508, 101, 410, 101, 211, 999, 508])  # 999: an object of no trial
-    train, test, labels = split_photographs(split, photos)
-    assert train.tolist() == [1, 3, 0, 6]  # object by object (101, 508), views in order
-    assert test.tolist() == [4, 2]  # 211, then 410
-    assert train.dtype.kind == test.dtype.kind == "i"
-    assert labels == {101: 1, 508: 0, 410: 1, 211: 0}
-
-
 @pytest.mark.parametrize(
     "n_train,n_test,views,k",
     [(1, 1, 4, 2), (9, 1, 4, 3), (1, 9, 4, 1), (3, 1, 2, 1), (1, 3, 5, 1), (2, 1, 3, 2)],
@@ -187,31 +170,19 @@ def test_photographs_follow_their_objects_trials() -> None:
 def test_an_object_split_by_trial_splits_its_photographs_in_proportion(
     n_train: int, n_test: int, views: int, k: int
 ) -> None:
-    train = [f"a_101_{t:02d}" for t in range(1, n_train + 1)]
-    test = [f"a_101_{t:02d}" for t in range(n_train + 1, n_train + n_test + 1)]
-    split = _photo_split(train, test, [1] * (n_train + n_test))
-    photos = np.array([101] * views + [508])
-    got_train, got_test, labels = split_photographs(split, photos)
-    assert got_train.tolist() == list(range(k))  # first views to train, at least one per side
-    assert got_test.tolist() == list(range(k, views))
-    assert labels == {101: 1}
+    photos = np.arange(10, 10 + views)
+    first, rest = divide_views(photos, n_train, n_test, "'soft': object 101")
+    assert first.tolist() == photos[:k].tolist()  # first views to train, at least one per side
+    assert rest.tolist() == photos[k:].tolist()
 
 
 def test_an_object_split_by_trial_needs_two_photographs() -> None:
-    split = _photo_split(["a_101_01"], ["a_101_02"], [1, 1])
     with pytest.raises(
         ValueError,
         match=r"'soft': object 101 is split by trial \(1 train, 1 test\) "
         r"but has 1 photograph\(s\); at least 2",
     ):
-        split_photographs(split, np.array([101, 508]))
-
-
-def test_no_trials_give_empty_integer_sides() -> None:
-    train, test, labels = split_photographs(_photo_split([], [], []), np.array([101]))
-    assert train.shape == test.shape == (0,)
-    assert train.dtype == test.dtype == np.int64
-    assert labels == {}
+        divide_views(np.array([0]), 1, 1, "'soft': object 101")
 
 
 def test_a_missing_split_group_falls_back_to_the_table(

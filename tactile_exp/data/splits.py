@@ -236,37 +236,6 @@ def folds_split(
     return _make(dataset, adjective, train, test, f"folds seed={seed} fold={fold}/{folds}")
 
 
-def split_photographs(
-    split: Split, photo_objects: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
-    """Indices of the photographs (of objects ``photo_objects``) on the training and test sides,
-    and each object's label.
-
-    An object's photographs follow its trials: all on the side that holds its trials. An object
-    split by trial (the only object of its class, see `check_split`) has its photographs split in
-    the same proportion (first views to train, at least one per side).
-    """
-    counts: dict[int, list[int]] = {}
-    labels: dict[int, int] = {}
-    for side, trials in enumerate((split.train, split.test)):
-        for t in trials:
-            obj = _object(t)
-            counts.setdefault(obj, [0, 0])[side] += 1
-            labels[obj] = split.labels[t]
-    train: list[np.ndarray] = []
-    test: list[np.ndarray] = []
-    for obj, (n_train, n_test) in sorted(counts.items()):
-        views = np.flatnonzero(photo_objects == obj)
-        if n_test == 0 or n_train == 0:
-            (train if n_test == 0 else test).append(views)
-            continue
-        first, rest = divide_views(views, n_train, n_test, f"{split.adjective!r}: object {obj}")
-        train.append(first)
-        test.append(rest)
-    empty = np.zeros(0, dtype=np.int64)
-    return np.concatenate(train or [empty]), np.concatenate(test or [empty]), labels
-
-
 def divide_views(
     views: np.ndarray, n_train: int, n_test: int, where: str
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -31,7 +31,8 @@ from __future__ import annotations
 
 import warnings
 from abc import abstractmethod
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -136,7 +137,32 @@ class SGDModel(Model):
         X = self._preprocess(X)
         return torch.as_tensor(np.ascontiguousarray(X, dtype=np.float32), device=self.device_)
 
+    @contextmanager
+    def _torch_threads(self) -> Iterator[None]:
+        """torch's own ops on one thread while the compiled kernels train or score (CPU).
+
+        The kernels sum in a fixed order whatever numba's thread count, but the torch layers
+        around them (the LSTM's FC layers, a classification layer's matrix products) sum in an
+        order that depends on torch's thread count, and 200 epochs of SGD turn that rounding into
+        different AUCs (row G: 0.900 or 0.842 for one adjective). Jobs under Hydra's joblib
+        launcher get one thread each (loky sets OMP_NUM_THREADS), a plain job every core: one
+        thread here makes them equal. Those ops are small beside the kernels'."""
+        compiled = self.impl == "compiled" or (self.impl == "auto" and self.device_.type == "cpu")
+        threads = torch.get_num_threads()
+        if not compiled or threads == 1:
+            yield
+            return
+        torch.set_num_threads(1)
+        try:
+            yield
+        finally:
+            torch.set_num_threads(threads)
+
     def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
+        with self._torch_threads():
+            return self._fit(train, on_epoch)
+
+    def _fit(self, train: Instances, on_epoch: EpochCallback | None) -> History:
         X = np.asarray(train.X)
         if len(X) == 0:
             raise ValueError(f"{type(self).__name__}.fit: no training instances")
@@ -213,7 +239,7 @@ class SGDModel(Model):
                     f"{self.pretrain_loss} stage (linearly separable rows, every margin >= 1), "
                     f"so the scores equal loss={self.pretrain_loss}'s",
                     FinetuneWarning,
-                    stacklevel=2,
+                    stacklevel=3,  # the caller of fit (past _fit)
                 )
         return history
 
@@ -247,11 +273,13 @@ class SGDModel(Model):
 
     def transform(self, X: np.ndarray) -> np.ndarray:
         """The body's features for each row of ``X``: (n, D) float32."""
-        return self._features(self._tensor(X)).cpu().numpy()
+        with self._torch_threads():
+            return self._features(self._tensor(X)).cpu().numpy()
 
     @torch.no_grad()
     def decision_function(self, X: np.ndarray) -> np.ndarray:
-        scores = self.classifier_(self._features(self._tensor(X))).squeeze(1)
+        with self._torch_threads():
+            scores = self.classifier_(self._features(self._tensor(X))).squeeze(1)
         return scores.double().cpu().numpy()
 
     def _state_arrays(self) -> dict[str, np.ndarray]:
