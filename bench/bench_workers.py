@@ -70,7 +70,7 @@ def main() -> None:
                     adjectives, args.epochs, workers, Path(tmp) / f"{r}-{workers}"
                 )
                 times[workers].append(seconds)
-                aucs[workers] = result.mean_auc
+                aucs[workers] = result.means["mean_auc"]
                 print(f"  round {r + 1}, workers={workers}: {seconds:.1f} s")
     one, two = statistics.median(times[1]), statistics.median(times[2])
     print(

@@ -2,7 +2,8 @@
 and exit status 2, with no traceback unless ``HYDRA_FULL_ERROR=1``.
 
 ``ConfigError`` lives here, below the config edge, so that a component (a store, a modality, the
-sweep) can raise it without importing ``config``, which imports the registries of components."""
+sweep) can raise it without importing ``config``, which imports the registries of components;
+``TrackingError`` likewise, so that this module sits below the tracking store."""
 
 from __future__ import annotations
 
@@ -12,11 +13,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from tactile_exp.data.layout import DataError
-from tactile_exp.tracking import TrackingError
 
 
 class ConfigError(ValueError):
     """An impossible config value, reported before any work starts."""
+
+
+class TrackingError(RuntimeError):
+    """The tracking store cannot be used (e.g. the server is down): reported before any work."""
 
 
 USER_ERRORS = (ConfigError, DataError, TrackingError)

@@ -1,5 +1,5 @@
-"""One job: every adjective's run (``adjective.run_adjective``: split, fitted pipeline, scores,
-ROC AUC) under one parent run, with the job's summary (T1, T4, E1, E2).
+"""One job: every adjective's run (``recording.record_adjective``: split, fitted pipeline,
+scores, metrics) under one parent run, with the job's summary (T1, T4, E1, E2).
 
 Runs without Hydra: it takes the plain ``Settings`` built by ``tactile_exp.config``.
 """
@@ -11,14 +11,12 @@ import logging
 import os
 import warnings
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
-
-from tactile_exp import evaluate, metrics, stats
-from tactile_exp.adjective import AdjectiveResult, key_params, log_data, run_adjective
+from tactile_exp import metrics, recording
 from tactile_exp.config import Settings, param_error
+from tactile_exp.core import AdjectiveResult
 from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
@@ -26,8 +24,6 @@ from tactile_exp.data.splits import make_split
 from tactile_exp.errors import ConfigError
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.runtime import workers
-from tactile_exp.tracking import Tracker, canonical_column, flatten
-from tactile_exp.train import device_name
 
 log = logging.getLogger(__name__)
 
@@ -35,12 +31,17 @@ log = logging.getLogger(__name__)
 @dataclass
 class JobResult:
     run_id: str | None
-    mean_auc: float
-    results: dict[str, AdjectiveResult]
+    results: dict[str, AdjectiveResult]  # fitted pipelines released: kept in their runs
+    means: dict[str, float] = field(default_factory=dict)  # mean_<key> over adjectives, ...
     skipped: bool = False
-    # Per adjective, the held-out validation objects' AUC (where they hold both classes): what
-    # the job's objective is computed from (tactile_exp.objective); read back when skipped.
-    val_aucs: dict[str, float] = field(default_factory=dict)
+    # Per adjective, the held-out validation objects' metrics (those defined on them: AUC
+    # where they hold both classes): what the job's objective is computed from
+    # (tactile_exp.objective); read back from the runs when the job is skipped.
+    val: dict[str, dict[str, float]] = field(default_factory=dict)
+
+    @property
+    def val_aucs(self) -> dict[str, float]:
+        return {a: m["auc"] for a, m in self.val.items() if "auc" in m}
 
 
 def load(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
@@ -76,52 +77,28 @@ def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
 
 def run(settings: Settings) -> JobResult:
     """Run (or skip, if already FINISHED) one job and log it to MLflow."""
-    tracker = Tracker(settings.tracking.uri, settings.tracking.experiment)
+    tracker = recording.open_tracker(settings)
     if settings.tracking.skip_finished:
         identity = DATA_SOURCES.build(settings.data.name, **settings.data.params).identity()
-        done = tracker.finished_run(settings.config_hash, data_identity=identity)
+        done = recording.finished_job(tracker, settings, identity)
         if done is not None:
             log.info(
                 "skipping %s: run %s already FINISHED with this config on this data file",
                 settings.run_name,
                 done,
             )
-            _log_view(tracker, settings)
-            return JobResult(
-                done, float("nan"), {}, skipped=True, val_aucs=_val_aucs(tracker, done)
-            )
+            recording.log_view(tracker, settings)
+            val = recording.val_metrics(tracker, done)
+            return JobResult(done, {}, skipped=True, val=val)
     tracker.end_stale_runs(settings.config_hash)
     dataset, modality, splits = open_data(settings)
-
-    params = {**flatten(settings.resolved), **key_params(settings)}
-    tags = {
-        "config_hash": settings.config_hash,
-        "row_hash": settings.row_hash,
-        "run_level": "parent",
-        "sweep_id": settings.sweep_id,
-        "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
-        "device": device_name(settings.device),  # what device=auto picked here
-        **settings.study_tags,  # search.study, search.role, search.trial (issue 28)
-    }
-    with tracker.run(settings.run_name, params, tags) as parent_id:
-        log.info(
-            "MLflow run %s (%s) in %s, on %s",
-            settings.run_name,
-            parent_id,
-            tracker.uri,
-            tags["device"],
-        )
-        _log_config(tracker, parent_id, settings)
+    with recording.job_run(tracker, settings) as parent_id:
         modality.check(dataset)
-        tracker.set_tags(
-            parent_id,
-            {"data.identity": dataset.identity(), "data.labels": " ".join(dataset.label_names)},
-        )
-        log_data(tracker, parent_id, dataset)
+        recording.record_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
         headline = metrics.METRICS.build(settings.metrics[0])
         for i, result in enumerate(_adjectives(settings, tracker, parent_id, dataset, splits), 1):
-            results[result.adjective] = result
+            results[result.adjective] = replace(result, pipeline=None)  # kept in its run
             log.info(
                 "[%d/%d] %s %s %.3f (%.1f s)",
                 i,
@@ -131,45 +108,17 @@ def run(settings: Settings) -> JobResult:
                 result.metrics[headline.key],
                 result.sizes["seconds"],
             )
-        logged = metrics.summary({a: r.metrics for a, r in results.items()})
-        mean = logged["mean_auc"]
-        held_out = {a: stats.HeldOut(r.objects, r.y, r.scores) for a, r in results.items()}
-        ci = stats.mean_interval([held_out])  # over test objects (issue 27)
-        tracker.log_metrics(
-            parent_id,
-            logged | _means(results) | {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high},
-        )
-        _log_summary(tracker, parent_id, settings, dataset, results)
+        means = recording.record_summary(tracker, parent_id, settings, dataset, results)
         key, label = headline.key, headline.label
-        log.info("mean %s over %d adjectives: %.4f", label, len(results), logged[f"mean_{key}"])
-    val_aucs = {
-        a: r.diagnostics["val_auc"] for a, r in results.items() if "val_auc" in r.diagnostics
-    }
-    _log_view(tracker, settings)
-    return JobResult(parent_id, mean, results, val_aucs=val_aucs)
-
-
-def _val_aucs(tracker: Tracker, parent_id: str) -> dict[str, float]:
-    """A finished job's per-adjective validation AUCs, from its adjectives' runs."""
-    return tracker.child_metrics(parent_id, "val_auc")
-
-
-def _log_view(tracker: Tracker, settings: Settings) -> None:
-    """The last lines of a job's log: where its sweep's runs table is, with its numbers."""
-    columns = [canonical_column("metrics", "mean_auc")]
-    columns += [canonical_column("params", f"axis.{k}") for k in settings.axes]
-    if not settings.axes:
-        columns += [canonical_column("params", k) for k in ("choice.model", "combine")]
-    url = tracker.runs_view(columns, order_by=canonical_column("metrics", "mean_auc"))
-    log.info("runs table (jobs by mean AUC, with what each sets): %s", url)
-    if not tracker.uri.startswith(("http://", "https://")):
-        log.info("  serve it first: mlflow ui --backend-store-uri %s", tracker.uri)
-    log.info("  (MLflow opened without this link shows its GenAI Overview: click 'Model training')")
+        log.info("mean %s over %d adjectives: %.4f", label, len(results), means[f"mean_{key}"])
+    val = {a: r.sides["val"].metrics for a, r in results.items() if "val" in r.sides}
+    recording.log_view(tracker, settings)
+    return JobResult(parent_id, results, means, val=val)
 
 
 def _adjectives(
     settings: Settings,
-    tracker: Tracker,
+    tracker: recording.Tracker,
     parent_id: str,
     dataset: Any,
     splits: Mapping[str, Split],
@@ -181,7 +130,9 @@ def _adjectives(
     if processes == 1:
         for i, adjective in enumerate(splits, start=1):
             log.info("[%d/%d] %s", i, n, adjective)
-            yield run_adjective(settings, tracker, parent_id, dataset, splits[adjective])
+            yield recording.record_adjective(
+                settings, tracker, parent_id, dataset, splits[adjective]
+            )
         return
     pool = workers.Pool(processes, init=_open_in_worker, initargs=(settings, parent_id))
     log.info("%d adjectives in %d worker processes", n, processes)
@@ -206,7 +157,7 @@ def _open_in_worker(settings: Settings, parent_id: str) -> None:
         dataset, _, splits = load(settings)
     _WORKER.update(
         settings=settings,
-        tracker=Tracker(settings.tracking.uri, settings.tracking.experiment),
+        tracker=recording.open_tracker(settings),
         parent_id=parent_id,
         dataset=dataset,
         splits=splits,
@@ -216,48 +167,7 @@ def _open_in_worker(settings: Settings, parent_id: str) -> None:
 def _adjective_in_worker(i: int, n: int, adjective: str) -> AdjectiveResult:
     log.info("[%d/%d] %s (worker %d)", i, n, adjective, os.getpid())
     w = _WORKER
-    return run_adjective(
+    result = recording.record_adjective(
         w["settings"], w["tracker"], w["parent_id"], w["dataset"], w["splits"][adjective]
     )
-
-
-def _means(results: Mapping[str, AdjectiveResult]) -> dict[str, float]:
-    """mean_train_auc and mean_val_auc over the adjectives that have them (val: both classes)."""
-    out = {}
-    for name in ("train_auc", "val_auc"):
-        values = [r.diagnostics[name] for r in results.values() if name in r.diagnostics]
-        if values:
-            out[f"mean_{name}"] = float(np.mean(values))
-            out[f"n_{name}"] = len(values)
-    return out
-
-
-def _log_config(tracker: Tracker, run_id: str, settings: Settings) -> None:
-    import yaml
-
-    tracker.log_text(run_id, yaml.safe_dump(settings.resolved, sort_keys=False), "config.yaml")
-    if settings.output_dir is not None and (settings.output_dir / ".hydra").is_dir():
-        tracker.log_dir(run_id, settings.output_dir / ".hydra", ".hydra")
-
-
-def _log_summary(
-    tracker: Tracker,
-    run_id: str,
-    settings: Settings,
-    dataset: Any,
-    results: dict[str, AdjectiveResult],
-) -> None:
-    lines = ["adjective,auc,n_test_units,n_test_positive_units,n_train_objects,n_test_objects"]
-    for adjective, r in results.items():
-        s = r.sizes
-        lines.append(
-            f"{adjective},{r.auc:.6f},{s['n_test_units']},{s['n_test_positive_units']},"
-            f"{s['n_train_objects']},{s['n_test_objects']}"
-        )
-    tracker.log_text(run_id, "\n".join(lines) + "\n", "auc_per_adjective.csv")
-    curves = {a: (r.y, r.scores) for a, r in results.items()}
-    figure = evaluate.roc_figure(curves, f"{settings.run_name} on {dataset.path.name}")
-    tracker.log_figure(run_id, figure, "roc.png")
-    import matplotlib.pyplot as plt
-
-    plt.close(figure)
+    return replace(result, pipeline=None)  # kept in its run; not sent back to the job

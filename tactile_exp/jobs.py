@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tactile_exp import store
+from tactile_exp import artifacts
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.tracking import ExperimentNotFound, Tracker, TrackingError
@@ -62,9 +62,11 @@ class StoredJob:
             config = yaml.safe_load((folder / "config.yaml").read_text())
         except (OSError, yaml.YAMLError) as err:
             error = f"run {job_id}: artifact config.yaml unreadable ({err})"
-            raise store.ArtifactError(error) from None
+            raise artifacts.ArtifactError(error) from None
         if not isinstance(config, dict) or "modality" not in config:
-            raise store.ArtifactError(f"run {job_id}: artifact config.yaml is not a job's config")
+            raise artifacts.ArtifactError(
+                f"run {job_id}: artifact config.yaml is not a job's config"
+            )
         return cls(tracker, run, config)
 
     @property
@@ -125,7 +127,9 @@ class StoredJob:
         try:
             return Path(self.tracker.client.download_artifacts(child, ""))
         except Exception as err:
-            raise store.ArtifactError(f"run {child}: artifacts cannot be read ({err})") from None
+            raise artifacts.ArtifactError(
+                f"run {child}: artifacts cannot be read ({err})"
+            ) from None
 
     def pipelines(self, adjectives: Sequence[str] | None = None) -> dict[str, AdjectivePipeline]:
         """Each adjective's fitted pipeline, loaded from its child run."""

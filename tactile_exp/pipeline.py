@@ -5,8 +5,12 @@ keeps, and predict and the exported models load and call.
 model, the combiner that groups ``combine`` instances of an object into a unit (T4) and, when
 units combine instances, the head retrained on them. ``save(folder)`` / ``load(folder)`` is the
 one storage protocol: ``pipeline.json`` (what to build), ``preprocess/`` (what the modality
-learned), ``model/``, ``head/`` and ``parts/<part>/`` (``store.write_model``'s folders: JSON,
-npz and ``weights_only`` tensors; loading runs no stored code).
+learned), ``model/``, ``head/`` and ``parts/<part>/`` (``artifacts.write_model``'s folders:
+JSON, npz and ``weights_only`` tensors; loading runs no stored code).
+
+A modality may be built on trained parts (rows M and N: the haptic ConvNet beside the visual
+trunk): it declares them (``Modality.parts``) and the pipeline is given them fitted, found or
+trained by whoever fits it (``core.fit_adjective`` from a model cache), never by the modality.
 """
 
 from __future__ import annotations
@@ -16,11 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_exp import store
+from tactile_exp import artifacts
 from tactile_exp.combine import COMBINERS
 from tactile_exp.data.layout import Instances, Trials
 from tactile_exp.modalities import MODALITIES, Modality
-from tactile_exp.modalities.base import PartProvider
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
 from tactile_exp.registry import Component
@@ -54,6 +57,7 @@ class AdjectivePipeline:
             modality.name, cache_dir=cache_dir, **modality.params
         )
         self._combine_units = COMBINERS.build(combiner)
+        self.parts_: dict[str, Model] = {}
 
     @property
     def trains_model(self) -> bool:
@@ -70,15 +74,26 @@ class AdjectivePipeline:
         train: Trials,
         *,
         model: Model | None = None,
-        provide: PartProvider | None = None,
+        parts: dict[str, Model] | None = None,
         on_epoch: EpochCallback | None = None,
     ) -> History:
         """Fit on ``train``; ``model``: an already trained model to use instead of training one
-        (found by its training key), ``provide``: where the modality's parts come from.
+        (found by its training key), ``parts``: the modality's fitted parts (``parts()``).
         Returns the training curves (model, then ``head_*``)."""
-        if provide is not None:
-            self.preprocess.use_parts(provide)
-        return self.fit_instances(self.preprocess.fit(train).transform(train), model, on_epoch)
+        return self.fit_instances(self.fit_preprocess(train, parts or {}), model, on_epoch)
+
+    def fit_preprocess(self, train: Trials, parts: dict[str, Model]) -> Instances:
+        """Give the modality its fitted ``parts``, fit it on ``train``: the training instances."""
+        self.preprocess.set_parts(parts)
+        self.parts_ = parts
+        return self.preprocess.fit(train).transform(train)
+
+    def train_model(
+        self, instances: Instances, on_epoch: EpochCallback | None = None
+    ) -> tuple[Model, History]:
+        """A new model trained on the training ``instances``, and its curves."""
+        model = MODELS.build(self.model.name, **self.model.params)
+        return model, model.fit(instances, on_epoch)
 
     def fit_instances(
         self,
@@ -89,10 +104,10 @@ class AdjectivePipeline:
         """``fit`` after the preprocessing: the model (unless given trained) and the head."""
         self.n_train_instances_ = len(instances)
         history: History = {}
-        if model is None:
+        if model is None and self.trains_model:
+            model, history = self.train_model(instances, on_epoch)
+        elif model is None:
             model = MODELS.build(self.model.name, **self.model.params)
-            if self.trains_model:
-                history = model.fit(instances, on_epoch)
         self.model_ = model
         self.head_: Model | None = None
         if self.keeps_instances:
@@ -129,34 +144,34 @@ class AdjectivePipeline:
     def save(self, folder: Path) -> None:
         """Everything ``load`` needs, into ``folder`` (which may hold other artifacts)."""
         settings = {
-            "format": store.FORMAT,
+            "format": artifacts.FORMAT,
             "label": self.label,
             "modality": {"name": self.modality.name, "params": self.modality.params},
             "model": {"name": self.model.name, "params": self.model.params},
             "combiner": self.combiner,
             "combine": self.combine,
         }
-        (folder / SETTINGS).write_text(json.dumps(settings, indent=1, default=store.jsonable))
+        (folder / SETTINGS).write_text(json.dumps(settings, indent=1, default=artifacts.jsonable))
         state, arrays = self.preprocess.get_state()
         (folder / "preprocess").mkdir()
-        store.write_state(folder / "preprocess", state, arrays)
+        artifacts.write_state(folder / "preprocess", state, arrays)
         if self.trains_model and self.model_.storable:
             _write_model(folder / "model", self.model.name, self.model_)
         if self.head_ is not None and self.head_.storable:
-            _write_model(folder / "head", store.model_name(self.head_), self.head_)
-        for part, fitted in self.preprocess.fitted_parts().items():
+            _write_model(folder / "head", artifacts.model_name(self.head_), self.head_)
+        for part, fitted in self.parts_.items():
             name = self.preprocess.parts()[part][1].name
             _write_model(folder / "parts" / part, name, fitted)
 
     @classmethod
     def load(cls, folder: Path, where: str) -> AdjectivePipeline:
         """The pipeline ``save`` wrote into ``folder``; ``where`` names it in errors (run id).
-        Raises ``store.ArtifactError`` naming the file when anything is missing or off."""
+        Raises ``artifacts.ArtifactError`` naming the file when anything is missing or off."""
 
         def at(path: str) -> str:
             return f"{where}: artifact {path}"
 
-        settings = store.read_json(folder, where, SETTINGS)
+        settings = artifacts.read_json(folder, where, SETTINGS)
         try:
             modality = Component(settings["modality"]["name"], settings["modality"]["params"])
             model = Component(settings["model"]["name"], settings["model"]["params"])
@@ -168,32 +183,31 @@ class AdjectivePipeline:
                 label=str(settings["label"]),
             )
         except (KeyError, TypeError, ValueError) as err:
-            raise store.ArtifactError(f"{at(SETTINGS)}: missing or bad entry {err}") from None
+            raise artifacts.ArtifactError(f"{at(SETTINGS)}: missing or bad entry {err}") from None
         pre = folder / "preprocess"
-        store.check_files(pre, store.STATE_FILES, at("preprocess"))
-        state = store.read_json(pre, at("preprocess"))
+        artifacts.check_files(pre, artifacts.STATE_FILES, at("preprocess"))
+        state = artifacts.read_json(pre, at("preprocess"))
         try:
-            pipeline.preprocess.set_state(state, store.read_arrays(pre, at("preprocess")))
+            pipeline.preprocess.set_state(state, artifacts.read_arrays(pre, at("preprocess")))
         except (KeyError, TypeError, ValueError) as err:
-            raise store.ArtifactError(f"{at('preprocess')}: {err}") from None
-        pipeline.preprocess.set_parts(
-            {
-                part: store.read_model(folder / "parts" / part, at(f"parts/{part}"))
-                for part in pipeline.preprocess.parts()
-            }
-        )
+            raise artifacts.ArtifactError(f"{at('preprocess')}: {err}") from None
+        pipeline.parts_ = {
+            part: artifacts.read_model(folder / "parts" / part, at(f"parts/{part}"))
+            for part in pipeline.preprocess.parts()
+        }
+        pipeline.preprocess.set_parts(pipeline.parts_)
         if (folder / "model").is_dir():
-            pipeline.model_ = store.read_model(folder / "model", at("model"))
+            pipeline.model_ = artifacts.read_model(folder / "model", at("model"))
         elif pipeline.trains_model:
-            raise store.ArtifactError(f"{where}: no artifact model/, but the model is trained")
+            raise artifacts.ArtifactError(f"{where}: no artifact model/, but the model is trained")
         else:
             pipeline.model_ = MODELS.build(model.name, **model.params)
         pipeline.head_ = None
         if not pipeline.keeps_instances:
-            pipeline.head_ = store.read_model(folder / "head", at("head"))
+            pipeline.head_ = artifacts.read_model(folder / "head", at("head"))
         return pipeline
 
 
 def _write_model(folder: Path, name: str, model: Model) -> None:
     folder.mkdir(parents=True)
-    store.write_model(folder, name, model)
+    artifacts.write_model(folder, name, model)

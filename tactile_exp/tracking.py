@@ -33,6 +33,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tactile_exp.errors import TrackingError
 from tactile_exp.runtime.processes import process_alive, process_tags
 from tactile_exp.runtime.termination import shielded
 
@@ -120,10 +121,6 @@ def ui_base(uri: str) -> str:
 def canonical_column(kind: str, key: str) -> str:
     """A runs-table column as the UI names it, e.g. ``metrics.`mean_auc```."""
     return f"{kind}.`{key}`"
-
-
-class TrackingError(RuntimeError):
-    """The tracking store cannot be used (e.g. the server is down): reported before any work."""
 
 
 def check_server(uri: str, timeout: float = 5.0) -> None:
@@ -458,3 +455,7 @@ class Tracker:
     def log_dir(self, run_id: str, folder: Path, path: str) -> None:
         with shielded():
             self.client.log_artifacts(run_id, str(folder), path)
+
+    def download(self, run_id: str, path: str) -> Path:
+        """Artifact ``path`` of run ``run_id`` ("" for all of them) as a local file or folder."""
+        return Path(self.client.download_artifacts(run_id, path))

@@ -29,9 +29,13 @@ def test_experiment_runs_end_to_end(tiny_config, mlflow_uri, experiment):
     result = run(settings_from_config(tiny_config(overrides, adjectives="[hard,thick]")))
     assert set(result.results) == {"hard", "thick"}
     for r in result.results.values():  # both classes scored, the AUC that of these scores
-        assert set(r.y) == {0, 1} and len(r.scores) == len(r.y) and np.all(np.isfinite(r.scores))
-        assert r.auc == pytest.approx(roc_auc_score(r.y, r.scores), abs=1e-12)
+        assert (
+            set(r.test.y) == {0, 1}
+            and len(r.test.scores) == len(r.test.y)
+            and np.all(np.isfinite(r.test.scores))
+        )
+        assert r.metrics["auc"] == pytest.approx(roc_auc_score(r.test.y, r.test.scores), abs=1e-12)
     parent = MlflowClient(mlflow_uri).get_run(result.run_id)
     assert parent.info.status == "FINISHED"
-    mean = np.mean([r.auc for r in result.results.values()])
+    mean = np.mean([r.metrics["auc"] for r in result.results.values()])
     assert parent.data.metrics["mean_auc"] == pytest.approx(mean, abs=1e-12)

@@ -53,7 +53,7 @@ def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri):
         assert len(client.get_metric_history(child.info.run_id, "train_loss")) == 2
     aucs = [c.data.metrics["auc"] for c in children]
     assert parent.data.metrics["mean_auc"] == pytest.approx(np.mean(aucs))
-    assert result.mean_auc == pytest.approx(np.mean(aucs))
+    assert result.means["mean_auc"] == pytest.approx(np.mean(aucs))
     listed = {a.path for a in client.list_artifacts(parent.info.run_id)}
     assert {"config.yaml", "auc_per_adjective.csv", "roc.png"} <= listed
 
@@ -137,7 +137,7 @@ def test_ten_trial_units_are_objects(tiny_config):
         tiny_config(["experiment=table1_j_haptic_cnn_10trials", "combine=2"], adjectives="[hard]")
     )
     result = run(settings).results["hard"]
-    assert len(result.units) == len(set(result.objects)) == result.sizes["n_test_objects"]
+    assert len(result.test.units) == len(set(result.test.objects)) == result.sizes["n_test_objects"]
 
 
 def test_parallel_sweep_runs_every_job(tiny_config, cache_dir, mlflow_uri, tmp_path):
@@ -183,11 +183,15 @@ def test_baseline_rows_run_from_their_experiment_configs(tiny_config, row, extra
     result = run(settings)
     assert set(result.results) == {"hard", "soft"}
     for r in result.results.values():
-        assert np.all(np.isfinite(r.scores)) and len(r.scores) == len(r.y) == len(r.units)
-        assert r.auc == pytest.approx(roc_auc_score(r.y, r.scores), abs=1e-12)
-        assert set(r.objects) and r.sizes["n_test_objects"] == len(set(r.objects))
+        assert np.all(np.isfinite(r.test.scores)) and len(r.test.scores) == len(r.test.y) == len(
+            r.test.units
+        )
+        assert r.metrics["auc"] == pytest.approx(roc_auc_score(r.test.y, r.test.scores), abs=1e-12)
+        assert set(r.test.objects) and r.sizes["n_test_objects"] == len(set(r.test.objects))
     pooled = settings.combine > 1
-    assert all((len(set(r.objects)) == len(r.units)) == pooled for r in result.results.values())
+    assert all(
+        (len(set(r.test.objects)) == len(r.test.units)) == pooled for r in result.results.values()
+    )
 
 
 def test_sigterm_marks_the_runs_failed(cache_dir, mlflow_uri):
@@ -242,9 +246,10 @@ def test_children_log_train_and_validation_auc_without_test_objects(tiny_config,
         assert np.isfinite([metrics["train_auc"], metrics["val_auc"]]).all()  # both logged
         assert metrics["n_val_objects"] >= 2 and metrics["n_val_positive_objects"] >= 1
         res = result.results[adjective]
-        assert res.diagnostics == {k: metrics[k] for k in ("train_auc", "val_auc")}
+        assert [res.sides[side].metrics["auc"] for side in ("train", "val")] == [
+            metrics["train_auc"], metrics["val_auc"]]  # fmt: skip
         split = splits[adjective]
-        assert set(res.objects) <= split.objects("test")  # test AUC: test objects only
+        assert set(res.test.objects) <= split.objects("test")  # test AUC: test objects only
         n_train = metrics["n_train_objects"] + metrics["n_val_objects"]
         assert n_train == len(split.objects("train"))  # held out of the final training
     parent = next(r for r in runs if r.data.tags["run_level"] == "parent")
@@ -373,8 +378,8 @@ def test_rows_a_and_i_run_on_five_objects(tiny_config, five_objects, row, adject
         result = run(settings)
     assert set(result.results) == {"absorbent", "squishy"}
     for r in result.results.values():  # a test side of both classes, and the AUC of its scores
-        assert set(r.y) == {0, 1} and set(r.objects) <= set(FIVE_OBJECTS)
-        assert r.auc == pytest.approx(roc_auc_score(r.y, r.scores), abs=1e-12)
+        assert set(r.test.y) == {0, 1} and set(r.test.objects) <= set(FIVE_OBJECTS)
+        assert r.metrics["auc"] == pytest.approx(roc_auc_score(r.test.y, r.test.scores), abs=1e-12)
     messages = " ".join(str(w.message) for w in caught)
     assert "falling back to the random split" in messages  # published test objects are absent
 

@@ -90,6 +90,6 @@ def test_new_model_and_new_row_in_a_temporary_config_dir(tmp_path, monkeypatch, 
     result = run(settings)
     assert set(result.results) == {"hard", "soft"}
     for r in result.results.values():  # the AUC of the new model's scores, both classes there
-        assert set(r.y) == {0, 1} and np.isfinite(r.scores).all()
-        assert r.auc == roc_auc_score(r.y, r.scores)
-        assert len(np.unique(r.scores)) > 1  # the new model's scores, not a constant
+        assert set(r.test.y) == {0, 1} and np.isfinite(r.test.scores).all()
+        assert r.metrics["auc"] == roc_auc_score(r.test.y, r.test.scores)
+        assert len(np.unique(r.test.scores)) > 1  # the new model's scores, not a constant

@@ -69,7 +69,7 @@ def _mean_aucs(tiny_config, files: dict[int, Path]) -> list[float]:
         ]
         result = run(settings_from_config(tiny_config(overrides, adjectives=ADJS)))
         assert set(result.results) == set(CHANNELS)
-        out.append(result.mean_auc)
+        out.append(result.means["mean_auc"])
     return out
 
 

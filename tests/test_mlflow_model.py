@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 from mlflow.tracking import MlflowClient
 
-from tactile_exp import store
+from tactile_exp import artifacts
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.deploy.__main__ import main
@@ -86,14 +86,14 @@ def test_a_corrupt_artifact_is_predicts_error(registered, mlflow_uri):
     local = Path(mlflow.artifacts.download_artifacts("models:/touch/1"))
     (head,) = local.rglob("head/weights.pt")
     head.write_bytes(b"garbage")
-    with pytest.raises(store.ArtifactError) as logged:  # when loaded, before any request
+    with pytest.raises(artifacts.ArtifactError) as logged:  # when loaded, before any request
         mlflow.pyfunc.load_model(str(local))
     child = head.parent.parent.name
     assert str(logged.value).startswith(f"run {child}: artifact head/weights.pt is not a readable")
     client = MlflowClient(mlflow_uri)
     original = Path(client.get_run(child).info.artifact_uri.removeprefix("file://"), "head")
     (original / "weights.pt").write_bytes(b"garbage")
-    with pytest.raises(store.ArtifactError) as direct:
+    with pytest.raises(artifacts.ArtifactError) as direct:
         predict(run_id=job, tracking_uri=mlflow_uri, data=data, trials=trials)
     assert str(direct.value) == str(logged.value)
 

@@ -276,7 +276,7 @@ def test_every_registered_model_declares_what_the_engine_reads(tmp_path, name):
     default, never probed: the capabilities' types, ``input_shape_``, ``check_steps`` and, for a
     storable model, ``state``/``restore`` that give back the same scores (store.py's round trip);
     a model that is not storable says so."""
-    from tactile_exp import store
+    from tactile_exp import artifacts
     from tactile_exp.modalities import MODALITIES
 
     cls = MODELS[name]
@@ -295,8 +295,8 @@ def test_every_registered_model_declares_what_the_engine_reads(tmp_path, name):
             model.state()
         return
     assert model.input_shape_ == shape
-    store.write_model(tmp_path, name, model)
-    loaded = store.read_model(tmp_path, "here")
+    artifacts.write_model(tmp_path, name, model)
+    loaded = artifacts.read_model(tmp_path, "here")
     assert type(loaded) is cls and loaded.input_shape_ == shape
     np.testing.assert_array_equal(
         loaded.decision_function(train.X), model.decision_function(train.X)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from mlflow.tracking import MlflowClient
 
-from tactile_exp import store
+from tactile_exp import artifacts
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import DataError, TrialName
 from tactile_exp.data.phac2 import PHAC2
@@ -100,7 +100,7 @@ def test_predict_errors_are_clear(job, mlflow_uri, tmp_path, capsys):
     message = error([result.run_id, *base])
     assert f"run {child.info.run_id}: artifact head/weights.pt" in message
     assert "Traceback" not in message
-    with pytest.raises(store.ArtifactError):
+    with pytest.raises(artifacts.ArtifactError):
         predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=data, trials=[trial])
 
 
@@ -186,12 +186,12 @@ def test_baseline_artifacts_corrupt_or_missing_are_clear_errors(tiny_config, mlf
         kept = (folder / path).read_bytes()
         (folder / path).write_bytes(b"garbage")
         with pytest.raises(
-            store.ArtifactError, match=f"run {child.info.run_id}: artifact {expected}"
+            artifacts.ArtifactError, match=f"run {child.info.run_id}: artifact {expected}"
         ):
             predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=data, trials=[trial])
         (folder / path).write_bytes(kept)
     (folder / "preprocess" / "arrays.npz").unlink()
-    with pytest.raises(store.ArtifactError, match=r"artifact preprocess/ lacks arrays.npz"):
+    with pytest.raises(artifacts.ArtifactError, match=r"artifact preprocess/ lacks arrays.npz"):
         predict(run_id=result.run_id, tracking_uri=mlflow_uri, data=data, trials=[trial])
 
 

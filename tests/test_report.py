@@ -285,7 +285,7 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
     child = tracker.children(job.run_id)["metallic"]
     net = store.load_model(tracker, child, "model")
     for m in data.maps:
-        assert m.unit.label == 1 and m.unit.unit in set(result.units)
+        assert m.unit.label == 1 and m.unit.unit in set(result.test.units)
         first = int(np.flatnonzero(test.trial == m.unit.unit)[0])
         expected = net.transform(test.X[first : first + 1]).reshape(net.conv3_shape_)
         assert m.activations == pytest.approx(expected, abs=1e-5)

@@ -78,10 +78,10 @@ def test_a_job_that_received_sigterm_stops_at_its_next_epoch(
     """The epoch loop calls ``check``: a dropped SIGTERM ends the training, its runs FAILED."""
     from mlflow.tracking import MlflowClient
 
-    from tactile_exp import adjective, experiment
+    from tactile_exp import experiment, recording
     from tactile_exp.config import settings_from_config
 
-    logger = adjective.epoch_logger
+    logger = recording.epoch_logger
     epochs: list[int] = []
 
     def signalled_in_epoch_2(name):
@@ -95,7 +95,7 @@ def test_a_job_that_received_sigterm_stops_at_its_next_epoch(
 
         return wrapped
 
-    monkeypatch.setattr(adjective, "epoch_logger", signalled_in_epoch_2)
+    monkeypatch.setattr(recording, "epoch_logger", signalled_in_epoch_2)
     overrides = ["model=haptic_cnn", "model.impl=torch"]
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard]"))
     with pytest.raises(termination.Terminated, match="signal 15"):

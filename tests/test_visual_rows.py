@@ -92,11 +92,11 @@ def test_visual_rows_run_end_to_end(visual_config, mlflow_uri, row, combine):
         assert r.sizes["n_test_instances"] == VIEWS * n_objects  # every view of a test object
         assert len(rows) == (VIEWS * n_objects if combine == 1 else n_objects)
         assert r.sizes["n_train_instances"] == VIEWS * r.sizes["n_train_objects"]
-        assert [LABELS[o][r.adjective] for o in r.objects] == list(r.y)
+        assert [LABELS[o][r.adjective] for o in r.test.objects] == list(r.test.y)
         assert len(client.get_metric_history(child.info.run_id, "train_loss")) == (
             settings.model.params["schedule"]["epochs"] if combine == 1 else 0  # row L: head only
         )
-    aucs = [r.auc for r in result.results.values()]
+    aucs = [r.metrics["auc"] for r in result.results.values()]
     assert parent.data.metrics["mean_auc"] == pytest.approx(np.mean(aucs))
 
 

@@ -7,7 +7,7 @@ import sys
 
 from mlflow.exceptions import MlflowException
 
-from tactile_exp import store
+from tactile_exp import artifacts
 from tactile_exp.predict import PredictError
 
 
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError as err:
         print(f"error: {err.name} is missing: pip install 'tactile_exp[deploy]'", file=sys.stderr)
         return 2
-    except (PredictError, store.ArtifactError) as err:
+    except (PredictError, artifacts.ArtifactError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     except MlflowException as err:  # e.g. --register on a store without a Model Registry

@@ -4,7 +4,7 @@ Each adjective's file is a plain-torch module (``DecisionNet``) built from the s
 exported with torch's TorchScript-based exporter (``dynamo=False``: it needs no onnxscript; the
 torch.export one does). The ConvNet and the LSTM train with numba kernels, but their weights are
 ordinary ``nn.Module`` parameters, so the stored model loaded with ``impl="torch"`` (a setting that
-changes no weight, ``store.MODEL_UNKEYED``) is already plain torch: grouped ``Conv1d`` and
+changes no weight, ``keys.MODEL_UNKEYED``) is already plain torch: grouped ``Conv1d`` and
 ``nn.LSTM``. The GoogLeNet trunk (rows K-N) is exported once (``googlenet.onnx``); the adjectives'
 files take its pooled inception (5a) features. ``manifest.json`` says what each input holds and
 ``preprocess.npz`` keeps each adjective's fitted preprocessing (docs/deployment.md has a numpy
@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from tactile_exp import store
+from tactile_exp import artifacts
 from tactile_exp.combine import COMBINERS
 from tactile_exp.data.layout import EPS
 from tactile_exp.jobs import PredictError, StoredJob
@@ -156,7 +156,7 @@ def _network(
     features are concatenated for the head."""
 
     def load(path: str) -> Any:
-        return store.read_model(folder / path, f"run {child}: artifact {path}", TORCH)
+        return artifacts.read_model(folder / path, f"run {child}: artifact {path}", TORCH)
 
     if modality == "multimodal":  # the ConvNet part, the object's views, one linear layer
         part, model = load("parts/haptic"), load("model")
@@ -235,7 +235,7 @@ def export_job(
                 manifest["visual"] = _visual_layout(visual, views)
                 key = (visual["size"], visual["layout"], visual["seed"], visual["weights"])
         except (KeyError, TypeError, ValueError) as err:
-            raise store.ArtifactError(
+            raise artifacts.ArtifactError(
                 f"{where}/pipeline.json: missing or bad entry {err}"
             ) from None
         prefix = "" if modality == "multimodal" else f"{modality}."  # multimodal's are prefixed

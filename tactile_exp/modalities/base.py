@@ -10,7 +10,6 @@ so bad input surfaces there. ``get_state``/``set_state`` carry what ``fit`` lear
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Self
 
@@ -19,9 +18,6 @@ import numpy as np
 from tactile_exp.data.layout import DataError, Instances, TrialName, Trials
 from tactile_exp.models.base import Model
 from tactile_exp.registry import Component, Registry
-
-# provide(part, training instances of the part's modality, their trials) -> the part's fitted model
-PartProvider = Callable[[str, Instances, Trials], Model]
 
 
 class Modality(ABC):
@@ -73,22 +69,15 @@ class Modality(ABC):
         return {}
 
     def parts(self) -> dict[str, tuple[Component, Component]]:
-        """Trained models this modality's features come from: part -> (modality, model).
+        """Trained models this modality's features come from: part -> (modality, model), the
+        part's model trained on its own modality's instances of the same training trials.
 
-        The engine finds or trains each per adjective and hands it over through ``use_parts``.
-        """
-        return {}
-
-    def use_parts(self, provide: PartProvider) -> None:
-        """Receive the engine's ``provide(part, train, trials) -> fitted model``."""
-        self.provide = provide
-
-    def fitted_parts(self) -> dict[str, Model]:
-        """The parts ``fit`` used (saved beside the model); set them with ``set_parts``."""
+        Whoever fits the modality finds or trains each one (by its training key) and gives them
+        fitted through ``set_parts`` before ``fit``; a loaded pipeline gives the stored ones."""
         return {}
 
     def set_parts(self, parts: dict[str, Model]) -> None:
-        """Take stored parts instead of asking the provider (a loaded pipeline)."""
+        """Take the fitted parts that ``parts()`` declares (before ``fit`` or ``set_state``)."""
         if parts:
             raise ValueError(f"{type(self).__name__} has no parts, got {sorted(parts)}")
 

@@ -5,8 +5,9 @@ of one object (row I's unit at 1, row J's at 10, concatenated as T4 does) follow
 L2-normalised inception (5a) features of the object's first ``views`` photographs (row L's unit,
 built by the visual modality's rule: ``unit_members`` without padding). ``multimodal_units`` and
 ``visual_units`` build the units for training and for ``predict`` alike.
-The ConvNet is the ``haptic`` part: the engine finds it by its training key (the model rows H, I
-and J train) or trains it in the job when absent, per adjective; the fitted pipeline keeps it.
+The ConvNet is the ``haptic`` part (``parts``): given fitted through ``set_parts``, found by its
+training key in a model cache (the model rows H, I and J train) or trained when absent, per
+adjective; the fitted pipeline keeps it.
 The visual trunk is frozen and untrained (its features are cached on disk by weights file), so
 it needs no lookup. The model on
 top is only a classification layer (``experiment=table1_m_*``: ``linear``, hinge loss).
@@ -122,13 +123,13 @@ class Multimodal(Modality):
         self.haptic.fit(trials)
         self.visual.fit(trials)
         self.left_out_ = set()
-        self.net_ = self.provide("haptic", self.haptic.transform(trials), trials)
+        if not hasattr(self, "net_"):
+            raise ValueError("multimodal: fit needs its fitted haptic ConvNet: set_parts first")
         return self
 
-    def fitted_parts(self) -> dict[str, Model]:
-        return {"haptic": self.net_}
-
     def set_parts(self, parts: dict[str, Model]) -> None:
+        if set(parts) != {"haptic"}:
+            raise ValueError(f"multimodal: expected its fitted part 'haptic', got {sorted(parts)}")
         self.net_ = parts["haptic"]
 
     def transform(self, trials: Trials) -> Instances:

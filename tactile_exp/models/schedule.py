@@ -4,7 +4,7 @@
 YAMLs carry it whole (``schedule: ${schedule}``) and ``SGDModel`` takes it as one constructor
 argument. ``head`` is how ``SGDModel.head()`` retrains the classification layer on combined
 instances (T4, the node's ``head``); it changes no learned representation, so the store leaves it
-out of the training key (``store.MODEL_UNKEYED``).
+out of the training key (``keys.MODEL_UNKEYED``).
 """
 
 from __future__ import annotations

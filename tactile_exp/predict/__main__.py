@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from tactile_exp import store
+from tactile_exp import artifacts
 from tactile_exp.predict import PredictError, predict
 
 
@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
             data=args.data, trials=args.trial, object_id=args.object, photos=args.photos,
             adjectives=args.adjective,
         )  # fmt: skip
-    except (PredictError, store.ArtifactError) as err:
+    except (PredictError, artifacts.ArtifactError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     if args.format != "table":  # the table says it itself; csv and json stay data only

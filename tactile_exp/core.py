@@ -1,0 +1,217 @@
+"""Fitting and scoring one adjective (T1, E1, E2), touching no tracking store.
+
+``fit_adjective`` takes the job's settings, the data set and one adjective's split, and returns
+an ``AdjectiveResult``: the fitted pipeline, every side's scores and metrics (test; train; val
+when ``validation.fraction`` > 0), the training curves and the sizes. Trained models and a
+modality's parts come from a ``cache.ModelCache`` by training key, so rows H, I and J share one
+ConvNet per adjective, and rows M and N the ConvNet of row I or J. Recording the result (an
+MLflow child run) is ``recording``'s work; a notebook needs none of it (``tactile_exp.api``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from tactile_exp import keys, metrics
+from tactile_exp.cache import ModelCache, Trained
+from tactile_exp.config import Settings
+from tactile_exp.data.layout import Instances, Split, Trials
+from tactile_exp.modalities import MODALITIES
+from tactile_exp.models.base import EpochCallback, History, Model
+from tactile_exp.models.registry import MODELS
+from tactile_exp.pipeline import AdjectivePipeline
+from tactile_exp.registry import Component
+from tactile_exp.runtime import termination
+from tactile_exp.validation import validation_split
+
+log = logging.getLogger(__name__)
+
+SIDES = ("test", "train", "val")  # the order scores are drawn in (row O's are random)
+Progress = Callable[[str], EpochCallback]  # what trains under a name -> its epoch callback
+
+
+@dataclass
+class Scored:
+    """One side's units: labels, scores, names (first trial of each unit), objects, and each
+    configured metric that is defined on them, keyed by the metric's key (``auc``, ``f1``)."""
+
+    y: np.ndarray
+    scores: np.ndarray
+    units: np.ndarray
+    objects: np.ndarray
+    metrics: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class AdjectiveResult:
+    adjective: str
+    sides: dict[str, Scored]  # "test", "train", and "val" when objects were held out
+    sizes: dict[str, float]  # counts of trials, objects, units; "seconds"
+    history: History = field(default_factory=dict)  # training curves (model, then head_*)
+    preprocess: dict[str, float] = field(default_factory=dict)  # the modality's own counts
+    pipeline: AdjectivePipeline | None = None  # None once released (kept in its run)
+
+    @property
+    def test(self) -> Scored:
+        return self.sides["test"]
+
+    @property
+    def metrics(self) -> dict[str, float]:
+        """The test side's metrics: what the paper's Table I reports (``auc``)."""
+        return self.sides["test"].metrics
+
+
+def adjective_key(
+    settings: Settings, dataset: Any, modality: Component, model: Component, label: str
+) -> str:
+    """``keys.training_key`` of one adjective's model (or part) in this job."""
+    return keys.training_key(
+        dataset=dataset.identity(),
+        modality=modality,
+        model=model,
+        split=settings.split_key,
+        validation=settings.validation_fraction,
+        seed=settings.seed,
+        adjective=label,
+    )
+
+
+def stores_model(settings: Settings) -> bool:
+    """Whether the job's model is trained and storable, so kept in (and found in) a cache."""
+    pipeline = new_pipeline(settings)
+    return pipeline.trains_model and MODELS[settings.model.name].storable
+
+
+def new_pipeline(settings: Settings, label: str = "") -> AdjectivePipeline:
+    return AdjectivePipeline(
+        settings.modality, settings.model, settings.combiner, settings.combine,
+        label=label, cache_dir=settings.cache_dir / "preprocessed",
+    )  # fmt: skip
+
+
+def sides(settings: Settings, dataset: Any, split: Split) -> dict[str, Trials]:
+    """Training, test and (held out of training, issue 13) validation trials of ``split``."""
+    fit_split, held = validation_split(
+        split, fraction=settings.validation_fraction, seed=settings.seed
+    )
+    out = {"train": fit_split.trials("train", dataset), "test": split.trials("test", dataset)}
+    if held:
+        out["val"] = replace(split.trials("train", dataset, held), side="validation")
+    return out
+
+
+def fit_adjective(
+    settings: Settings,
+    dataset: Any,
+    split: Split,
+    cache: ModelCache,
+    *,
+    progress: Progress | None = None,
+) -> AdjectiveResult:
+    """Fit ``split``'s adjective on its training trials, score every side, compute metrics.
+
+    ``progress(name)``: the epoch callback of what trains under ``name`` (the adjective, or
+    ``<adjective>/<part>``); the test side's metrics raise when undefined on its labels."""
+    termination.check()
+    on_epoch = None if progress is None else progress(split.adjective)
+    start = time.perf_counter()
+    adjective = split.adjective
+    pipeline = new_pipeline(settings, adjective)
+    trials = sides(settings, dataset, split)
+    parts = {
+        part: _part(settings, dataset, cache, part, modality, model, trials["train"], progress)
+        for part, (modality, model) in pipeline.preprocess.parts().items()
+    }
+    instances = pipeline.fit_preprocess(trials["train"], parts)
+    history: History = {}
+    model = None
+    if pipeline.trains_model and MODELS[settings.model.name].storable:
+        key = adjective_key(settings, dataset, settings.modality, settings.model, adjective)
+        trained = cache.get_or_train(
+            key,
+            lambda: pipeline.train_model(instances, on_epoch),
+            overrides=keys.unkeyed(settings.model.params),
+        )
+        model, history = trained.model, trained.history
+    history = history | pipeline.fit_instances(instances, model, on_epoch)
+    test = pipeline.preprocess.transform(trials["test"])
+    scored = {"test": pipeline.score(test), "train": pipeline.train_scores()}
+    if "val" in trials:
+        scored["val"] = pipeline.decision_function(trials["val"])
+    result = {
+        side: _scored(settings.metrics, *scored[side], side == "test")
+        for side in SIDES
+        if side in scored
+    }
+    sizes = _sizes(split, trials, pipeline, test, scored["test"][1], scored.get("val"))
+    sizes["seconds"] = time.perf_counter() - start
+    return AdjectiveResult(
+        adjective, result, sizes, history, pipeline.preprocess.metrics(), pipeline
+    )
+
+
+def _part(
+    settings: Settings,
+    dataset: Any,
+    cache: ModelCache,
+    part: str,
+    modality: Component,
+    model: Component,
+    train: Trials,
+    progress: Progress | None,
+) -> Model:
+    """A modality's part (row M's ConvNet), found by its training key or trained on ``train``
+    after the part's own modality, as the job that trains it alone would."""
+
+    def fit() -> tuple[Model, History]:
+        preprocess = MODALITIES.build(
+            modality.name, cache_dir=settings.cache_dir / "preprocessed", **modality.params
+        )
+        net = MODELS.build(model.name, **model.params)
+        on_epoch = None if progress is None else progress(f"{train.label}/{part}")
+        return net, net.fit(preprocess.fit(train).transform(train), on_epoch)
+
+    key = adjective_key(settings, dataset, modality, model, train.label)
+    trained: Trained = cache.get_or_train(key, fit, part=part, overrides=keys.unkeyed(model.params))
+    return trained.model
+
+
+def _scored(names: tuple[str, ...], scores: np.ndarray, units: Instances, strict: bool) -> Scored:
+    """A side's scores with every metric of ``names``: those defined on its labels, or (strict,
+    the test side) all of them, raising when one is not."""
+    if strict:
+        values = metrics.compute(names, units.y, scores)
+    else:
+        both = len(np.unique(units.y)) == 2
+        defined = [n for n in names if both or not metrics.METRICS.build(n).needs_both_classes]
+        values = metrics.compute(defined, units.y, scores)
+    return Scored(units.y, scores, units.trial, units.object_id, values)
+
+
+def _sizes(
+    split: Split,
+    trials: dict[str, Trials],
+    pipeline: AdjectivePipeline,
+    test: Instances,
+    units: Instances,
+    val: tuple[np.ndarray, Instances] | None,
+) -> dict[str, float]:
+    val_units = val[1] if val is not None else Instances(np.zeros((0, 1)), *[np.zeros(0)] * 3)
+    return {
+        "n_train_instances": pipeline.n_train_instances_,
+        "n_test_instances": len(test),
+        "n_train_trials": len(trials["train"]),
+        "n_test_trials": len(split.test),
+        "n_train_objects": len(trials["train"].objects),
+        "n_test_objects": len(split.objects("test")),
+        "n_test_units": len(units),
+        "n_test_positive_units": int(units.y.sum()),
+        "n_val_objects": len(np.unique(val_units.object_id)),
+        "n_val_positive_objects": len(np.unique(val_units.object_id[val_units.y == 1])),
+    }

@@ -1,0 +1,65 @@
+"""The training key: what makes two trained models the same model, so one is found, not retrained.
+
+It hashes exactly what determines a learned representation (data identity, modality and
+preprocessing settings, architecture, the network's schedule, loss, split rule, seed, adjective),
+not what only the head, the evaluation or the machine uses, so rows H, I and J share one ConvNet
+per adjective. Every model cache (``cache``, ``store``) is keyed by it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from typing import Any
+
+from tactile_exp import dotted
+from tactile_exp.artifacts import FORMAT
+from tactile_exp.registry import Component
+
+# Model settings that change neither the representation nor the instance classifier; a dotted
+# key is a value inside a setting (the T4 head's schedule inside the model's ``schedule``).
+MODEL_UNKEYED = ("schedule.head", "impl", "device")
+# Modality settings that change only where or how fast features are computed.
+MODALITY_UNKEYED = ("device", "batch_size")
+
+
+def training_key(
+    *,
+    dataset: str,
+    modality: Component,
+    model: Component,
+    split: str,
+    validation: float,
+    seed: int,
+    adjective: str,
+) -> str:
+    """Hash of what determines one adjective's trained model (not combine/combine_instances).
+
+    ``validation`` is the fraction of training objects held out for the validation score: they
+    are left out of training, so it changes the model."""
+    keyed = {
+        "format": FORMAT,
+        "dataset": dataset,
+        "modality": [modality.name, dotted.without(modality.params, MODALITY_UNKEYED)],
+        "model": [model.name, dotted.without(model.params, MODEL_UNKEYED)],
+        "split": split,
+        "validation": validation,
+        "seed": seed,
+        "adjective": adjective,
+    }
+    raw = json.dumps(keyed, sort_keys=True, default=str)
+    return hashlib.sha256(raw.encode()).hexdigest()[:20]
+
+
+def unkeyed(params: Mapping[str, Any]) -> dict[str, Any]:
+    """The settings of ``MODEL_UNKEYED`` in a job's model ``params``, by dotted key: what a model
+    it reuses takes from it (``artifacts.read_model``'s overrides). A schedule without a head
+    gives ``schedule.head`` None: the head then trains like the model, as in the job."""
+    out = {}
+    for path in MODEL_UNKEYED:
+        parent, _, leaf = path.rpartition(".")
+        node = dotted.get(params, parent) if parent else params
+        if isinstance(node, Mapping) and (parent or leaf in node):
+            out[path] = node.get(leaf)
+    return out
