@@ -20,9 +20,13 @@ import numpy as np
 
 from tactile_exp import keys, metrics
 from tactile_exp.cache import ModelCache, Trained
-from tactile_exp.config import Settings
+from tactile_exp.config import Settings, param_error
+from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Instances, Split, Trials
-from tactile_exp.modalities import MODALITIES
+from tactile_exp.data.sources import DATA_SOURCES
+from tactile_exp.data.splits import make_split
+from tactile_exp.errors import ConfigError
+from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
 from tactile_exp.pipeline import AdjectivePipeline
@@ -65,6 +69,37 @@ class AdjectiveResult:
     def metrics(self) -> dict[str, float]:
         """The test side's metrics: what the paper's Table I reports (``auc``)."""
         return self.sides["test"].metrics
+
+
+def load(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
+    """Open the data, check every split, read and cache shared arrays: bad input surfaces here."""
+    dataset, modality, splits = open_data(settings)
+    modality.check(dataset)
+    return dataset, modality, splits
+
+
+def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
+    """Open the data and check ``combine`` and every split, cheaply (before a run is created)."""
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+    try:
+        modality = MODALITIES.build(
+            settings.modality.name,
+            cache_dir=settings.cache_dir / "preprocessed",
+            **settings.modality.params,
+        )
+    except (TypeError, ValueError) as err:
+        raise param_error("modality", settings.modality.params, err) from err
+    limit, unit = modality.max_combine(dataset)
+    if settings.combine > limit:
+        raise ConfigError(
+            f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
+            f"most {limit} {unit}; allowed 1..{limit}"
+        )
+    splits = {
+        a: make_split(dataset, a, settings.split, settings.seed, **settings.split_params)
+        for a in select_labels(dataset, settings.adjectives)
+    }
+    return dataset, modality, splits
 
 
 def adjective_key(

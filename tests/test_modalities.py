@@ -18,6 +18,7 @@ from tactile_exp.data.splits import make_split
 from tactile_exp.experiment import load
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.base import Model
 
 # modality -> the overrides of a tiny job that uses it (all but signals read PHAC-2 files)
 ON_PHAC2 = {
@@ -43,15 +44,17 @@ def test_the_constructor_takes_hyperparameters_not_data(name):
         assert isinstance(getattr(cls, flag), bool)
 
 
-def _provider(modality: Modality):
-    """The engine's part provider, reduced to training the part on what it is given."""
-
-    def provide(part, train: Instances, trials: Trials):
-        model = MODELS.build(modality.parts()[part][1].name, **modality.parts()[part][1].params)
-        model.fit(train)
-        return model
-
-    return provide
+def _parts(modality: Modality, train: Trials) -> dict[str, Model]:
+    """Each declared part trained on its own modality's instances of ``train``, as the core
+    trains a part that no model cache holds."""
+    out = {}
+    for part, (part_modality, part_model) in modality.parts().items():
+        pre = MODALITIES.build(
+            part_modality.name, cache_dir=modality.cache_dir, **part_modality.params
+        )
+        out[part] = MODELS.build(part_model.name, **part_model.params)
+        out[part].fit(pre.fit(train).transform(train))
+    return out
 
 
 def _assert_contract(build, dataset, split: Split):
@@ -59,8 +62,9 @@ def _assert_contract(build, dataset, split: Split):
     transforms the test trials to the same instances."""
     fitted = build()
     fitted.check(dataset)
-    fitted.use_parts(_provider(fitted))
     train, test = split.trials("train", dataset), split.trials("test", dataset)
+    parts = _parts(fitted, train)
+    fitted.set_parts(parts)
     first = fitted.fit(train).transform(test)
     assert isinstance(first, Instances) and len(first) > 0
     if fitted.takes_trials:  # instances named by their trial carry its label
@@ -69,7 +73,7 @@ def _assert_contract(build, dataset, split: Split):
     settings, arrays = fitted.get_state()
     fresh = build()
     fresh.set_state(settings, arrays)
-    fresh.set_parts(fitted.fitted_parts())
+    fresh.set_parts(parts)
     again = fresh.transform(test)
     np.testing.assert_array_equal(again.trial, first.trial)
     np.testing.assert_allclose(again.X, first.X, rtol=0, atol=1e-6)

@@ -20,7 +20,7 @@ import torch
 from conftest import TINY_DATA
 from mlflow.tracking import MlflowClient
 
-from tactile_exp import store
+from tactile_exp import artifacts, keys, store
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances
 from tactile_exp.experiment import run
@@ -53,13 +53,13 @@ def test_saved_model_loads_with_identical_scores(tmp_path, name, shape, params):
     model = MODELS.build(name, schedule=schedule, **params)
     data = _instances(shape=shape)
     model.fit(data)
-    store.write_model(tmp_path, name, model)
+    artifacts.write_model(tmp_path, name, model)
     stored = json.loads((tmp_path / "settings.json").read_text())["params"]
     assert stored["schedule"]["head"]["lr"] == 0.5  # the Schedule value kept as its JSON node
-    loaded = store.read_model(tmp_path, "here")
+    loaded = artifacts.read_model(tmp_path, "here")
     assert type(loaded) is type(model)
     assert loaded.schedule == model.schedule
-    as_json = [json.dumps(m.get_params(), default=store.jsonable) for m in (loaded, model)]
+    as_json = [json.dumps(m.get_params(), default=artifacts.jsonable) for m in (loaded, model)]
     assert as_json[0] == as_json[1]  # every setting back (tuples as the JSON lists they were)
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
     np.testing.assert_array_equal(loaded.transform(data.X), model.transform(data.X))
@@ -70,16 +70,16 @@ def test_corrupt_or_missing_model_files_name_the_file(tmp_path):
         widths=(2, 2, 2), schedule=Schedule(epochs=1, finetune_epochs=0), impl="torch"
     )
     model.fit(_instances())
-    store.write_model(tmp_path, "haptic_cnn", model)
+    artifacts.write_model(tmp_path, "haptic_cnn", model)
     (tmp_path / "weights.pt").write_bytes(b"not a state dict")
-    with pytest.raises(store.ArtifactError, match=r"run X: artifact model/weights.pt"):
-        store.read_model(tmp_path, "run X: artifact model")
+    with pytest.raises(artifacts.ArtifactError, match=r"run X: artifact model/weights.pt"):
+        artifacts.read_model(tmp_path, "run X: artifact model")
     torch.save({"body.weights.0": torch.zeros(3)}, tmp_path / "weights.pt")
-    with pytest.raises(store.ArtifactError, match="does not load"):
-        store.read_model(tmp_path, "run X: artifact model")
+    with pytest.raises(artifacts.ArtifactError, match="does not load"):
+        artifacts.read_model(tmp_path, "run X: artifact model")
     (tmp_path / "settings.json").write_text("{")
-    with pytest.raises(store.ArtifactError, match="settings.json is not readable JSON"):
-        store.read_model(tmp_path, "run X: artifact model")
+    with pytest.raises(artifacts.ArtifactError, match="settings.json is not readable JSON"):
+        artifacts.read_model(tmp_path, "run X: artifact model")
 
 
 def _children(uri: str, parent_id: str, level: str = "child") -> dict[str, object]:
@@ -136,7 +136,7 @@ def test_missing_artifact_of_a_found_run_is_a_clear_error(tiny_config, mlflow_ur
     assert isinstance(store.load_model(tracker, trained.info.run_id, "model"), HapticCNN)
     # the local artifact store is a folder: remove the stored weights behind MLflow's back
     Path(trained.info.artifact_uri.removeprefix("file://"), "model", "weights.pt").unlink()
-    with pytest.raises(store.ArtifactError, match=rf"run {trained.info.run_id}.*weights.pt"):
+    with pytest.raises(artifacts.ArtifactError, match=rf"run {trained.info.run_id}.*weights.pt"):
         run(settings_from_config(tiny_config(REPEAT, ONE)))
 
 
@@ -218,7 +218,7 @@ def _key(**change) -> str:
         "seed": 0,
         "adjective": "hard",
     }
-    return store.training_key(**(base | change))
+    return keys.training_key(**(base | change))
 
 
 def test_training_key_changes_with_what_trains_the_model_and_nothing_else():
@@ -328,83 +328,94 @@ def test_a_logged_model_loads_from_its_run_and_missing_files_name_the_run(mlflow
     model, data = _linear()
     tracker = Tracker(mlflow_uri, "store")
     with tracker.run("r", {}, {}) as run_id:
-        store.log_folder(tracker, run_id, "model", lambda d: store.write_model(d, "linear", model))
+        store.log_folder(
+            tracker, run_id, "model", lambda d: artifacts.write_model(d, "linear", model)
+        )
         store.log_folder(tracker, run_id, "half", lambda d: (d / "settings.json").write_text("{}"))
     loaded = store.load_model(tracker, run_id, "model", {"device": "cpu"})
     assert loaded.get_params()["device"] == "cpu"
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
-    local = store.download(tracker, run_id, "model", store.MODEL_FILES)
-    assert sorted(p.name for p in local.iterdir()) == sorted(store.MODEL_FILES)
+    local = store.download(tracker, run_id, "model", artifacts.MODEL_FILES)
+    assert sorted(p.name for p in local.iterdir()) == sorted(artifacts.MODEL_FILES)
     with pytest.raises(
-        store.ArtifactError, match=rf"^run {run_id}: artifact half/ lacks weights.pt, arrays.npz$"
+        artifacts.ArtifactError,
+        match=rf"^run {run_id}: artifact half/ lacks weights.pt, arrays.npz$",
     ):
         store.load_model(tracker, run_id, "half")
-    with pytest.raises(store.ArtifactError, match=rf"^run {run_id}: artifact nothing/ cannot be"):
-        store.download(tracker, run_id, "nothing", store.STATE_FILES)
+    with pytest.raises(
+        artifacts.ArtifactError, match=rf"^run {run_id}: artifact nothing/ cannot be"
+    ):
+        store.download(tracker, run_id, "nothing", artifacts.STATE_FILES)
 
 
 def test_state_folders_round_trip_and_bad_files_name_the_artifact(tmp_path):
     settings = {"steps": np.int64(3), "shape": (1, 2), "sizes": np.array([4, 5])}
-    store.write_state(tmp_path, settings, {"a": [1.5, 2.0]})
-    settings = store.read_json(tmp_path, "here")
-    assert settings == {"format": store.FORMAT, "steps": 3, "shape": [1, 2], "sizes": [4, 5]}
-    np.testing.assert_array_equal(store.read_arrays(tmp_path, "here")["a"], [1.5, 2.0])
-    assert list(store.read_arrays(tmp_path, "here")) == ["a"]
+    artifacts.write_state(tmp_path, settings, {"a": [1.5, 2.0]})
+    settings = artifacts.read_json(tmp_path, "here")
+    assert settings == {"format": artifacts.FORMAT, "steps": 3, "shape": [1, 2], "sizes": [4, 5]}
+    np.testing.assert_array_equal(artifacts.read_arrays(tmp_path, "here")["a"], [1.5, 2.0])
+    assert list(artifacts.read_arrays(tmp_path, "here")) == ["a"]
     with pytest.raises(TypeError, match="^cannot store object as JSON$"):
-        store.write_state(tmp_path, {"x": object()}, {})
+        artifacts.write_state(tmp_path, {"x": object()}, {})
     for text in ("[1]", '{"format": 0}', "{}"):
         (tmp_path / "settings.json").write_text(text)
         with pytest.raises(
-            store.ArtifactError,
-            match=rf"^here/settings.json: expected a mapping with format {store.FORMAT}$",
+            artifacts.ArtifactError,
+            match=rf"^here/settings.json: expected a mapping with format {artifacts.FORMAT}$",
         ):
-            store.read_json(tmp_path, "here")
+            artifacts.read_json(tmp_path, "here")
     (tmp_path / "settings.json").write_text("{")
-    with pytest.raises(store.ArtifactError, match=r"^here/settings.json is not readable JSON \("):
-        store.read_json(tmp_path, "here")
+    with pytest.raises(
+        artifacts.ArtifactError, match=r"^here/settings.json is not readable JSON \("
+    ):
+        artifacts.read_json(tmp_path, "here")
     (tmp_path / "arrays.npz").write_bytes(b"garbage")
-    with pytest.raises(store.ArtifactError, match=r"^here/arrays.npz is not a readable npz file"):
-        store.read_arrays(tmp_path, "here")
+    with pytest.raises(
+        artifacts.ArtifactError, match=r"^here/arrays.npz is not a readable npz file"
+    ):
+        artifacts.read_arrays(tmp_path, "here")
 
 
 def test_stored_model_settings_are_checked_before_loading(tmp_path):
     model, data = _linear()
-    store.write_model(tmp_path, "linear", model)
+    artifacts.write_model(tmp_path, "linear", model)
     settings = json.loads((tmp_path / "settings.json").read_text())
     assert settings["model"] == "linear"
     assert settings["input_shape"] == list(data.X.shape[1:])
-    assert settings["format"] == store.FORMAT
+    assert settings["format"] == artifacts.FORMAT
     for broken in ({"model": None}, {"input_shape": ["x"]}, {"params": 3}):
         (tmp_path / "settings.json").write_text(json.dumps(settings | broken))
         if broken == {"model": None}:
             (tmp_path / "settings.json").write_text(
                 json.dumps({k: v for k, v in settings.items() if k != "model"})
             )
-        with pytest.raises(store.ArtifactError, match=r"^w/settings.json: missing or bad entry"):
-            store.read_model(tmp_path, "w")
+        with pytest.raises(
+            artifacts.ArtifactError, match=r"^w/settings.json: missing or bad entry"
+        ):
+            artifacts.read_model(tmp_path, "w")
     (tmp_path / "settings.json").write_text(json.dumps(settings | {"model": "nope"}))
-    with pytest.raises(store.ArtifactError, match=r"^w: the stored nope model does not load"):
-        store.read_model(tmp_path, "w")
+    with pytest.raises(artifacts.ArtifactError, match=r"^w: the stored nope model does not load"):
+        artifacts.read_model(tmp_path, "w")
     (tmp_path / "settings.json").write_text(json.dumps(settings))
     torch.save({"w": [1, 2]}, tmp_path / "weights.pt")
     with pytest.raises(
-        store.ArtifactError, match=r"^w/weights.pt: expected a mapping of names to tensors$"
+        artifacts.ArtifactError, match=r"^w/weights.pt: expected a mapping of names to tensors$"
     ):
-        store.read_model(tmp_path, "w")
+        artifacts.read_model(tmp_path, "w")
     torch.save([torch.zeros(1)], tmp_path / "weights.pt")
-    with pytest.raises(store.ArtifactError, match=r"^w/weights.pt: expected a mapping"):
-        store.read_model(tmp_path, "w")
+    with pytest.raises(artifacts.ArtifactError, match=r"^w/weights.pt: expected a mapping"):
+        artifacts.read_model(tmp_path, "w")
 
 
 def test_model_name_is_the_registry_name_that_read_model_builds(tmp_path):
     """A stored model is rebuilt from the name ``model_name`` gives: it must be its own class's."""
     model, data = _linear()
-    assert store.model_name(model) == "linear"
-    assert store.model_name(HapticCNN(widths=(2, 2, 2))) == "haptic_cnn"
-    store.write_model(tmp_path, store.model_name(model), model)
-    assert type(store.read_model(tmp_path, "here")) is type(model)
+    assert artifacts.model_name(model) == "linear"
+    assert artifacts.model_name(HapticCNN(widths=(2, 2, 2))) == "haptic_cnn"
+    artifacts.write_model(tmp_path, artifacts.model_name(model), model)
+    assert type(artifacts.read_model(tmp_path, "here")) is type(model)
     with pytest.raises(KeyError, match="^'Instances is not a registered model'$"):
-        store.model_name(data)
+        artifacts.model_name(data)
 
 
 def test_models_configured_with_numpy_values_are_stored_as_plain_json(tmp_path):
@@ -413,10 +424,10 @@ def test_models_configured_with_numpy_values_are_stored_as_plain_json(tmp_path):
     X, y = _instances(shape=(7,)).X, np.arange(40) % 2
     data = Instances(X, y, np.array([f"t{i}" for i in range(40)], dtype=object), np.arange(40) // 2)
     model.fit(data)
-    store.write_model(tmp_path, "linear_svm", model)
+    artifacts.write_model(tmp_path, "linear_svm", model)
     params = json.loads((tmp_path / "settings.json").read_text())["params"]
     assert params["Cs"] == [0.01, 0.1, 1.0] and params["seed"] == 3
-    loaded = store.read_model(tmp_path, "here")
+    loaded = artifacts.read_model(tmp_path, "here")
     np.testing.assert_array_equal(loaded.decision_function(X), model.decision_function(X))
 
 
@@ -425,13 +436,13 @@ def test_a_model_that_does_not_load_from_its_run_names_the_run_and_artifact(mlfl
     tracker = Tracker(mlflow_uri, "store")
 
     def broken(folder: Path) -> None:
-        store.write_model(folder, "linear", model)
+        artifacts.write_model(folder, "linear", model)
         (folder / "settings.json").write_text('{"format": 0}')
 
     with tracker.run("r", {}, {}) as run_id:
         store.log_folder(tracker, run_id, "model", broken)
     with pytest.raises(
-        store.ArtifactError,
+        artifacts.ArtifactError,
         match=rf"^run {run_id}: artifact model/settings.json: expected a mapping with format 1$",
     ):
         store.load_model(tracker, run_id, "model")
@@ -449,16 +460,18 @@ class _Marker:
 
 def test_stored_weights_never_run_code_and_arrays_are_checked(tmp_path):
     model, _ = _linear()
-    store.write_model(tmp_path, "linear", model)
+    artifacts.write_model(tmp_path, "linear", model)
     ran = tmp_path / "ran"
     torch.save({"body.w": torch.zeros(1), "x": _Marker(ran)}, tmp_path / "weights.pt")
-    with pytest.raises(store.ArtifactError, match=r"^w/weights.pt is not a readable state_dict"):
-        store.read_model(tmp_path, "w")
+    with pytest.raises(
+        artifacts.ArtifactError, match=r"^w/weights.pt is not a readable state_dict"
+    ):
+        artifacts.read_model(tmp_path, "w")
     assert not ran.exists()
-    store.write_model(tmp_path, "linear", model)
+    artifacts.write_model(tmp_path, "linear", model)
     (tmp_path / "arrays.npz").write_bytes(b"garbage")
-    with pytest.raises(store.ArtifactError, match=r"^w/arrays.npz is not a readable npz file"):
-        store.read_model(tmp_path, "w")
+    with pytest.raises(artifacts.ArtifactError, match=r"^w/arrays.npz is not a readable npz file"):
+        artifacts.read_model(tmp_path, "w")
 
 
 def test_weights_saved_on_a_gpu_load_on_the_cpu(tmp_path, monkeypatch):
@@ -466,8 +479,8 @@ def test_weights_saved_on_a_gpu_load_on_the_cpu(tmp_path, monkeypatch):
     model, data = _linear()
     with monkeypatch.context() as patch:  # stored as if its tensors lived on the GPU
         patch.setattr(torch.serialization, "location_tag", lambda storage: "cuda:0")
-        store.write_model(tmp_path, "linear", model)
-    loaded = store.read_model(tmp_path, "w")
+        artifacts.write_model(tmp_path, "linear", model)
+    loaded = artifacts.read_model(tmp_path, "w")
     assert all(t.device.type == "cpu" for t in loaded.state()[0].values())
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
 
@@ -661,15 +674,15 @@ def test_a_reused_model_takes_the_head_schedule_kernels_and_device_of_the_job(tm
     model = MODELS.build("linear", **trained)
     data = _instances(shape=(7,))
     model.fit(data)
-    store.write_model(tmp_path, "linear", model)
+    artifacts.write_model(tmp_path, "linear", model)
     job = {"schedule": {"epochs": 2, "batch_size": 16, "head": {"lr": 0.1}}, "impl": "auto"}
-    assert store.unkeyed(job) == {"schedule.head": {"lr": 0.1}, "impl": "auto"}
-    loaded = store.read_model(tmp_path, "here", store.unkeyed(job | {"device": "cpu"}))
+    assert keys.unkeyed(job) == {"schedule.head": {"lr": 0.1}, "impl": "auto"}
+    loaded = artifacts.read_model(tmp_path, "here", keys.unkeyed(job | {"device": "cpu"}))
     assert (loaded.impl, loaded.device) == ("auto", "cpu")
     assert loaded.schedule == Schedule.of(job["schedule"]) != model.schedule
     assert loaded.head().schedule.lr == 0.1
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
     # a job whose schedule has no head: the reused model's head trains like the model, as there
-    plain = store.read_model(tmp_path, "here", store.unkeyed({"schedule": {"epochs": 2}}))
+    plain = artifacts.read_model(tmp_path, "here", keys.unkeyed({"schedule": {"epochs": 2}}))
     assert plain.schedule.head is None
-    assert store.unkeyed({"Cs": None, "seed": 0}) == {}  # linear_svm: nothing unkeyed
+    assert keys.unkeyed({"Cs": None, "seed": 0}) == {}  # linear_svm: nothing unkeyed

@@ -115,9 +115,9 @@ def cell(overrides: Sequence[str], where: Sequence[int]) -> str:
 
 def job_settings(job: DictConfig) -> Settings:
     """One job's settings, checked as a single run checks them before it creates a run
-    (``experiment.open_data``: no data is preprocessed)."""
+    (``core.open_data``: no data is preprocessed)."""
     from tactile_exp.config import settings_from_config
-    from tactile_exp.experiment import open_data
+    from tactile_exp.core import open_data
 
     sweep_id = str(Path(job.hydra.sweep.dir))  # as the job tags its runs
     settings = settings_from_config(
@@ -228,8 +228,8 @@ class PrepareSweep(Callback):
     def _prepare(self, config: DictConfig) -> None:
         """What ``on_multirun_start`` does; a user error raised here stops the sweep."""
         from tactile_exp.config import settings_from_config
+        from tactile_exp.core import load
         from tactile_exp.errors import ConfigError
-        from tactile_exp.experiment import load
         from tactile_exp.tracking import Tracker
 
         folder = sweep_folder(config.hydra)
