@@ -17,8 +17,8 @@ from tactile_exp.data.layout import Instances, Split, Trials
 from tactile_exp.data.splits import make_split
 from tactile_exp.experiment import load
 from tactile_exp.modalities import MODALITIES, Modality
-from tactile_exp.models.registry import MODELS
 from tactile_exp.models.base import Model
+from tactile_exp.models.registry import MODELS
 
 # modality -> the overrides of a tiny job that uses it (all but signals read PHAC-2 files)
 ON_PHAC2 = {
