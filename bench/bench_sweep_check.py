@@ -1,7 +1,7 @@
 """Bench: what checking every job's config costs a sweep before its first job (issue 33).
 
 Composes the multirun config of ``python -m tactile_exp -m <overrides>`` (default: the Table I
-grid over three seeds, 45 jobs) and times ``tactile_exp.runtime.sweep.check_jobs`` on it, then the
+grid over three seeds, 45 jobs) and times ``tactile_exp.app.sweep.check_jobs`` on it, then the
 same jobs step by step: composing each job's config, ``settings_from_config`` (values, components,
 models built once) and ``experiment.open_data`` (the data file, ``combine``, every adjective's
 split). Nothing is trained or tracked. Prints the seconds of each, in total and per job.
@@ -23,9 +23,9 @@ from hydra import initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from hydra.types import RunMode
 
+from tactile_exp.app import sweep
 from tactile_exp.config import settings_from_config
 from tactile_exp.experiment import open_data
-from tactile_exp.runtime import sweep
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

@@ -20,11 +20,11 @@ log = logging.getLogger("tactile_exp")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg: DictConfig) -> float:
     signal.signal(signal.SIGTERM, termination.handle)
+    from tactile_exp.app.sweep import SweepJob
     from tactile_exp.config import settings_from_config
     from tactile_exp.errors import reported
     from tactile_exp.experiment import run
     from tactile_exp.objective import value
-    from tactile_exp.runtime.sweep import SweepJob
 
     hc = HydraConfig.get()
     choices = {k: str(v) for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}

@@ -456,6 +456,16 @@ class Tracker:
         with shielded():
             self.client.log_artifacts(run_id, str(folder), path)
 
-    def download(self, run_id: str, path: str) -> Path:
-        """Artifact ``path`` of run ``run_id`` ("" for all of them) as a local file or folder."""
-        return Path(self.client.download_artifacts(run_id, path))
+    def download(self, run_id: str, path: str, into: Path | None = None) -> Path:
+        """Artifact ``path`` of run ``run_id`` ("" for all of them) as a local file or folder
+        (in folder ``into`` when given, else a temporary one)."""
+        dst = None if into is None else str(into)
+        return Path(self.client.download_artifacts(run_id, path, dst))
+
+    def artifacts(self, run_id: str) -> set[str]:
+        """The top-level artifact paths of run ``run_id``."""
+        return {a.path for a in self.client.list_artifacts(run_id)}
+
+    def get_run(self, run_id: str) -> Run:
+        """Run ``run_id`` (MlflowException when the store has none)."""
+        return self.client.get_run(run_id)

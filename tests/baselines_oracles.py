@@ -16,7 +16,8 @@ from contextlib import contextmanager
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 
-from tactile_exp.baselines import dynamic, shortcuts, static
+from tactile_exp import cores
+from tactile_exp.baselines import dynamic, static
 from tactile_exp.baselines.static import FILL, N_ELECTRODE_PCS, PHASES, POLY_DEGREE
 from tactile_exp.models import linear_svm as svm
 
@@ -86,7 +87,7 @@ def plain_paths() -> Iterator[None]:
         (static.StaticFeatures, "transform", static_per_trial),
         (svm.ObjectCVLinearSVM, "_held_out_decisions", held_out_decisions_per_c),
         (dynamic.DynamicFeatures, "transform", chain_scores),
-        (shortcuts, "threads", lambda tasks: 1),
+        (cores, "threads", lambda tasks: 1),
     ]
     before = [(owner, name, getattr(owner, name)) for owner, name, _ in patched]
     try:

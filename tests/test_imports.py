@@ -104,6 +104,35 @@ def test_tactile_exp_has_no_import_cycles():
     assert found == [], "import cycles:\n" + "\n".join(found)
 
 
+def folder_graph(graph: Edges, found: dict[str, Path], package: str) -> Edges:
+    """The imports between folders: each subpackage one node (its modules together), each
+    module at the package's root its own node (the root holds the bottom, ``registry``, and
+    the top, ``experiment``, so as one node it would be a circle by construction)."""
+
+    def folder(name: str) -> str:
+        here = name if found[name].name == "__init__.py" else name.rpartition(".")[0]
+        return name if here == package else here
+
+    out: Edges = {}
+    for a, edges in graph.items():
+        for b, line in edges.items():
+            if folder(a) != folder(b):
+                out.setdefault(folder(a), {}).setdefault(folder(b), line)
+    return out
+
+
+def test_tactile_exp_has_no_import_cycles_between_folders():
+    """``runtime`` stays the bottom (the Hydra callback lives in ``app``), ``models`` and
+    ``baselines`` one way: a folder that imports another is never imported back."""
+    root = Path(tactile_exp.__file__).resolve().parents[1]
+    graph = folder_graph(
+        import_graph(root, "tactile_exp"), modules(root, "tactile_exp"), "tactile_exp"
+    )
+    assert {"tactile_exp.runtime", "tactile_exp.models", "tactile_exp.app"} <= set(graph)
+    found = [describe(graph, c) for c in cycles(graph)]
+    assert found == [], "import cycles between folders:\n" + "\n".join(found)
+
+
 def test_deferred_relative_and_type_checking_imports_make_cycles(tmp_path):
     """The finder itself: each kind of import closes a circle, a package's own __init__ not."""
     files = {
@@ -125,3 +154,6 @@ def test_deferred_relative_and_type_checking_imports_make_cycles(tmp_path):
     assert describe(graph, ["pkg.d", "pkg.sub.e"]) == (
         "pkg.d -> pkg.sub.e (line 1); pkg.sub.e -> pkg.d (line 1)"
     )
+    folders = folder_graph(graph, modules(tmp_path, "pkg"), "pkg")
+    assert cycles(folders) == [["pkg.a", "pkg.b", "pkg.c"], ["pkg.d", "pkg.sub"]]  # root modules
+    assert folders["pkg.leaf"] == {"pkg.sub": 2}  # a folder is one node

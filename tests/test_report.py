@@ -11,11 +11,11 @@ from PIL import Image
 from sklearn.metrics import f1_score, roc_auc_score
 
 from tactile_exp import experiment, stats, store
+from tactile_exp.app import sweep
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.report import activations, cli, figures, heldout, runs, table1
 from tactile_exp.report import table3 as t3
-from tactile_exp.runtime import sweep
 from tactile_exp.tracking import Tracker
 
 ROW_A = {"choice.experiment": "table1_a_haptic_static_1trial", "paper.row": "A"}

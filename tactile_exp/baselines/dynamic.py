@@ -30,7 +30,7 @@ from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
-from tactile_exp.baselines import shortcuts
+from tactile_exp import cores
 from tactile_exp.baselines.static import PHASES, pool_moments, principal_axes
 from tactile_exp.data.layout import Split, TrialData, TrialName
 from tactile_exp.models.numba_setup import numba
@@ -449,7 +449,7 @@ class DynamicFeatures:
         # each chain's own catch_warnings restores what it saw when it entered.
         with warnings.catch_warnings(), threadpool_limits(1):
             _quiet_kmeans()
-            with ThreadPoolExecutor(shortcuts.threads(len(CHAINS))) as pool:
+            with ThreadPoolExecutor(cores.threads(len(CHAINS))) as pool:
                 fitted = list(pool.map(fit_chain, range(len(CHAINS))))
         self.params_ = [best for best, _ in fitted]
         self.chains_ = [chain for _, chain in fitted]

@@ -9,12 +9,3 @@ trial-EP at a time, one pipeline per (C, draw), chains one after the other) is k
 ``tests/baselines_oracles.py`` as the oracle the tests, and ``bench/bench_baselines.py --rows``,
 compare these with; it is not a runtime path.
 """
-
-from __future__ import annotations
-
-import os
-
-
-def threads(tasks: int) -> int:
-    """Threads for ``tasks`` independent single-threaded tasks: one per core, at most one each."""
-    return max(1, min(os.cpu_count() or 1, tasks))

@@ -8,8 +8,6 @@ registered version is tagged with the job's experiment, Table I row, data identi
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import tempfile
 from pathlib import Path
@@ -19,6 +17,7 @@ import numpy as np
 
 from tactile_exp.jobs import PredictError, StoredJob
 from tactile_exp.modalities import MODALITIES
+from tactile_exp.models.registry import MODELS
 from tactile_exp.pipeline import SETTINGS
 
 MODEL_FILE = Path(__file__).with_name("pyfunc_model.py")
@@ -46,18 +45,12 @@ def _example(job: StoredJob, child: str) -> Any:
     makes (the data file keeps them all in one folder), so that example shows the shape only."""
     import pandas as pd
 
-    from tactile_exp.data.sources import DATA_SOURCES
-
-    config = job.config
     modality = MODALITIES[job.modality]
     takes_trials, takes_photos = modality.takes_trials, modality.takes_photographs
-    scores = Path(job.tracker.client.download_artifacts(child, "scores.csv")).read_text()
-    unit = next(csv.DictReader(io.StringIO(scores)))["unit"].split("#")[0]
+    unit = job.scores(child)[0]["unit"].split("#")[0]
     example: dict[str, list[str]] = {}
     if takes_trials:
-        data = {k: v for k, v in config["data"].items() if k != "name"}
-        path = DATA_SOURCES.build(str(config["data"]["name"]), **data).path
-        example = {"data": [str(path)], "trial": [unit]}
+        example = {"data": [str(job.spec.data_source().path)], "trial": [unit]}
     if takes_photos:
         stem = unit.rsplit("_", 1)[0]  # <stem>_<trial> or <stem>_v<view>
         example["photos"] = [f"photos/{stem}"]
@@ -77,31 +70,28 @@ def log_job(
     import mlflow
 
     stored = StoredJob.open(run_id, experiment=experiment, tracking_uri=tracking_uri)
-    job, job_id, config = stored.run, stored.id, stored.config
-    model_name = str(config["model"]["name"])
-    if model_name == "random":
+    job, job_id, spec = stored.run, stored.id, stored.spec
+    if not MODELS[spec.model.name].applies:
         raise PredictError(
-            f"run {job_id}: a {model_name} job on {stored.modality} keeps no model to log"
+            f"run {job_id}: a {spec.model.name} job on {stored.modality} keeps no model to log"
         )
     children = stored.children()
     with tempfile.TemporaryDirectory(prefix="tactile_exp-model-") as tmp:
         folder = Path(tmp) / "job"
         for child in children.values():
             (folder / "runs" / child).mkdir(parents=True)
-            listed = {a.path for a in stored.tracker.client.list_artifacts(child)}
+            listed = stored.listed(child)
             for path in KEPT:
                 if path in listed:
-                    stored.tracker.client.download_artifacts(
-                        child, path, str(folder / "runs" / child)
-                    )
+                    stored.copy(child, path, folder / "runs" / child)
         (folder / "job.json").write_text(
-            json.dumps({"job": job_id, "config": config, "adjectives": children}, indent=1)
+            json.dumps({"job": job_id, "config": stored.config, "adjectives": children}, indent=1)
         )
         mlflow.set_tracking_uri(stored.tracker.uri)
         metrics = job.data.metrics
         tags = {
             "experiment": experiment,
-            "row": str((config.get("paper") or {}).get("row")),
+            "row": str(spec.row),
             "data.identity": job.data.tags.get("data.identity", ""),
             "mean_auc": f"{metrics.get('mean_auc', float('nan')):.4f}",
             "job": job_id,

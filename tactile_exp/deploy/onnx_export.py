@@ -28,6 +28,7 @@ from tactile_exp import artifacts
 from tactile_exp.combine import COMBINERS
 from tactile_exp.data.layout import EPS
 from tactile_exp.jobs import PredictError, StoredJob
+from tactile_exp.models.registry import MODELS
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.preprocess.haptic import N_SCALAR, SIGNALS
 from tactile_exp.preprocess.trunk import INCEPTION5A_CHANNELS as FEATURES
@@ -37,6 +38,7 @@ TRUNK_FILE = "googlenet.onnx"
 FINGERS = 2
 OPSET = 17
 TORCH = {"impl": "torch"}  # load the kernels-trained networks as plain torch (same weights)
+NETWORKS = ("haptic", "visual", "multimodal")  # the modalities ``_network`` exports
 
 
 class DecisionNet(nn.Module):
@@ -192,16 +194,16 @@ def export_job(
     """Write job ``run_id``'s networks, ``manifest.json`` and ``preprocess.npz`` into ``out``;
     return the manifest. PredictError for a job that keeps no network (rows A-F, O)."""
     stored = StoredJob.open(run_id, experiment=experiment, tracking_uri=tracking_uri)
-    job_id, config = stored.id, stored.config
-    modality, model_name = str(config["modality"]["name"]), str(config["model"]["name"])
-    if modality == "haptic_features" or model_name == "random":
+    job_id, spec = stored.id, stored.spec
+    modality, model_name = spec.modality.name, spec.model.name
+    if modality not in NETWORKS or not MODELS[model_name].applies:
         raise PredictError(
             f"run {job_id} is a {model_name} job on modality {modality} (Table I rows A-F, O): "
             "it keeps no network to export to ONNX (rows A-F: a linear SVM on hand-designed "
             "features only this package computes); `python -m tactile_exp.deploy log` makes an "
             "MLflow model of it instead"
         )
-    combiner, combine = str(config["combine_instances"]["name"]), int(config["combine"])
+    combiner, combine = spec.combiner, spec.combine
     keeps = COMBINERS.build(combiner).keeps_instances
     children = stored.children(adjectives)
     folder = Path(out)
@@ -211,7 +213,7 @@ def export_job(
     manifest: dict[str, Any] = {
         "format": MANIFEST_FORMAT,
         "job": job_id,
-        "row": (config.get("paper") or {}).get("row"),
+        "row": spec.row,
         "modality": modality,
         "model": model_name,
         "combine_instances": combiner,

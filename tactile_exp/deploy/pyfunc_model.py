@@ -25,6 +25,7 @@ import mlflow
 import pandas as pd
 from mlflow.pyfunc import PythonModel
 
+from tactile_exp.jobs import JobSpec
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.predict import PredictError, apply, new_trials
 
@@ -47,6 +48,7 @@ class JobModel(PythonModel):
     def load_context(self, context: Any) -> None:
         folder = Path(context.artifacts["job"])
         self.job = json.loads((folder / "job.json").read_text())
+        self.spec = JobSpec.of(self.job["config"], f"job {self.job['job']}")
         self.pipelines = {
             adjective: AdjectivePipeline.load(folder / "runs" / child, f"run {child}")
             for adjective, child in self.job["adjectives"].items()
@@ -61,7 +63,7 @@ class JobModel(PythonModel):
             raise PredictError(f"input columns {unknown}: expected among {list(INPUT_COLUMNS)}")
         trials = [str(t) for t in frame["trial"].dropna()] if "trial" in frame else []
         given = new_trials(
-            str(self.job["config"]["modality"]["name"]),
+            self.spec.modality.name,
             data=_one(frame, "data"),
             trials=trials,
             object_id=None,

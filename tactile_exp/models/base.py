@@ -34,8 +34,11 @@ class Model(ABC):
     # takes; empty: any (it flattens rows).
     learns_representation: bool = True
     modalities: tuple[str, ...] = ()
-    # storable: ``state()``/``restore()`` keep the fitted model as tensors and arrays (store.py).
+    # storable: ``state()``/``restore()`` keep the fitted model as tensors and arrays (artifacts).
     storable: bool = False
+    # applies: its scores depend on the input, so a finished job's model is worth applying to
+    # new trials (predict, deploy); False for a chance floor whose scores ignore the input.
+    applies: bool = True
     # Fitted (storable models): the shape of one training row, what ``restore`` rebuilds for.
     input_shape_: tuple[int, ...] | None = None
 

@@ -37,7 +37,7 @@ from sklearn.svm import LinearSVC
 from sklearn.utils.class_weight import compute_sample_weight
 from threadpoolctl import threadpool_limits
 
-from tactile_exp.baselines import shortcuts
+from tactile_exp import cores
 from tactile_exp.data.layout import Instances
 from tactile_exp.models.base import EpochCallback, History, Model, clone
 from tactile_exp.models.registry import MODELS
@@ -227,7 +227,7 @@ class ObjectCVLinearSVM:
             warnings.simplefilter("ignore", ConvergenceWarning)
             # liblinear releases the GIL: draws run on threads (2.1x on 2 cores, measured),
             # their decisions kept in draw order, so the result does not depend on the threads.
-            with ThreadPoolExecutor(shortcuts.threads(len(draws))) as pool:
+            with ThreadPoolExecutor(cores.threads(len(draws))) as pool:
                 per_draw = list(pool.map(lambda d: self._draw_decisions(X, y, *d), draws))
         return [[draw[j] for draw in per_draw] for j in range(len(self.Cs))]
 

@@ -14,6 +14,7 @@ class RandomGuess(Model):
     """Scores drawn from U(0, 1), independent of the input; the chance floor of Table I."""
 
     learns_representation = False
+    applies = False  # seeded random numbers: nothing to apply to new trials
 
     def __init__(self, *, seed: int = 0) -> None:
         self.seed = seed

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -39,21 +37,6 @@ def signal_names(pca_components: int) -> list[str]:
     the electrode PCs, as ``HapticPreprocessor`` orders them."""
     per_ep = [s.upper() for s in SIGNALS[:N_SCALAR]] + [f"PC{i + 1}" for i in range(pca_components)]
     return [f"{ep} {signal}" for ep in EPS for signal in per_ep]
-
-
-def job_config(tracker: Tracker, job_id: str) -> dict[str, Any]:
-    """The resolved config a job logged (``config.yaml``), read as plain YAML."""
-    import yaml
-    from mlflow.exceptions import MlflowException
-
-    try:
-        path = Path(tracker.client.download_artifacts(job_id, "config.yaml"))
-        config = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError, MlflowException) as err:
-        raise ReportError(f"run {job_id}: artifact config.yaml unreadable ({err})") from None
-    if not isinstance(config, dict) or "modality" not in config:
-        raise ReportError(f"run {job_id}: artifact config.yaml is not a job's config")
-    return config
 
 
 def first_per_unit(units: list[UnitScore]) -> dict[str, UnitScore]:
@@ -93,18 +76,21 @@ def conv3_maps(
 ) -> Fig6Data:
     """The conv3 maps of job ``job_id`` (a ``haptic_cnn`` job) for ``trials`` (test trials of
     every adjective), or ``n_trials`` picked per adjective."""
+    from tactile_exp.artifacts import ArtifactError
     from tactile_exp.data.layout import Trials
-    from tactile_exp.data.sources import DATA_SOURCES
+    from tactile_exp.jobs import PredictError, StoredJob
     from tactile_exp.pipeline import AdjectivePipeline
 
-    config = job_config(tracker, job_id)
-    modality, model = config["modality"]["name"], config["model"]["name"]
+    try:
+        job = StoredJob.read(tracker, job_id)
+    except (ArtifactError, PredictError) as err:
+        raise ReportError(str(err)) from None
+    modality, model = job.spec.modality.name, job.spec.model.name
     if (modality, model) != ("haptic", "haptic_cnn"):
         raise ReportError(f"run {job_id}: a {modality}/{model} job, not a haptic ConvNet's")
     found = tracker.children(job_id)
-    data = dict(config["data"])
-    dataset = DATA_SOURCES.build(data.pop("name"), **data)
-    logged = tracker.client.get_run(job_id).data.tags.get("data.identity")
+    dataset = job.spec.data_source()
+    logged = job.data_identity
     if logged and dataset.identity() != logged:
         raise ReportError(
             f"run {job_id} ran on data {logged}; {dataset.path} is now {dataset.identity()}"
@@ -124,8 +110,7 @@ def conv3_maps(
         else:
             chosen = pick_units(list(units.values()), n_trials)
         names = [u.unit for u in chosen]
-        folder = Path(tracker.client.download_artifacts(child, ""))
-        pipeline = AdjectivePipeline.load(folder, f"run {child}")
+        pipeline = AdjectivePipeline.load(job.folder(child), f"run {child}")
         instances = pipeline.preprocess.transform(Trials(dataset, tuple(names)))
         net = pipeline.model_
         first = [int(np.flatnonzero(instances.trial == name)[0]) for name in names]

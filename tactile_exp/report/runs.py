@@ -228,7 +228,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
 
 def skipped_cells(tracker: Tracker, sweep_id: str) -> list[str]:
     """The cells sweep ``sweep_id`` listed invalid and skipped, one line each (``#num cell:
-    reason``): the ``invalid`` tag of its ``run_level=sweep`` run (``runtime.sweep``)."""
+    reason``): the ``invalid`` tag of its ``run_level=sweep`` run (``app.sweep``)."""
     found = tracker.sweep_runs(sweep_id)
     return [line for run in found for line in run.data.tags.get("invalid", "").splitlines()]
 

@@ -5,7 +5,7 @@ A run records who runs it (``process_tags``: host, PID and the PID's start time)
 run whose process has ended is told apart from a live one, even after its PID is reused. A
 stopped worker is signalled, given time to end its runs, then killed (``stop``): a job's
 adjective workers (``runtime.workers``) and a terminated sweep's joblib workers
-(``runtime.sweep``) end the same way.
+(``app.sweep``) end the same way.
 """
 
 from __future__ import annotations

@@ -27,6 +27,7 @@ from collections.abc import Callable, Iterable, Iterator
 from types import TracebackType
 from typing import Any
 
+from tactile_exp import cores
 from tactile_exp.runtime import processes, termination
 
 log = logging.getLogger(__name__)
@@ -34,11 +35,6 @@ log = logging.getLogger(__name__)
 GRACE_S = 30.0  # how long stopped workers get to end their runs before SIGKILL
 _PR_SET_PDEATHSIG = 1  # prctl(2)
 ORPHAN_POLL_S = 1.0  # how often a worker looks whether its job is still its parent
-
-
-def cores() -> int:
-    """The cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 class Pool:
@@ -52,7 +48,7 @@ class Pool:
         context = multiprocessing.get_context("spawn")
         records = context.Queue()
         self._listener = logging.handlers.QueueListener(records, _Relay())
-        threads = max(1, cores() // workers)
+        threads = max(1, cores.cores() // workers)
         self._executor = concurrent.futures.ProcessPoolExecutor(
             max_workers=workers,
             mp_context=context,
@@ -144,6 +140,7 @@ def _start(
 
     from tactile_exp.models.numba_setup import numba
 
+    cores.share(threads)
     torch.set_num_threads(threads)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     init(*initargs)

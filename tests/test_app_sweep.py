@@ -1,6 +1,6 @@
 """The named grids: `sweep=table1` is every table1_* file and takes seed/split lists; `sweep=smoke`
 runs every row end to end, and the report built from it matches the runs. A sweep survives its
-invalid cells and failed jobs (issue 33, ``tactile_exp.runtime.sweep``): every job's config is
+invalid cells and failed jobs (issue 33, ``tactile_exp.app.sweep``): every job's config is
 checked before the first starts, invalid cells are listed and skipped (or nothing runs), a job
 that fails while training leaves its runs FAILED and the jobs after it run, and one line sums it
 up; SIGTERM to the launcher stops its workers and closes the runs killed ones left RUNNING."""
@@ -242,7 +242,7 @@ def test_skipped_cells_are_listed_for_the_report_before_any_job(
 ):
     restore = _restore_sigterm()
     try:
-        with caplog.at_level(logging.WARNING, logger="tactile_exp.runtime.sweep"):
+        with caplog.at_level(logging.WARNING, logger="tactile_exp.app.sweep"):
             sweep.PrepareSweep().on_multirun_start(multirun(*GRID))
     finally:
         restore()
@@ -310,7 +310,7 @@ def test_the_summary_line_counts_every_job(tmp_path, caplog):
     folder = tmp_path / "m"
     for num, status in enumerate(["FINISHED", "skipped", "FINISHED"]):  # job #3 never recorded
         sweep.SweepJob(folder, num, callback.jobs[num]).record(status)
-    caplog.set_level(logging.INFO, logger="tactile_exp.runtime.sweep")
+    caplog.set_level(logging.INFO, logger="tactile_exp.app.sweep")
     with pytest.raises(SystemExit) as stop:
         callback.on_multirun_end(config)
     assert stop.value.code == 1
