@@ -8,6 +8,7 @@ import sys
 from mlflow.exceptions import MlflowException
 
 from tactile_exp import artifacts
+from tactile_exp.errors import EXIT_USER_ERROR
 from tactile_exp.predict import PredictError
 
 
@@ -43,13 +44,13 @@ def main(argv: list[str] | None = None) -> int:
                   f"to {args.out}")  # fmt: skip
     except ImportError as err:
         print(f"error: {err.name} is missing: pip install 'tactile_exp[deploy]'", file=sys.stderr)
-        return 2
+        return EXIT_USER_ERROR
     except (PredictError, artifacts.ArtifactError) as err:
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return EXIT_USER_ERROR
     except MlflowException as err:  # e.g. --register on a store without a Model Registry
         print(f"error: {err.message}", file=sys.stderr)
-        return 2
+        return EXIT_USER_ERROR
     return 0
 
 

@@ -28,6 +28,7 @@ from tactile_exp import artifacts
 from tactile_exp.combine import COMBINERS
 from tactile_exp.data.layout import EPS
 from tactile_exp.jobs import PredictError, StoredJob
+from tactile_exp.metrics import THRESHOLD
 from tactile_exp.models.registry import MODELS
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.preprocess.haptic import N_SCALAR, SIGNALS
@@ -218,7 +219,7 @@ def export_job(
         "model": model_name,
         "combine_instances": combiner,
         "combine": combine,
-        "threshold": 0.0,
+        "threshold": THRESHOLD,
     }
     trunk_key: tuple[Any, ...] | None = None
     for adjective, child in children.items():

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from tactile_exp import artifacts
+from tactile_exp.errors import EXIT_USER_ERROR
 from tactile_exp.predict import PredictError, predict
 
 
@@ -37,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
         )  # fmt: skip
     except (PredictError, artifacts.ArtifactError) as err:
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return EXIT_USER_ERROR
     if args.format != "table":  # the table says it itself; csv and json stay data only
         print("\n".join(result.header()), file=sys.stderr)
     text = {"table": result.to_table, "csv": result.to_csv, "json": result.to_json}[args.format]()

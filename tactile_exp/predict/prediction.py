@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tactile_exp.data.layout import DataError, Instances, TrialName, Trials
+from tactile_exp.metrics import THRESHOLD
 
 
 @dataclass
@@ -33,13 +34,14 @@ class Prediction:
         for obj in dict.fromkeys(o for o in self.objects if o is not None):
             rows = [i for i, o in enumerate(self.objects) if o == obj]
             mean = self.scores[rows].mean(axis=0)
-            out[obj] = [a for a, s in zip(self.adjectives, mean, strict=True) if s > 0]
+            out[obj] = [a for a, s in zip(self.adjectives, mean, strict=True) if s > THRESHOLD]
         return out
 
     def predicted(self) -> list[list[str]]:
         """The adjectives whose decision value is > 0, per unit."""
         return [
-            [a for a, s in zip(self.adjectives, row, strict=True) if s > 0] for row in self.scores
+            [a for a, s in zip(self.adjectives, row, strict=True) if s > THRESHOLD]
+            for row in self.scores
         ]
 
     def to_csv(self) -> str:

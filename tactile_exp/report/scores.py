@@ -13,9 +13,9 @@ import csv
 from dataclasses import dataclass
 from pathlib import Path
 
+from tactile_exp.metrics import THRESHOLD
 from tactile_exp.tracking import Tracker
 
-THRESHOLD = 0.0
 SCORES_FILE = "scores.csv"
 
 
