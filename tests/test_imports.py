@@ -157,3 +157,16 @@ def test_deferred_relative_and_type_checking_imports_make_cycles(tmp_path):
     folders = folder_graph(graph, modules(tmp_path, "pkg"), "pkg")
     assert cycles(folders) == [["pkg.a", "pkg.b", "pkg.c"], ["pkg.d", "pkg.sub"]]  # root modules
     assert folders["pkg.leaf"] == {"pkg.sub": 2}  # a folder is one node
+
+
+def test_the_engine_reaches_mlflow_through_three_modules():
+    """Recording (writes), the MLflow model cache and the finished-job reader import the
+    tracking layer; fitting and scoring (``core``, ``pipeline``, ``experiment``) never do. The
+    report reads runs (its own folder), and ``search`` runs studies (an Optuna storage)."""
+    root = Path(tactile_exp.__file__).resolve().parents[1]
+    graph = import_graph(root, "tactile_exp")
+    importers = {
+        m for m, edges in graph.items() if "tactile_exp.tracking" in edges and ".report" not in m
+    }
+    engine = importers - {"tactile_exp.search"}
+    assert engine == {"tactile_exp.recording", "tactile_exp.store", "tactile_exp.jobs"}

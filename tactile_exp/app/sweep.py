@@ -37,7 +37,7 @@ from tactile_exp.runtime import processes
 
 if TYPE_CHECKING:
     from tactile_exp.config import Settings
-    from tactile_exp.tracking import Tracker
+    from tactile_exp.recording import Tracker
 
 log = logging.getLogger(__name__)
 
@@ -227,10 +227,10 @@ class PrepareSweep(Callback):
 
     def _prepare(self, config: DictConfig) -> None:
         """What ``on_multirun_start`` does; a user error raised here stops the sweep."""
+        from tactile_exp import recording
         from tactile_exp.config import settings_from_config
         from tactile_exp.core import load
         from tactile_exp.errors import ConfigError
-        from tactile_exp.tracking import Tracker
 
         folder = sweep_folder(config.hydra)
         on_invalid = config.get("sweep", {}).get("on_invalid", "skip")
@@ -266,7 +266,7 @@ class PrepareSweep(Callback):
                 )
         if not valid:
             raise ConfigError(f"all {len(self.jobs)} jobs have an invalid config; none run")
-        tracker = Tracker(valid[0].tracking.uri, valid[0].tracking.experiment)
+        tracker = recording.open_tracker(valid[0])
         if invalid:
             track_invalid(tracker, valid[0].sweep_id, listing)
         signal.signal(signal.SIGTERM, functools.partial(terminate_workers, tracker=tracker))
