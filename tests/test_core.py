@@ -134,13 +134,14 @@ def test_a_modality_with_a_new_output_kind_fits_with_no_engine_change(row_i, reg
 
 
 def test_a_new_reusable_part_is_trained_once_kept_and_stored_with_the_pipeline(
-    row_i, registered, tmp_path
+    row_i, registered, tiny_config, tmp_path
 ):
     settings, dataset, split = row_i
     params = {"haptic": settings.modality.params, "net": settings.model.params}
+    layer = settings_from_config(tiny_config([*ROW_I, "model=linear"], adjectives="[hard]")).model
     features = dataclasses.replace(
-        settings, modality=Component("conv_features", params), model=Component("linear_svm", {})
-    )
+        settings, modality=Component("conv_features", params), model=layer
+    )  # row M's shape: a classification layer on the part's conv3 features
     cache = MemoryCache()
     first = core.fit_adjective(features, dataset, split, cache)
     part_key = cache.keys[0]

@@ -269,7 +269,7 @@ class LinearSVMModel(Model):
     """The `Model` face of `ObjectCVLinearSVM` (Table I rows A-F); groups = object ids."""
 
     learns_representation = False
-    storable = True  # state()/restore(): the scaler's and the SVM's fitted arrays (store.py)
+    storable = True  # state()/restore(): the scaler's and the SVM's fitted arrays (artifacts.py)
 
     def __init__(
         self,
