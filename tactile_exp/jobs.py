@@ -5,14 +5,13 @@ config or the tracking client."""
 
 from __future__ import annotations
 
-import csv
-import io
 import urllib.parse
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tactile_exp import scores_file
 from tactile_exp.artifacts import ArtifactError
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.models.registry import MODELS
@@ -190,11 +189,12 @@ class StoredJob:
         """Child run ``child``'s artifact ``path`` copied into folder ``into``."""
         self.tracker.download(child, path, into)
 
-    def scores(self, child: str) -> list[dict[str, str]]:
-        """Child run ``child``'s ``scores.csv``: one mapping per test unit (unit, object_id,
-        label, score), as ``recording.scores_table`` wrote it."""
-        text = self.folder(child, "scores.csv").read_text()
-        return list(csv.DictReader(io.StringIO(text)))
+    def scores(self, child: str) -> list[scores_file.UnitScore]:
+        """Child run ``child``'s test units and scores (its ``scores.csv``)."""
+        try:
+            return scores_file.read(self.folder(child, scores_file.NAME).read_text())
+        except (KeyError, ValueError) as err:
+            raise ArtifactError(f"run {child}: artifact {scores_file.NAME}: {err}") from None
 
     def listed(self, child: str) -> set[str]:
         """The top-level artifact paths of child run ``child``."""

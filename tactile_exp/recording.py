@@ -7,7 +7,6 @@ store (``store.MlflowCache``); everything it computes comes back in the ``Adject
 
 from __future__ import annotations
 
-import io
 import logging
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -15,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_exp import core, evaluate, metrics, stats, store
+from tactile_exp import core, evaluate, metrics, scores_file, stats, store
 from tactile_exp.config import Settings
 from tactile_exp.data.layout import Split
 from tactile_exp.models.base import EpochCallback
@@ -143,7 +142,7 @@ def record_adjective(
         )
         log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in others.items()))
         tracker.log_curves(run_id, result.history)
-        tracker.log_text(run_id, scores_table(result.test), "scores.csv")
+        tracker.log_text(run_id, scores_table(result.test), scores_file.NAME)
         # The run turns FINISHED only after the pipeline is written, and lookups take FINISHED
         # runs only, so a job killed while writing leaves nothing reusable.
         store.log_folder(tracker, run_id, "", pipeline_of(result).save)
@@ -168,16 +167,7 @@ def side_metrics(result: core.AdjectiveResult) -> dict[str, float]:
 
 def scores_table(scored: core.Scored) -> str:
     """``scores.csv``: each test unit's name, object, label and score."""
-    table = io.StringIO()
-    np.savetxt(
-        table,
-        np.column_stack([scored.units, scored.objects, scored.y, scored.scores]),
-        fmt="%s",
-        delimiter=",",
-        header="unit,object_id,label,score",
-        comments="",
-    )
-    return table.getvalue()
+    return scores_file.write(scored.units, scored.objects, scored.y, scored.scores)
 
 
 def record_summary(

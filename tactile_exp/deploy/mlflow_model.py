@@ -47,7 +47,7 @@ def _example(job: StoredJob, child: str) -> Any:
 
     modality = MODALITIES[job.modality]
     takes_trials, takes_photos = modality.takes_trials, modality.takes_photographs
-    unit = job.scores(child)[0]["unit"].split("#")[0]
+    unit = job.scores(child)[0].unit.split("#")[0]
     example: dict[str, list[str]] = {}
     if takes_trials:
         example = {"data": [str(job.spec.data_source().path)], "trial": [unit]}

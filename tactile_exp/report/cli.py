@@ -38,7 +38,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from tactile_exp import stats
-from tactile_exp.metrics import METRICS
+from tactile_exp.metrics import METRICS, THRESHOLD
 from tactile_exp.report import comparisons, heldout
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
@@ -53,7 +53,7 @@ from tactile_exp.report.runs import (
     skipped_cells,
 )
 from tactile_exp.report.runs_table import runs_table
-from tactile_exp.report.scores import THRESHOLD, ReportError
+from tactile_exp.report.scores import ReportError
 from tactile_exp.report.table1 import table1, table1_markdown
 from tactile_exp.store import ArtifactError
 from tactile_exp.tracking import ExperimentNotFound, Tracker, git_commit

@@ -33,7 +33,7 @@ def runs_table(*, tracker: Tracker, job_id: str, metric: str = "roc_auc") -> str
     ``mean_<key>``, ``<key>`` of ``metric`` (``mean_auc``, ``auc`` by default)."""
     key = METRICS.build(metric).key
     columns = (*COLUMNS, f"mean_{key}", key)
-    parent = tracker.client.get_run(job_id)
+    parent = tracker.get_run(job_id)
     found = tracker.child_runs(job_id, level=None)
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines.append("| " + " | ".join(_cells(parent, key)) + " |")

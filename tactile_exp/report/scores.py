@@ -9,30 +9,15 @@ ends in a hinge-loss linear layer, so an adjective is predicted when its score i
 
 from __future__ import annotations
 
-import csv
-from dataclasses import dataclass
-from pathlib import Path
-
-from tactile_exp.metrics import THRESHOLD
+from tactile_exp import scores_file
+from tactile_exp.scores_file import UnitScore
 from tactile_exp.tracking import Tracker
 
-SCORES_FILE = "scores.csv"
+SCORES_FILE = scores_file.NAME
 
 
 class ReportError(RuntimeError):
     """A run the report needs is incomplete or does not fit; the message says which and why."""
-
-
-@dataclass(frozen=True)
-class UnitScore:
-    unit: str
-    object_id: int
-    label: int
-    score: float
-
-    @property
-    def predicted(self) -> bool:
-        return self.score > THRESHOLD
 
 
 def read_scores(tracker: Tracker, child_id: str) -> list[UnitScore]:
@@ -40,11 +25,6 @@ def read_scores(tracker: Tracker, child_id: str) -> list[UnitScore]:
     from mlflow.exceptions import MlflowException
 
     try:
-        path = Path(tracker.client.download_artifacts(child_id, SCORES_FILE))
-        with open(path, newline="") as f:
-            return [
-                UnitScore(r["unit"], int(r["object_id"]), int(float(r["label"])), float(r["score"]))
-                for r in csv.DictReader(f)
-            ]
+        return scores_file.read(tracker.download(child_id, SCORES_FILE).read_text())
     except (OSError, KeyError, ValueError, MlflowException) as err:
         raise ReportError(f"run {child_id}: artifact {SCORES_FILE} unreadable ({err})") from None

@@ -17,8 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from tactile_exp.data.layout import objects
+from tactile_exp.metrics import THRESHOLD
 from tactile_exp.report.runs import Group, label_order, row_group
-from tactile_exp.report.scores import THRESHOLD, UnitScore, read_scores
+from tactile_exp.report.scores import UnitScore, read_scores
 from tactile_exp.tracking import Tracker
 
 # The paper's Table III columns: Table I row -> modality shown.
