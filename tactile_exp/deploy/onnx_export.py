@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,6 @@ TRUNK_FILE = "googlenet.onnx"
 FINGERS = 2
 OPSET = 17
 TORCH = {"impl": "torch"}  # load the kernels-trained networks as plain torch (same weights)
-NETWORKS = ("haptic", "visual", "multimodal")  # the modalities ``_network`` exports
 
 
 class DecisionNet(nn.Module):
@@ -150,38 +150,66 @@ def _export(
     onnx.checker.check_model(str(path), full_check=True)
 
 
-def _network(
-    folder: Path, child: str, modality: str, settings: dict[str, Any], keeps: bool, combine: int
-) -> tuple[DecisionNet, dict[str, list[int | None]], int, int]:
-    """Child run ``child``'s network (its saved pipeline in ``folder``) as plain torch, its
-    inputs' shapes (None: any number of rows), and the trials and views one row holds.
-    ``keeps``: the combiner scores instances (``separate``), else ``combine`` instances'
-    features are concatenated for the head."""
+@dataclass(frozen=True)
+class Network:
+    """One adjective's exported network: its inputs' shapes (None: any number of rows), the
+    manifest's layout of each input kind it takes (``haptic``, ``visual``) and, for visual
+    inputs, the trunk that computes them (weights, seed, ...: one per job)."""
 
-    def load(path: str) -> Any:
-        return artifacts.read_model(folder / path, f"run {child}: artifact {path}", TORCH)
+    net: DecisionNet
+    inputs: dict[str, list[int | None]]
+    layouts: dict[str, dict[str, Any]]
+    trunk: tuple[Any, ...] | None = None
 
-    if modality == "multimodal":  # the ConvNet part, the object's views, one linear layer
-        part, model = load("parts/haptic"), load("model")
-        trials, views = int(settings["trials"]), int(settings["views"])
-        count = trials * FINGERS * int(settings["haptic"]["offsets"])
-        inputs = {"instances": [None, count, *part.input_shape_], "views": [None, views, FEATURES]}
-        return DecisionNet(part.body_, *_layer(model), per_unit=True), inputs, trials, views
-    if modality == "haptic":
-        model = load("model")
-        shape = list(model.input_shape_)
-        if keeps:
-            return DecisionNet(model.body_, *_layer(model)), {"instances": [None, *shape]}, 1, 0
-        head = load("head")
-        count = combine * FINGERS * int(settings["offsets"])
-        inputs = {"instances": [None, count, *shape]}
-        return DecisionNet(model.body_, *_layer(head), per_unit=True), inputs, combine, 0
-    if keeps:  # visual, one view per row
-        model = load("model")
-        return DecisionNet(nn.Identity(), *_layer(model)), {"features": [None, FEATURES]}, 0, 1
-    head = load("head")
-    inputs = {"views": [None, combine, FEATURES]}
-    return DecisionNet(nn.Identity(), *_layer(head), per_unit=True), inputs, 0, combine
+
+Load = Callable[[str], Any]  # artifact path of the saved pipeline -> its model (plain torch)
+
+
+def _haptic(load: Load, settings: dict[str, Any], keeps: bool, combine: int) -> Network:
+    """Row H (instances scored one by one), I and J (``combine`` trials' conv3, then the head)."""
+    model = load("model")
+    shape = list(model.input_shape_)
+    if keeps:
+        net = DecisionNet(model.body_, *_layer(model))
+        return Network(net, {"instances": [None, *shape]}, {"haptic": _haptic_layout(settings, 1)})
+    count = combine * FINGERS * int(settings["offsets"])
+    net = DecisionNet(model.body_, *_layer(load("head")), per_unit=True)
+    layout = _haptic_layout(settings, combine)
+    return Network(net, {"instances": [None, count, *shape]}, {"haptic": layout})
+
+
+def _visual(load: Load, settings: dict[str, Any], keeps: bool, combine: int) -> Network:
+    """Rows K (one view per row) and L (``combine`` views' features, then the head)."""
+    trunk = (settings["size"], settings["layout"], settings["seed"], settings["weights"])
+    if keeps:
+        net = DecisionNet(nn.Identity(), *_layer(load("model")))
+        layout = {"visual": _visual_layout(settings, 1)}
+        return Network(net, {"features": [None, FEATURES]}, layout, trunk)
+    net = DecisionNet(nn.Identity(), *_layer(load("head")), per_unit=True)
+    layout = {"visual": _visual_layout(settings, combine)}
+    return Network(net, {"views": [None, combine, FEATURES]}, layout, trunk)
+
+
+def _multimodal(load: Load, settings: dict[str, Any], keeps: bool, combine: int) -> Network:
+    """Rows M and N: the ConvNet part on ``trials`` trials, the object's views, one layer."""
+    part, model = load("parts/haptic"), load("model")
+    trials, views = int(settings["trials"]), int(settings["views"])
+    haptic, visual = settings["haptic"], settings["visual"]
+    count = trials * FINGERS * int(haptic["offsets"])
+    inputs = {"instances": [None, count, *part.input_shape_], "views": [None, views, FEATURES]}
+    layouts = {"haptic": _haptic_layout(haptic, trials), "visual": _visual_layout(visual, views)}
+    trunk = (visual["size"], visual["layout"], visual["seed"], visual["weights"])
+    net = DecisionNet(part.body_, *_layer(model), per_unit=True)
+    return Network(net, inputs, layouts, trunk)
+
+
+# The modalities whose fitted pipelines export to ONNX, each by its own rule; any other
+# (haptic_features, signals) cannot: its features need this package's code.
+NETWORKS: dict[str, Callable[[Load, dict[str, Any], bool, int], Network]] = {
+    "haptic": _haptic,
+    "visual": _visual,
+    "multimodal": _multimodal,
+}
 
 
 def export_job(
@@ -228,25 +256,25 @@ def export_job(
         pipeline = AdjectivePipeline.load(saved, where)
         settings = pipeline.modality.params  # the modality's hyperparameters, as the job set them
         state = pipeline.preprocess.get_state()[1]
-        haptic = settings.get("haptic") if modality == "multimodal" else settings
-        visual = settings.get("visual") if modality == "multimodal" else settings
+
+        def load(path: str, saved: Path = saved, child: str = child) -> Any:
+            return artifacts.read_model(saved / path, f"run {child}: artifact {path}", TORCH)
+
         try:
-            net, inputs, trials, views = _network(saved, child, modality, settings, keeps, combine)
-            if modality != "visual":
-                manifest["haptic"] = _haptic_layout(haptic, trials)
-            if modality != "haptic":
-                manifest["visual"] = _visual_layout(visual, views)
-                key = (visual["size"], visual["layout"], visual["seed"], visual["weights"])
+            exported = NETWORKS[modality](load, settings, keeps, combine)
         except (KeyError, TypeError, ValueError) as err:
             raise artifacts.ArtifactError(
                 f"{where}/pipeline.json: missing or bad entry {err}"
             ) from None
-        prefix = "" if modality == "multimodal" else f"{modality}."  # multimodal's are prefixed
+        manifest.update(exported.layouts)
+        # The state's arrays under the input kind they prepare (multimodal's carry theirs).
+        prefix = "" if len(exported.layouts) > 1 else f"{next(iter(exported.layouts))}."
         arrays.update({f"{adjective}.{prefix}{k}": np.asarray(v) for k, v in state.items()})
-        if modality != "haptic":
-            if trunk_key is not None and key != trunk_key:
+        if exported.trunk is not None:
+            if trunk_key is not None and exported.trunk != trunk_key:
                 raise PredictError(f"run {job_id}: adjectives use different GoogLeNet trunks")
-            trunk_key = key
+            trunk_key = exported.trunk
+        net, inputs = exported.net, exported.inputs
         path = folder / f"{adjective}.onnx"
         dummy = tuple(torch.zeros([2, *dims[1:]]) for dims in inputs.values())
         _export(net, dummy, list(inputs), path, "decision")
