@@ -119,8 +119,7 @@ def adjective_key(
 
 def stores_model(settings: Settings) -> bool:
     """Whether the job's model is trained and storable, so kept in (and found in) a cache."""
-    pipeline = new_pipeline(settings)
-    return pipeline.trains_model and MODELS[settings.model.name].storable
+    return new_pipeline(settings).stores_model
 
 
 def new_pipeline(settings: Settings, label: str = "") -> AdjectivePipeline:
@@ -166,7 +165,7 @@ def fit_adjective(
     instances = pipeline.fit_preprocess(trials["train"], parts)
     history: History = {}
     model = None
-    if pipeline.trains_model and MODELS[settings.model.name].storable:
+    if pipeline.stores_model:
         key = adjective_key(settings, dataset, settings.modality, settings.model, adjective)
         trained = cache.get_or_train(
             key,

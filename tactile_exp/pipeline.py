@@ -66,6 +66,11 @@ class AdjectivePipeline:
         return self.keeps_instances or MODELS[self.model.name].learns_representation
 
     @property
+    def stores_model(self) -> bool:
+        """Whether the trained model is kept (and found again) by its training key."""
+        return self.trains_model and MODELS[self.model.name].storable
+
+    @property
     def keeps_instances(self) -> bool:
         return self._combine_units.keeps_instances
 
