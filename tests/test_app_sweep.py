@@ -31,7 +31,8 @@ from test_extending import table1_rows
 
 from tactile_exp.errors import ConfigError
 from tactile_exp.report import cli, figures, table3
-from tactile_exp.runtime import processes, sweep
+from tactile_exp.app import sweep
+from tactile_exp.runtime import processes
 from tactile_exp.runtime.termination import Terminated
 
 
@@ -468,7 +469,8 @@ def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
 TERMINATE = """
 import os, subprocess, sys
 from multiprocessing import resource_tracker
-from tactile_exp.runtime import processes, sweep
+from tactile_exp.app import sweep
+from tactile_exp.runtime import processes
 
 class NoRuns:
     def end_runs_of(self, pids, *, error):

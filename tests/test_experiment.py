@@ -77,8 +77,8 @@ def test_same_seed_same_aucs(tiny_config):
     cfg = tiny_config(["seed=5", "tracking.skip_finished=false"], adjectives="[hard,squishy]")
     a, b = run(settings_from_config(cfg)), run(settings_from_config(cfg))
     for adj in ("hard", "squishy"):
-        np.testing.assert_array_equal(a.results[adj].scores, b.results[adj].scores)
-        assert a.results[adj].auc == b.results[adj].auc
+        np.testing.assert_array_equal(a.results[adj].test.scores, b.results[adj].test.scores)
+        assert a.results[adj].metrics["auc"] == b.results[adj].metrics["auc"]
 
 
 def test_a_failing_job_is_marked_failed_and_nothing_stays_running(

@@ -65,8 +65,10 @@ def test_a_new_sensor_in_the_folder_layout_runs_end_to_end(
     assert sorted(by_label) == sorted(LABELS) and len(children) == len(LABELS)
     assert all(c.info.status == "FINISHED" for c in children)
     for label, child in by_label.items():
-        assert parent.data.metrics[f"auc.{label}"] == pytest.approx(result.results[label].auc)
-        assert child.data.metrics["auc"] == pytest.approx(result.results[label].auc)
+        assert parent.data.metrics[f"auc.{label}"] == pytest.approx(
+            result.results[label].metrics["auc"]
+        )
+        assert child.data.metrics["auc"] == pytest.approx(result.results[label].metrics["auc"])
 
     # predict on one object: each label it is a test object of scores as the job logged it
     tracker = Tracker(mlflow_uri, settings.tracking.experiment)

@@ -32,9 +32,9 @@ def test_two_workers_give_the_same_job_as_one(tiny_config, mlflow_uri, caplog):
     assert list(two.results) == ["hard", "soft", "smooth"]  # in the configured order
     for adjective, expected in one.results.items():
         got = two.results[adjective]
-        np.testing.assert_array_equal(got.units, expected.units)
-        np.testing.assert_allclose(got.scores, expected.scores, rtol=1e-4, atol=1e-5)
-        assert got.auc == pytest.approx(expected.auc, abs=1e-3)
+        np.testing.assert_array_equal(got.test.units, expected.test.units)
+        np.testing.assert_allclose(got.test.scores, expected.test.scores, rtol=1e-4, atol=1e-5)
+        assert got.metrics["auc"] == pytest.approx(expected.metrics["auc"], abs=1e-3)
     children = _children(mlflow_uri, two_settings.config_hash)
     mine = [c for c in children if c.data.tags["mlflow.parentRunId"] == two.run_id]
     assert sorted(c.info.run_name for c in mine) == ["adj=hard", "adj=smooth", "adj=soft"]
