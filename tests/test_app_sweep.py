@@ -29,9 +29,9 @@ from omegaconf import OmegaConf
 from PIL import Image
 from test_extending import table1_rows
 
+from tactile_exp.app import sweep
 from tactile_exp.errors import ConfigError
 from tactile_exp.report import cli, figures, table3
-from tactile_exp.app import sweep
 from tactile_exp.runtime import processes
 from tactile_exp.runtime.termination import Terminated
 

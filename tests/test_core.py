@@ -112,6 +112,13 @@ class ConvFeatures(Modality):
             self.net_.transform(signals.X), signals.y, signals.trial, signals.object_id
         )
 
+    def get_state(self) -> tuple[dict, dict]:
+        return self.haptic.get_state()
+
+    def set_state(self, settings: dict, arrays: dict) -> Self:
+        self.haptic.set_state(settings, arrays)
+        return self
+
 
 @pytest.fixture
 def registered(monkeypatch):
