@@ -275,8 +275,7 @@ def test_every_registered_model_declares_what_the_engine_reads(tmp_path, name):
     """What the store, the config check and the report read is declared on ``Model`` with a
     default, never probed: the capabilities' types, ``input_shape_``, ``check_steps`` and, for a
     storable model, ``state``/``restore`` that give back the same scores (artifacts.py's round
-    trip);
-    a model that is not storable says so."""
+    trip); a model that is not storable says so."""
     from tactile_exp import artifacts
     from tactile_exp.modalities import MODALITIES
 
