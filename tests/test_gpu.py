@@ -11,10 +11,10 @@ import torch
 from sklearn.metrics import roc_auc_score
 from test_models import FAST, easy_case
 
+from tactile_exp.artifacts import read_model, write_model
 from tactile_exp.models import MODELS
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.preprocess.trunk import build_trunk, pooled_features
-from tactile_exp.store import read_model, write_model
 from tactile_exp.train import device_name
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")

@@ -38,6 +38,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from tactile_exp import stats
+from tactile_exp.artifacts import ArtifactError
 from tactile_exp.metrics import METRICS, THRESHOLD
 from tactile_exp.report import comparisons, heldout
 from tactile_exp.report import table3 as t3
@@ -55,7 +56,6 @@ from tactile_exp.report.runs import (
 from tactile_exp.report.runs_table import runs_table
 from tactile_exp.report.scores import ReportError
 from tactile_exp.report.table1 import table1, table1_markdown
-from tactile_exp.store import ArtifactError
 from tactile_exp.tracking import ExperimentNotFound, Tracker, git_commit
 
 ENTRY_POINT = "python -m tactile_exp.report"
