@@ -120,3 +120,100 @@ def test_jobs_set_up_one_experiment_at_once(server, tmp_path):
         (experiment,) = [e for e in client.search_experiments() if e.name == name]
         views = [k for k in experiment.tags if k.startswith("mlflow.sharedViewState.")]
         assert len(views) == 3
+
+
+def _tactile(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """``python -m tactile_exp...`` from the repository root, its output kept for the message."""
+    return subprocess.run(
+        [sys.executable, "-m", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def _runs(uri: str, experiment: str) -> list:
+    client = MlflowClient(uri)
+    found = client.get_experiment_by_name(experiment)
+    return [] if found is None else client.search_runs([found.experiment_id], max_results=1000)
+
+
+def _most_at_once(runs: list) -> int:
+    """The most runs RUNNING at one moment, from their start and end times."""
+    events = sorted([(r.info.start_time, 1) for r in runs] + [(r.info.end_time, -1) for r in runs])
+    most = now = 0
+    for _, step in events:
+        now += step
+        most = max(most, now)
+    return most
+
+
+# Smoke-sized data (tests/test_every_experiment.py's) and the tiny schedule.
+SMOKE = [
+    "data.trials=2",
+    "data.views=2",
+    "data.duration_scale=0.1",
+    "data.image_width=96",
+    "data.image_height=64",
+    "schedule=tiny",
+    "adjectives=[hard,thick]",
+]
+ROWS = "table1_h_haptic_cnn_separate,table1_i_haptic_cnn_1trial,table1_m_multimodal_i_l"
+
+
+def test_rows_sharing_convnets_on_slurm_log_to_the_server(server, cache_dir, tmp_path):
+    """Rows H, I and M through Hydra's submitit SLURM launcher, two jobs at a time, logging to
+    the server: every run FINISHED, each ConvNet trained once (I and M load H's through the
+    server's artifact proxy), then the report, predict and deploy work against the server."""
+    experiment = _experiment()
+    sweep = _tactile(
+        "tactile_exp",
+        "-m",
+        "hydra/launcher=submitit_slurm",
+        "hydra.launcher.partition=debug",
+        "hydra.launcher.cpus_per_task=1",
+        f"hydra.sweep.dir={tmp_path / 'multirun'}",
+        f"experiment={ROWS}",
+        "tracking=server",
+        f"tracking.uri={server}",
+        f"tracking.experiment={experiment}",
+        f"cache_dir={cache_dir}",
+        *SMOKE,
+        timeout=600,
+    )
+    logs = "\n".join(p.read_text() for p in (tmp_path / "multirun").rglob("*.err"))
+    assert sweep.returncode == 0, sweep.stderr[-3000:] + logs[-3000:]
+    assert "3 FINISHED, 0 skipped (invalid), 0 FAILED" in sweep.stdout + sweep.stderr
+
+    runs = _runs(server, experiment)
+    parents = [r for r in runs if r.data.tags.get("run_level") == "parent"]
+    assert len(parents) == 3 and {r.info.status for r in runs} == {"FINISHED"}
+    assert _most_at_once(parents) >= 2  # SLURM ran two jobs side by side
+    assert all(r.info.artifact_uri.startswith("mlflow-artifacts:/") for r in runs)
+    keyed: dict[str, list] = {}
+    for r in runs:
+        if "training_key" in r.data.tags:
+            keyed.setdefault(r.data.tags["training_key"], []).append(r)
+    convnets = [key for key, found in keyed.items() if len(found) > 1]
+    assert len(convnets) == 2  # one ConvNet per adjective, used by all three rows
+    for key, found in keyed.items():
+        trained = [r for r in found if "reused_from" not in r.data.tags]
+        assert len(trained) == 1, key
+        assert {r.data.tags.get("reused_from") for r in found} - {None} <= {trained[0].info.run_id}
+
+    where = ["--tracking-uri", server, "--experiment", experiment]
+    report = _tactile("tactile_exp.report", *where, "--out", str(tmp_path / "report"))
+    assert report.returncode == 0, report.stderr[-3000:]
+    assert "(I)" in (tmp_path / "report" / "index.md").read_text()
+    row_i = next(r for r in parents if r.data.params.get("paper.row") == "I")
+    predicted = _tactile(
+        "tactile_exp.predict", row_i.info.run_id, *where, "--object", "101", "--format", "csv"
+    )
+    assert predicted.returncode == 0, predicted.stderr[-3000:]
+    assert predicted.stdout.count("\n") >= 2 and "hard" in predicted.stdout
+    model = f"{experiment}-model"
+    deployed = _tactile("tactile_exp.deploy", *where, "log", row_i.info.run_id, "--register", model)
+    assert deployed.returncode == 0, deployed.stderr[-3000:]
+    (version,) = MlflowClient(server).search_model_versions(f"name = '{model}'")
+    assert version.source.startswith(("mlflow-artifacts:/", "models:/"))
