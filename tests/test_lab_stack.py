@@ -217,3 +217,138 @@ def test_rows_sharing_convnets_on_slurm_log_to_the_server(server, cache_dir, tmp
     assert deployed.returncode == 0, deployed.stderr[-3000:]
     (version,) = MlflowClient(server).search_model_versions(f"name = '{model}'")
     assert version.source.startswith(("mlflow-artifacts:/", "models:/"))
+
+
+def _job(server: str, experiment: str, cache_dir: Path, run_dir: Path) -> list[str]:
+    """One job of three adjectives whose second trains for seconds after its first epoch line
+    (tests/test_kill_resume.py's): time to stop the server or cancel the job mid-training."""
+    return [
+        sys.executable,
+        "-m",
+        "tactile_exp",
+        *SMOKE[:5],
+        "schedule=tiny",
+        "schedule.epochs=50",
+        "adjectives=[hard,soft,smooth]",
+        "seed=41",
+        "tracking=server",
+        f"tracking.uri={server}",
+        f"tracking.experiment={experiment}",
+        f"cache_dir={cache_dir}",
+        f"hydra.run.dir={run_dir}",
+    ]
+
+
+def _wait_for_line(log: Path, text: str, *, alive=lambda: True, timeout: float = 300) -> None:
+    deadline = time.monotonic() + timeout
+    while not (log.is_file() and text in log.read_text()):
+        assert alive() and time.monotonic() < deadline, f"no {text!r} in {log}"
+        time.sleep(0.2)
+
+
+def _stack(command: str, part: str) -> None:
+    subprocess.run([str(STACK), command, part], check=True, capture_output=True, timeout=300)
+
+
+def _by_adjective(runs: list) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for r in sorted(runs, key=lambda r: r.info.start_time):
+        if r.data.tags.get("run_level") == "child":
+            out.setdefault(r.data.tags["adjective"], []).append(r)
+    return out
+
+
+def test_a_job_waits_out_a_server_restart(server, cache_dir, tmp_path):
+    """The tracking server restarts while a job trains: the job's next writes are retried with
+    backoff until it is back, and the job finishes with every run FINISHED."""
+    experiment, log = _experiment(), tmp_path / "run" / "__main__.log"
+    job = subprocess.Popen(
+        _job(server, experiment, cache_dir, tmp_path / "run"),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        _wait_for_line(log, "soft epoch 1/", alive=lambda: job.poll() is None)
+        _stack("stop", "mlflow")
+        time.sleep(2)
+        _stack("start", "mlflow")
+        output = job.communicate(timeout=400)[0]
+    finally:
+        job.kill()
+    assert job.returncode == 0, output[-3000:]
+    runs = _runs(server, experiment)
+    assert len(runs) == 4 and {r.info.status for r in runs} == {"FINISHED"}
+
+
+def test_a_server_down_too_long_ends_the_job_then_a_rerun_finishes_it(server, cache_dir, tmp_path):
+    """The server stays down past the client's retries (cut short here): the job ends with one
+    ``error:`` line; once the server is back a rerun marks the job's runs KILLED, reuses the
+    adjective that finished and finishes the job."""
+    experiment, log = _experiment(), tmp_path / "run" / "__main__.log"
+    command = _job(server, experiment, cache_dir, tmp_path / "run")
+    short = {**os.environ, "MLFLOW_HTTP_REQUEST_MAX_RETRIES": "1"}
+    short["MLFLOW_HTTP_REQUEST_BACKOFF_FACTOR"] = "1"
+    job = subprocess.Popen(
+        command, cwd=ROOT, env=short, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        _wait_for_line(log, "soft epoch 1/", alive=lambda: job.poll() is None)
+        _stack("stop", "mlflow")
+        _, stderr = job.communicate(timeout=300)
+    finally:
+        job.kill()
+        _stack("start", "mlflow")
+    assert job.returncode == 2, stderr[-3000:]
+    errors = [line for line in stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "stopped answering" in errors[0], stderr[-3000:]
+
+    rerun = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=400)
+    assert rerun.returncode == 0, rerun.stderr[-3000:]
+    runs = _runs(server, experiment)
+    assert "RUNNING" not in {r.info.status for r in runs}
+    hard, soft = _by_adjective(runs)["hard"], _by_adjective(runs)["soft"]
+    assert [r.info.status for r in hard] == ["FINISHED", "FINISHED"]
+    assert hard[1].data.tags["reused_from"] == hard[0].info.run_id
+    assert [r.info.status for r in soft] == ["KILLED", "FINISHED"]
+
+
+def test_a_cancelled_slurm_job_leaves_no_running_run_and_its_rerun_reuses(
+    server, cache_dir, tmp_path
+):
+    """``scancel`` while the second adjective trains: SLURM's SIGTERM ends the job's runs
+    FAILED (before its SIGKILL); the rerun reuses the first adjective's model."""
+    experiment, log = _experiment(), tmp_path / "run" / "__main__.log"
+    command = _job(server, experiment, cache_dir, tmp_path / "run")
+    submitted = subprocess.run(
+        ["sbatch", "--parsable", "-p", "debug", "-c", "1", "-o", str(tmp_path / "slurm.out")]
+        + ["--chdir", str(ROOT), "--wrap", "exec " + " ".join(command)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    job_id = submitted.stdout.strip().split(";")[0]
+
+    def queued() -> bool:
+        out = subprocess.run(["squeue", "-h", "-j", job_id], capture_output=True, text=True)
+        return bool(out.stdout.strip())
+
+    try:
+        _wait_for_line(log, "soft epoch 1/", alive=queued)
+    finally:
+        subprocess.run(["scancel", job_id], check=True)
+    deadline = time.monotonic() + 60
+    while queued():
+        assert time.monotonic() < deadline, f"job {job_id} still queued after scancel"
+        time.sleep(0.5)
+    runs = _runs(server, experiment)
+    assert "RUNNING" not in {r.info.status for r in runs}
+    (hard,), (soft,) = _by_adjective(runs)["hard"], _by_adjective(runs)["soft"]
+    assert hard.info.status == "FINISHED" and soft.info.status in ("FAILED", "KILLED")
+
+    rerun = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=400)
+    assert rerun.returncode == 0, rerun.stderr[-3000:]
+    runs = _runs(server, experiment)
+    assert "RUNNING" not in {r.info.status for r in runs}
+    assert _by_adjective(runs)["hard"][1].data.tags["reused_from"] == hard.info.run_id
