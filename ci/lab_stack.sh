@@ -8,7 +8,7 @@
 #   ci/lab_stack.sh start [munge|slurm|postgres|mlflow]   start what is not running (idempotent)
 #   ci/lab_stack.sh stop  [munge|slurm|postgres|mlflow]   stop what runs
 #   ci/lab_stack.sh status                                 what runs, one line each; exit 1 if not all
-#   ci/lab_stack.sh env                                    the variables a job needs (eval "$(...)")
+#   ci/lab_stack.sh env                                    where jobs log (eval "$(...)")
 #
 # Needs root (daemons, /etc/slurm/slurm.conf). Installs Debian's slurm-wlm, munge and postgresql
 # when missing, and psycopg into the Python environment when missing. Everything variable lives
@@ -21,12 +21,13 @@ LAB=${LAB_STACK_DIR:-/var/tmp/tactile_exp-lab}
 PYTHON=${LAB_STACK_PYTHON:-$REPO/.venv/bin/python}  # the environment `mlflow server` runs in
 PG_PORT=${LAB_PG_PORT:-55432}
 MLFLOW_PORT=${LAB_MLFLOW_PORT:-5055}
-DB=mlflow DB_USER=mlflow DB_PASSWORD=${LAB_DB_PASSWORD:-mlflow}  # loopback only; a lab sets its own
+DB=mlflow STUDY_DB=optuna DB_USER=mlflow DB_PASSWORD=${LAB_DB_PASSWORD:-mlflow}  # loopback only; a lab sets its own
 PARTITION=debug
 SLURM_CONF=/etc/slurm/slurm.conf
 MARKER="# written by tactile_exp ci/lab_stack.sh"  # only such a slurm.conf is ever rewritten
 PG_BIN=$(ls -d /usr/lib/postgresql/*/bin 2>/dev/null | sort -V | tail -1 || true)
 BACKEND="postgresql+psycopg://$DB_USER:$DB_PASSWORD@127.0.0.1:$PG_PORT/$DB"  # psycopg 3's driver
+STUDY_STORAGE="postgresql+psycopg://$DB_USER:$DB_PASSWORD@127.0.0.1:$PG_PORT/$STUDY_DB"  # search=...
 TRACKING_URI="http://127.0.0.1:$MLFLOW_PORT"
 
 say() { echo "lab_stack: $*"; }
@@ -130,23 +131,27 @@ stop_slurm() {
 pg() { runuser -u postgres -- "$PG_BIN/$1" "${@:2}"; }
 postgres_up() { pg pg_isready -q -h 127.0.0.1 -p "$PG_PORT"; }
 start_postgres() {
-    postgres_up && return
-    install -d -o postgres -g postgres -m 0700 "$LAB/postgres"
-    install -d -o postgres -g postgres "$LAB/log/postgres"
-    if [ ! -f "$LAB/postgres/PG_VERSION" ]; then
-        pg initdb -D "$LAB/postgres" -U postgres --auth-local=peer --auth-host=scram-sha-256 >/dev/null
+    if ! postgres_up; then
+        install -d -o postgres -g postgres -m 0700 "$LAB/postgres"
+        install -d -o postgres -g postgres "$LAB/log/postgres"
+        if [ ! -f "$LAB/postgres/PG_VERSION" ]; then
+            pg initdb -D "$LAB/postgres" -U postgres --auth-local=peer --auth-host=scram-sha-256 >/dev/null
+        fi
+        pg pg_ctl -D "$LAB/postgres" -l "$LAB/log/postgres/server.log" -w \
+            -o "-c listen_addresses=127.0.0.1 -c port=$PG_PORT -k /tmp" start >/dev/null
+        wait_for 20 postgres postgres_up
     fi
-    pg pg_ctl -D "$LAB/postgres" -l "$LAB/log/postgres/server.log" -w \
-        -o "-c listen_addresses=127.0.0.1 -c port=$PG_PORT -k /tmp" start >/dev/null
-    wait_for 20 postgres postgres_up
-    # The MLflow role and database, once.
-    local psql=(pg psql -q -h /tmp -p "$PG_PORT" -U postgres -v ON_ERROR_STOP=1)
+    # Once: the role, MLflow's database and the searches' study database (Optuna's tables apart
+    # from MLflow's: both keep an alembic_version table).
+    local psql=(pg psql -q -h /tmp -p "$PG_PORT" -U postgres -v ON_ERROR_STOP=1) db
     if [ -z "$("${psql[@]}" -tAc "SELECT 1 FROM pg_roles WHERE rolname = '$DB_USER'")" ]; then
         "${psql[@]}" -c "CREATE ROLE $DB_USER LOGIN PASSWORD '$DB_PASSWORD'"
     fi
-    if [ -z "$("${psql[@]}" -tAc "SELECT 1 FROM pg_database WHERE datname = '$DB'")" ]; then
-        "${psql[@]}" -c "CREATE DATABASE $DB OWNER $DB_USER"
-    fi
+    for db in "$DB" "$STUDY_DB"; do
+        if [ -z "$("${psql[@]}" -tAc "SELECT 1 FROM pg_database WHERE datname = '$db'")" ]; then
+            "${psql[@]}" -c "CREATE DATABASE $db OWNER $DB_USER"
+        fi
+    done
 }
 stop_postgres() {
     [ -f "$LAB/postgres/postmaster.pid" ] || return 0
@@ -207,7 +212,7 @@ stop)
 status) status ;;
 env)
     echo "export MLFLOW_TRACKING_URI=$TRACKING_URI"
-    echo "export TACTILE_EXP_LAB_STACK=$TRACKING_URI"
+    echo "# a search's study storage: hydra.sweeper.storage=$STUDY_STORAGE"
     ;;
 *) die "usage: $0 start|stop|status|env [munge|slurm|postgres|mlflow ...]" ;;
 esac

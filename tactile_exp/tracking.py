@@ -32,7 +32,7 @@ import urllib.request
 from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager, nullcontext
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from tactile_exp.runtime.processes import process_alive, process_tags
 from tactile_exp.runtime.termination import shielded
@@ -46,6 +46,7 @@ os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")  # no calls home; the 
 os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 MAX_PARAM_LENGTH = 6000  # MLflow's limit on a param value
 MAX_BATCH = 1000  # MLflow's limit on metrics per log_batch call
@@ -169,21 +170,22 @@ def unreachable(err: BaseException) -> bool:
     return _UNREACHABLE.search(str(err)) is not None
 
 
-def retried(write: Callable[[], Any], *, done: Callable[[], bool], what: str) -> None:
+def retried(
+    write: Callable[[], T], *, done: Callable[[], bool] = lambda: False, what: str
+) -> T | None:
     """Compare-and-retry for a write that other jobs may make at the same moment: on a conflict,
-    ``done()`` reads the store back (someone else's identical write counts) and else the write
-    is tried again, with jittered backoff, for up to ``CONFLICT_WAIT_S`` seconds."""
+    ``done()`` reads the store back (someone else's identical write counts: then None) and else
+    the write is tried again, with jittered backoff, for up to ``CONFLICT_WAIT_S`` seconds."""
     delay, deadline = 0.05, time.monotonic() + CONFLICT_WAIT_S
     while True:
         try:
-            write()
-            return
+            return write()
         except Exception as err:
             if not conflicting(err) or time.monotonic() > deadline:
                 raise
             log.debug("%s: lost a race (%s); reading it back", what, err)
         if done():
-            return
+            return None
         time.sleep(delay * (1 + random.random()))
         delay = min(2 * delay, 2.0)
 
@@ -514,7 +516,6 @@ class Tracker:
         with shielded():
             retried(
                 lambda: self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)]),
-                done=lambda: False,
                 what=f"dataset {name}",
             )
 

@@ -122,6 +122,48 @@ def test_jobs_set_up_one_experiment_at_once(server, tmp_path):
         assert len(views) == 3
 
 
+STUDY = textwrap.dedent(
+    """
+    import sys, time
+    from pathlib import Path
+    import optuna
+    from tactile_exp.search import open_study
+    storage, name, folder, me = sys.argv[1], sys.argv[2], Path(sys.argv[3]), sys.argv[4]
+    (folder / f"study.{me}").touch()
+    while not (folder / "study").exists():
+        time.sleep(0.002)
+    study = open_study(name, storage, direction="maximize", sampler=optuna.samplers.RandomSampler())
+    trial = study.ask()
+    study.tell(trial, 0.5)
+    """
+)
+STUDY_STORAGE = "postgresql+psycopg://mlflow:mlflow@127.0.0.1:55432/optuna"  # ci/lab_stack.sh's
+
+
+def test_searches_open_one_study_at_once(server, tmp_path):
+    """N sweeps of one search start together on the stack's study database: each makes or
+    finds the one study (and, on a fresh database, Optuna's tables) and adds its trial."""
+    pytest.importorskip("optuna", reason="no optuna: pip install -e '.[search]'")
+    import optuna
+
+    name = _experiment()
+    jobs = [
+        subprocess.Popen(
+            [sys.executable, "-c", STUDY, STUDY_STORAGE, name, str(tmp_path), str(i)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for i in range(N_JOBS)
+    ]
+    _release(tmp_path, "study", N_JOBS)
+    outputs = [job.communicate(timeout=180)[0] for job in jobs]
+    failed = [out for job, out in zip(jobs, outputs, strict=True) if job.returncode != 0]
+    assert not failed, f"{len(failed)} of {N_JOBS} searches failed; the first:\n{failed[0][-3000:]}"
+    study = optuna.load_study(study_name=name, storage=STUDY_STORAGE)
+    assert len(study.trials) == N_JOBS
+
+
 def _tactile(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     """``python -m tactile_exp...`` from the repository root, its output kept for the message."""
     return subprocess.run(
