@@ -9,6 +9,7 @@ with ``TACTILE_EXP_LAB_STACK`` set (CI sets it to the server's URI) a missing st
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -98,28 +99,51 @@ def _release(folder: Path, phase: str, n: int) -> None:
 
 def test_jobs_set_up_one_experiment_at_once(server, tmp_path):
     """N jobs start together against the PostgreSQL-backed server: all create or find the same
-    experiments and write the same runs-table view tag; none fails (PostgreSQL does not
+    experiments and write the same runs-table view tags; none fails (PostgreSQL does not
     serialise writers as sqlite does: two inserts of one tag raise a UniqueViolation)."""
     names = [_experiment() for _ in range(4)]
+    outputs = _at_once(SETUP, ["create", "view"], [server, ",".join(names)], tmp_path)
+    assert not [out for out in outputs if "not stored" in out]  # each wrote (or read) its views
+    client = MlflowClient(server)
+    for name in names:
+        (experiment,) = [e for e in client.search_experiments() if e.name == name]
+        views = [k for k in experiment.tags if k.startswith("mlflow.sharedViewState.")]
+        assert len(views) == 3
+
+
+REGISTER = textwrap.dedent(
+    """
+    import sys, time
+    from pathlib import Path
+    import mlflow
+    uri, name, model, folder, me = *sys.argv[1:4], Path(sys.argv[4]), sys.argv[5]
+    mlflow.set_tracking_uri(uri)
+    (folder / f"register.{me}").touch()
+    while not (folder / "register").exists():
+        time.sleep(0.002)
+    print(mlflow.register_model(model, name).version)
+    """
+)
+
+
+def _at_once(script: str, phases: list[str], args: list[str], folder: Path) -> list[str]:
+    """``script`` in N_JOBS processes (arguments: ``args``, the folder of its barriers, its
+    number), released together at each barrier in ``phases``; their outputs."""
     jobs = [
         subprocess.Popen(
-            [sys.executable, "-c", SETUP, server, ",".join(names), str(tmp_path), str(i)],
+            [sys.executable, "-c", script, *args, str(folder), str(i)],
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
         )
         for i in range(N_JOBS)
     ]
-    _release(tmp_path, "create", N_JOBS)
-    _release(tmp_path, "view", N_JOBS)
+    for phase in phases:
+        _release(folder, phase, N_JOBS)
     outputs = [job.communicate(timeout=180)[0] for job in jobs]
     failed = [out for job, out in zip(jobs, outputs, strict=True) if job.returncode != 0]
-    assert not failed, f"{len(failed)} of {N_JOBS} jobs failed; the first:\n{failed[0][-3000:]}"
-    client = MlflowClient(server)
-    for name in names:
-        (experiment,) = [e for e in client.search_experiments() if e.name == name]
-        views = [k for k in experiment.tags if k.startswith("mlflow.sharedViewState.")]
-        assert len(views) == 3
+    assert not failed, f"{len(failed)} of {N_JOBS} failed; the first:\n{failed[0][-3000:]}"
+    return outputs
 
 
 STUDY = textwrap.dedent(
@@ -147,19 +171,7 @@ def test_searches_open_one_study_at_once(server, tmp_path):
     import optuna
 
     name = _experiment()
-    jobs = [
-        subprocess.Popen(
-            [sys.executable, "-c", STUDY, STUDY_STORAGE, name, str(tmp_path), str(i)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        for i in range(N_JOBS)
-    ]
-    _release(tmp_path, "study", N_JOBS)
-    outputs = [job.communicate(timeout=180)[0] for job in jobs]
-    failed = [out for job, out in zip(jobs, outputs, strict=True) if job.returncode != 0]
-    assert not failed, f"{len(failed)} of {N_JOBS} searches failed; the first:\n{failed[0][-3000:]}"
+    _at_once(STUDY, ["study"], [STUDY_STORAGE, name], tmp_path)
     study = optuna.load_study(study_name=name, storage=STUDY_STORAGE)
     assert len(study.trials) == N_JOBS
 
@@ -259,6 +271,11 @@ def test_rows_sharing_convnets_on_slurm_log_to_the_server(server, cache_dir, tmp
     assert deployed.returncode == 0, deployed.stderr[-3000:]
     (version,) = MlflowClient(server).search_model_versions(f"name = '{model}'")
     assert version.source.startswith(("mlflow-artifacts:/", "models:/"))
+    # N jobs register the same logged model under one name at once: each gets its own version.
+    logged = re.search(r"logged (models:/\S+)", deployed.stdout).group(1)
+    outputs = _at_once(REGISTER, ["register"], [server, model, logged], tmp_path)
+    versions = sorted(int(out.strip().splitlines()[-1]) for out in outputs)
+    assert versions == list(range(2, N_JOBS + 2))
 
 
 def _job(server: str, experiment: str, cache_dir: Path, run_dir: Path) -> list[str]:
