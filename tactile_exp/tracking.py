@@ -175,11 +175,13 @@ def retried(
 ) -> T | None:
     """Compare-and-retry for a write that other jobs may make at the same moment: on a conflict,
     ``done()`` reads the store back (someone else's identical write counts: then None) and else
-    the write is tried again, with jittered backoff, for up to ``CONFLICT_WAIT_S`` seconds."""
+    the write is tried again, with jittered backoff, for up to ``CONFLICT_WAIT_S`` seconds.
+    Each try is ``shielded``: a SIGTERM ends the job between tries, never inside one."""
     delay, deadline = 0.05, time.monotonic() + CONFLICT_WAIT_S
     while True:
         try:
-            return write()
+            with shielded():
+                return write()
         except Exception as err:
             if not conflicting(err) or time.monotonic() > deadline:
                 raise
@@ -288,12 +290,11 @@ class Tracker:
         def done() -> bool:
             return self.client.get_experiment(experiment_id).tags.get(key) == value
 
-        with shielded():
-            retried(
-                lambda: self.client.set_experiment_tag(experiment_id, key, value),
-                done=done,
-                what=f"experiment tag {key}",
-            )
+        retried(
+            lambda: self.client.set_experiment_tag(experiment_id, key, value),
+            done=done,
+            what=f"experiment tag {key}",
+        )
 
     def runs_view(self, columns: Sequence[str], *, order_by: str) -> str:
         """A link that opens the UI on this experiment's runs table (not its GenAI Overview)
@@ -486,8 +487,8 @@ class Tracker:
                 if not unreachable(end_err):
                     raise
                 log.warning(
-                    "run %s stays RUNNING: the tracking server does not answer; the next run of "
-                    "this config marks it KILLED",
+                    "run %s stays RUNNING: the tracking server does not answer; a rerun of "
+                    "this config on this host marks it KILLED",
                     run_id,
                 )
             if down and not isinstance(err, TrackingError):
@@ -513,11 +514,10 @@ class Tracker:
         from mlflow.entities import Dataset, DatasetInput
 
         dataset = Dataset(name=name, digest=digest, source_type="local", source=source)
-        with shielded():
-            retried(
-                lambda: self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)]),
-                what=f"dataset {name}",
-            )
+        retried(
+            lambda: self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)]),
+            what=f"dataset {name}",
+        )
 
     def log_metrics(self, run_id: str, values: Mapping[str, float], step: int = 0) -> None:
         self.log_curves(run_id, {k: [v] for k, v in values.items()}, start=step)
