@@ -200,7 +200,12 @@ start)
     [ "$(id -u)" = 0 ] || die "start needs root (daemons and $SLURM_CONF)"
     begin=$(date +%s%N)
     install_packages
-    for part in "${parts[@]}"; do "start_$part"; done
+    for part in "${parts[@]}"; do
+        t=$(date +%s%N)
+        "start_$part"
+        ms=$((($(date +%s%N) - t) / 1000000))
+        say "$part up ($((ms / 1000)).$((ms % 1000 / 100)) s)"
+    done
     status >/dev/null || true
     ms=$((($(date +%s%N) - begin) / 1000000))
     say "started ${parts[*]} in $((ms / 1000)).$((ms % 1000 / 100)) s"
