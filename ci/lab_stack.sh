@@ -206,7 +206,6 @@ start)
         ms=$((($(date +%s%N) - t) / 1000000))
         say "$part up ($((ms / 1000)).$((ms % 1000 / 100)) s)"
     done
-    status >/dev/null || true
     ms=$((($(date +%s%N) - begin) / 1000000))
     say "started ${parts[*]} in $((ms / 1000)).$((ms % 1000 / 100)) s"
     ;;
