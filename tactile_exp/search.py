@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from tactile_exp.errors import ConfigError
 from tactile_exp.runtime.processes import process_alive
-from tactile_exp.tracking import Tracker, resolve_uri
+from tactile_exp.tracking import Tracker, resolve_uri, retried
 
 if TYPE_CHECKING:
     import optuna
@@ -112,13 +112,16 @@ def open_study(
     """The study ``name`` in ``storage``, made on first use, else continued."""
     import optuna
 
-    try:
-        study = optuna.create_study(
-            study_name=name,
-            storage=storage,
-            direction=direction,
-            sampler=sampler,
-            load_if_exists=True,
+    try:  # sweeps starting together on one database race to make its tables and the study
+        study = retried(
+            lambda: optuna.create_study(
+                study_name=name,
+                storage=storage,
+                direction=direction,
+                sampler=sampler,
+                load_if_exists=True,
+            ),
+            what=f"study {name}",
         )
     except ValueError as err:
         raise ConfigError(f"hydra.sweeper.direction: {err}") from err

@@ -22,6 +22,7 @@ import hashlib
 import json
 import logging
 import os
+import random
 import re
 import socket
 import subprocess
@@ -29,9 +30,9 @@ import time
 import urllib.error
 import urllib.request
 from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from tactile_exp.errors import TrackingError
 from tactile_exp.runtime.processes import process_alive, process_tags
@@ -46,6 +47,7 @@ os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")  # no calls home; the 
 os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 MAX_PARAM_LENGTH = 6000  # MLflow's limit on a param value
 MAX_BATCH = 1000  # MLflow's limit on metrics per log_batch call
@@ -61,6 +63,20 @@ _JOB = "tags.run_level = 'parent'"
 _FINISHED = "attributes.status = 'FINISHED'"
 _RUNNING = "attributes.status = 'RUNNING'"
 _NEWEST_FIRST = "attributes.start_time DESC"
+# A write that another job's same write can collide with (a shared store: PostgreSQL does not
+# serialise writers as sqlite does) is read back and retried, with backoff, for this long.
+CONFLICT_WAIT_S = 60.0
+# (sqlite's "database is locked": a writer that waited its busy timeout for another's).
+_CONFLICT = re.compile(
+    r"unique constraint|duplicate key|UniqueViolation|already exists|database is locked", re.I
+)
+# How MLflow's client reports a server that stopped answering once its own retries (with
+# backoff: ``MLFLOW_HTTP_REQUEST_MAX_RETRIES``, default 7, about 4 minutes) are spent.
+_UNREACHABLE = re.compile(
+    r"Max retries exceeded|Connection (refused|reset|aborted)|ConnectionError|"
+    r"RemoteDisconnected|timeout exception|too many (500|502|503|504) error",
+    re.I,
+)
 
 
 def project_root() -> Path:
@@ -136,6 +152,59 @@ def check_server(uri: str, timeout: float = 5.0) -> None:
         ) from err
 
 
+def _first_line(err: BaseException) -> str:
+    lines = str(err).strip().splitlines()
+    return (lines[0] if lines else type(err).__name__)[:300]
+
+
+def conflicting(err: BaseException) -> bool:
+    """Whether ``err`` is a write that lost a race to (or waited out) another job's write."""
+    return _CONFLICT.search(str(err)) is not None
+
+
+def unreachable(err: BaseException) -> bool:
+    """Whether ``err`` is a tracking server that stopped answering (MLflow's retries spent)."""
+    return _UNREACHABLE.search(str(err)) is not None
+
+
+def retried(
+    write: Callable[[], T], *, done: Callable[[], bool] = lambda: False, what: str
+) -> T | None:
+    """Compare-and-retry for a write that other jobs may make at the same moment: on a conflict,
+    ``done()`` reads the store back (someone else's identical write counts: then None) and else
+    the write is tried again, with jittered backoff, for up to ``CONFLICT_WAIT_S`` seconds.
+    Each try is ``shielded``: a SIGTERM ends the job between tries, never inside one."""
+    delay, deadline = 0.05, time.monotonic() + CONFLICT_WAIT_S
+    while True:
+        try:
+            with shielded():
+                return write()
+        except Exception as err:
+            if not conflicting(err) or time.monotonic() > deadline:
+                raise
+            log.debug("%s: lost a race (%s); reading it back", what, err)
+        if done():
+            return None
+        time.sleep(delay * (1 + random.random()))
+        delay = min(2 * delay, 2.0)
+
+
+@contextmanager
+def fail_fast() -> Iterator[None]:
+    """MLflow's client tries each request once inside the block: for the last writes of a job
+    whose server already failed to answer through a whole retry period."""
+    name = "MLFLOW_HTTP_REQUEST_MAX_RETRIES"
+    before = os.environ.get(name)
+    os.environ[name] = "0"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = before
+
+
 def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
     """Nested config -> {"model.params.lr": "0.01", ...} as MLflow params."""
     out: dict[str, str] = {}
@@ -194,23 +263,35 @@ class Tracker:
         self.source_tags = source_tags(entry_point)
 
     def _experiment(self, name: str) -> str:
-        # Parallel jobs on one sqlite file race on creation: retry, then read what won.
-        for attempt in range(5):
-            found = self.client.get_experiment_by_name(name)
-            if found is not None:
-                for key, value in EXPERIMENT_TAGS.items():  # made before the tag existed
-                    if key not in found.tags:
-                        self.client.set_experiment_tag(found.experiment_id, key, value)
-                return found.experiment_id
-            try:
-                return self.client.create_experiment(
+        """Create-or-get: jobs that start together all create ``name``; one wins, the others
+        find the winner's experiment."""
+        get = self.client.get_experiment_by_name
+        if get(name) is None:
+            retried(
+                lambda: self.client.create_experiment(
                     name, artifact_location=_artifact_root(self.uri), tags=EXPERIMENT_TAGS
-                )
-            except Exception:
-                if attempt == 4:
-                    raise
-                time.sleep(0.5 * (attempt + 1))
-        raise RuntimeError("unreachable")
+                ),
+                done=lambda: get(name) is not None,
+                what=f"experiment {name}",
+            )
+        found = get(name)
+        for key, value in EXPERIMENT_TAGS.items():  # made before the tag existed
+            if found.tags.get(key) != value:
+                self.set_experiment_tag(found.experiment_id, key, value)
+        return found.experiment_id
+
+    def set_experiment_tag(self, experiment_id: str, key: str, value: str) -> None:
+        """An experiment tag that other jobs may write at the same moment (with the same value:
+        the runs-table view, the experiment kind): compare-and-retry."""
+
+        def done() -> bool:
+            return self.client.get_experiment(experiment_id).tags.get(key) == value
+
+        retried(
+            lambda: self.client.set_experiment_tag(experiment_id, key, value),
+            done=done,
+            what=f"experiment tag {key}",
+        )
 
     def runs_view(self, columns: Sequence[str], *, order_by: str) -> str:
         """A link that opens the UI on this experiment's runs table (not its GenAI Overview)
@@ -225,8 +306,10 @@ class Tracker:
         }
         text = json.dumps(state, sort_keys=True)
         key = hashlib.sha256(text.encode()).hexdigest()[:12]
-        with shielded():
-            self.client.set_experiment_tag(self.experiment_id, f"{SHARED_VIEW_TAG}{key}", text)
+        try:  # a view is a convenience: failing to store it never fails a job
+            self.set_experiment_tag(self.experiment_id, f"{SHARED_VIEW_TAG}{key}", text)
+        except Exception as err:
+            log.warning("the runs-table view was not stored (%s); the link shows no columns", err)
         page = f"{ui_base(self.uri)}/#/experiments/{self.experiment_id}/runs"
         return f"{page}?{WORKFLOW}&viewStateShareKey={key}"
 
@@ -392,9 +475,24 @@ class Tracker:
                 raise
             message = f"{type(err).__name__}: {err}"[:5000]
             status = "KILLED" if isinstance(err, KeyboardInterrupt) else "FAILED"
-            with shielded():
-                self.client.log_batch(run_id, tags=[RunTag("error", message)])
-                self.client.set_terminated(run_id, status=status)
+            down = unreachable(err)
+            try:  # a server that has not answered through MLflow's retries gets one more try
+                with shielded(), fail_fast() if down else nullcontext():
+                    self.client.log_batch(run_id, tags=[RunTag("error", message)])
+                    self.client.set_terminated(run_id, status=status)
+            except Exception as end_err:
+                if not unreachable(end_err):
+                    raise
+                log.warning(
+                    "run %s stays RUNNING: the tracking server does not answer; a rerun of "
+                    "this config on this host marks it KILLED",
+                    run_id,
+                )
+            if down and not isinstance(err, TrackingError):
+                raise TrackingError(
+                    f"tracking.uri: the MLflow server at {self.uri} stopped answering "
+                    f"({_first_line(err)}); rerun the same command once it is back"
+                ) from err
             raise
         with shielded():
             self.client.set_terminated(run_id, status="FINISHED")
@@ -408,21 +506,15 @@ class Tracker:
     def log_dataset(self, run_id: str, *, name: str, digest: str, source: str) -> None:
         """A data file as the run's dataset input: the UI's Dataset column (name + digest).
 
-        Parallel jobs race to insert the experiment's one row for the file; the loser gets a
-        unique-constraint error (it failed a sweep's job), and on retry finds the winner's row."""
+        Parallel jobs race to insert the experiment's one row for the file: the loser's retry
+        finds the winner's row and links its run to it."""
         from mlflow.entities import Dataset, DatasetInput
-        from mlflow.exceptions import MlflowException
 
         dataset = Dataset(name=name, digest=digest, source_type="local", source=source)
-        for attempt in range(3):
-            try:
-                with shielded():
-                    self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)])
-                return
-            except MlflowException as err:
-                if attempt == 2 or not re.search("unique constraint|duplicate", str(err), re.I):
-                    raise
-                time.sleep(0.2)
+        retried(
+            lambda: self.client.log_inputs(run_id, datasets=[DatasetInput(dataset)]),
+            what=f"dataset {name}",
+        )
 
     def log_metrics(self, run_id: str, values: Mapping[str, float], step: int = 0) -> None:
         self.log_curves(run_id, {k: [v] for k, v in values.items()}, start=step)
