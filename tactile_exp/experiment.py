@@ -18,11 +18,11 @@ import numpy as np
 
 from tactile_exp import evaluate, metrics, stats
 from tactile_exp.adjective import AdjectiveResult, key_params, log_data, run_adjective
-from tactile_exp.config import Settings, param_error
+from tactile_exp.config import Settings, check_data_chain, param_error
 from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
-from tactile_exp.data.splits import make_split
+from tactile_exp.data.splits import label_splits, object_counts
 from tactile_exp.errors import ConfigError
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.runtime import workers
@@ -61,17 +61,53 @@ def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
         )
     except (TypeError, ValueError) as err:
         raise param_error("modality", settings.modality.params, err) from err
+    check_data_chain(settings, dataset, modality)
     limit, unit = modality.max_combine(dataset)
     if settings.combine > limit:
         raise ConfigError(
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
             f"most {limit} {unit}; allowed 1..{limit}"
         )
-    splits = {
-        a: make_split(dataset, a, settings.split, settings.seed, **settings.split_params)
-        for a in select_labels(dataset, settings.adjectives)
-    }
+    splits = label_splits(
+        dataset,
+        select_labels(dataset, settings.adjectives),
+        settings.split,
+        settings.seed,
+        settings.min_objects,
+        **settings.split_params,
+    )
     return dataset, modality, splits
+
+
+def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -> dict[str, str]:
+    """Tags on the job's run, each logged once as a warning line: the labels
+    ``labels.min_objects`` dropped, with their object counts (``labels.dropped``), and those
+    scored on trials of an object seen in training (``labels.seen_object``: a class of one
+    object, split by trial)."""
+    notes = {}
+    dropped = [a for a in select_labels(dataset, settings.adjectives) if a not in splits]
+    if dropped:
+        counts = " ".join(
+            f"{a}(+{p}/-{n})" for a in dropped for p, n in [object_counts(dataset, a)]
+        )
+        notes["labels.dropped"] = f"{counts} min_objects={settings.min_objects}"
+        log.warning(
+            "labels.min_objects=%d: %d label(s) with fewer positive or negative objects dropped: "
+            "%s",
+            settings.min_objects,
+            len(dropped),
+            counts,
+        )
+    seen = [a for a, s in splits.items() if s.objects("train") & s.objects("test")]
+    if seen:
+        notes["labels.seen_object"] = " ".join(seen)
+        log.warning(
+            "%d label(s) have one object of a class, split by trial: scored on trials of an "
+            "object seen in training: %s",
+            len(seen),
+            " ".join(seen),
+        )
+    return notes
 
 
 def run(settings: Settings) -> JobResult:
@@ -115,7 +151,11 @@ def run(settings: Settings) -> JobResult:
         modality.check(dataset)
         tracker.set_tags(
             parent_id,
-            {"data.identity": dataset.identity(), "data.labels": " ".join(dataset.label_names)},
+            {
+                "data.identity": dataset.identity(),
+                "data.labels": " ".join(dataset.label_names),
+                **label_notes(settings, dataset, splits),
+            },
         )
         log_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
