@@ -43,8 +43,9 @@ def _options(group: str) -> list[str]:
 
 def _model_for(modality: str) -> str:
     """The default model if it takes ``modality``, else the first registered one that does."""
-    takes = [n for n in MODELS.names() if modality in MODELS[n].modalities]
-    takes_any = [n for n in MODELS.names() if not MODELS[n].modalities]
+    emits = MODALITIES[modality].emits
+    takes = [n for n in MODELS.names() if emits in MODELS[n].accepts]
+    takes_any = [n for n in MODELS.names() if not MODELS[n].accepts]
     return "haptic_cnn" if "haptic_cnn" in takes else (takes or takes_any)[0]
 
 
@@ -68,8 +69,9 @@ def test_every_option_composes_and_builds(compose_config, group, option, tmp_pat
         overrides.append(f"data.path={tmp_path}")  # only its existence is checked before a job
     if group == "modality":
         overrides.append(f"model={_model_for(option)}")
-    if group == "model" and MODELS[option].modalities:
-        overrides.append(f"modality={MODELS[option].modalities[0]}")
+    if group == "model" and MODELS[option].accepts:
+        fits = [m for m in MODALITIES.names() if MODALITIES[m].emits in MODELS[option].accepts]
+        overrides.append(f"modality={fits[-1]}")
     cfg = compose_config(overrides)
     settings = settings_from_config(cfg)  # builds the model through its registry
     if group in REGISTRIES:
@@ -260,7 +262,8 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("schedule.head.lr=0", "schedule.head.lr: lr must be > 0"),
         (
             "modality=visual",
-            "modality: model=haptic_cnn takes modality haptic or signals, got 'visual'",
+            "modality: model=haptic_cnn takes (channels, time) signals, modality=visual gives "
+            "feature vectors; modality=haptic or signals would fit",
         ),
         ("seed=-1", "seed: must be a whole number in 0..2**32-1, got -1"),
         ("model.kernel_sizes=[5,0,5]", "model.kernel_sizes: kernel_sizes must be >= 1"),
