@@ -85,7 +85,7 @@ def label_splits(
             errors[a] = err
     if not errors:
         return splits
-    if not splits and len({str(e).replace(repr(a), "") for a, e in errors.items()}) == 1:
+    if not splits and all(repr(a) not in str(e) for a, e in errors.items()):
         raise next(iter(errors.values()))  # the rule refuses this data set, not its labels
     bad = list(errors)
     k = max(min(object_counts(dataset, a)) for a in bad) + 1
