@@ -103,8 +103,8 @@ def _runs(uri: str) -> list:
         ),
         (
             ["data=folder", "data.path={folder}", "split=random"],  # modality=haptic: BioTac's
-            "error: modality: modality=haptic needs trials in the phac2-biotac layout, which {path} "
-            "(sensor 'glove', 6 channels at 50 Hz, no declared layout) does not give; "
+            "error: modality: modality=haptic needs trials in the phac2-biotac layout, which "
+            "{path} (sensor 'glove', 6 channels at 50 Hz, no declared layout) does not give; "
             "modality=signals would fit",
         ),
         (
