@@ -89,6 +89,7 @@ class Settings:
     split_params: dict[str, Any] = field(default_factory=dict)  # e.g. folds=5, fold=0
     modules: tuple[str, ...] = ()  # the components' ``_module_``s: see ``component_modules``
     metrics: tuple[str, ...] = ("roc_auc",)  # logged per adjective (tactile_exp.metrics)
+    min_objects: int | None = None  # labels.min_objects: see `data.splits.label_splits`
 
     @property
     def split_key(self) -> str:
@@ -97,8 +98,17 @@ class Settings:
         return f"{self.split}({params})" if params else self.split
 
 
+# Nodes added after jobs were stored: at these values they are left out of the hash, so a job
+# that did not set them keeps the hash (and its finished runs) it had before they existed.
+ADDED_AT_DEFAULT: dict[str, Any] = {"labels": {"min_objects": None}}
+
+
 def config_hash(resolved: dict[str, Any]) -> str:
-    kept = {k: v for k, v in resolved.items() if k not in UNHASHED}
+    kept = {
+        k: v
+        for k, v in resolved.items()
+        if k not in UNHASHED and not (k in ADDED_AT_DEFAULT and v == ADDED_AT_DEFAULT[k])
+    }
     return hashlib.sha256(json.dumps(kept, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -287,6 +297,14 @@ def settings_from_config(
     if isinstance(fraction, bool) or not isinstance(fraction, int | float) or not 0 <= fraction < 1:
         raise ConfigError(f"validation.fraction: must be a number in [0, 1), got {fraction!r}")
 
+    min_objects = (resolved.get("labels") or {}).get("min_objects")
+    if min_objects is not None and (
+        isinstance(min_objects, bool) or not isinstance(min_objects, int) or min_objects < 1
+    ):
+        raise ConfigError(
+            f"labels.min_objects: must be null (refuse labels the split cannot evaluate) or a "
+            f"whole number of objects >= 1 per class, got {min_objects!r}"
+        )
     objective = _check_objective(resolved.get("objective", "mean_val_auc"))
     metrics = _check_metrics(resolved.get("metrics", ["roc_auc"]))
     study_tags = _check_study(resolved.get("study") or {}, float(fraction))
@@ -321,6 +339,7 @@ def settings_from_config(
         split_params={k: v for k, v in resolved["split"].items() if k != "name"},
         modules=component_modules(resolved),
         metrics=metrics,
+        min_objects=min_objects,
     )
     check_components(settings)
     return settings
@@ -447,8 +466,57 @@ def check_components(settings: Settings) -> None:
         except ValueError as err:
             message = f"modality.steps: {steps} with model={settings.model.name}: {err}"
             raise ConfigError(message) from err
-    if model.modalities and settings.modality.name not in model.modalities:
-        raise ConfigError(
-            f"modality: model={settings.model.name} takes modality "
-            f"{' or '.join(model.modalities)}, got {settings.modality.name!r}"
+    emits = MODALITIES[settings.modality.name].emits
+    if model.accepts and emits and emits not in model.accepts:
+        raise ConfigError(_kind_mismatch(settings, model.accepts, emits))
+
+
+def _kind_mismatch(settings: Settings, accepts: tuple[str, ...], emits: str) -> str:
+    """One line: the model takes other rows than the modality gives; modalities that fit."""
+    from tactile_exp.data.layout import INSTANCE_KINDS
+    from tactile_exp.modalities import MODALITIES
+
+    fits = [n for n in MODALITIES.names() if MODALITIES[n].emits in accepts]
+    takes = " or ".join(INSTANCE_KINDS.get(k, k) for k in accepts)
+    return (
+        f"modality: model={settings.model.name} takes {takes}, modality="
+        f"{settings.modality.name} gives {INSTANCE_KINDS.get(emits, emits)}; "
+        f"modality={' or '.join(fits)} would fit"
+    )
+
+
+def check_data_chain(settings: Settings, dataset: Any, modality: Any) -> None:
+    """Data set -> modality -> model, once the data opens and before any run: the modality
+    gets what it needs from the data set (declared: `Modality.lacks`) and the model takes
+    what the modality gives on it (`Model.accepts`, `Model.check_input`); else one
+    ConfigError naming the key and a value that would work."""
+    from tactile_exp.modalities import MODALITIES
+    from tactile_exp.models.registry import MODELS
+
+    model_cls = MODELS[settings.model.name]
+    lacking = modality.lacks(dataset)
+    if lacking is not None:
+        fits = [
+            n
+            for n in MODALITIES.names()
+            if MODALITIES[n].lacks(dataset) is None
+            and (not model_cls.accepts or MODALITIES[n].emits in model_cls.accepts)
+        ]
+        advice = (
+            f"modality={' or '.join(fits)} would fit"
+            if fits
+            else (f"no modality fits it with model={settings.model.name}")
         )
+        raise ConfigError(
+            f"modality: modality={settings.modality.name} needs {lacking}, which {dataset.path} "
+            f"({dataset.sensor.describe()}) does not give; {advice}"
+        )
+    spec = modality.output(dataset)
+    if model_cls.accepts and spec.kind not in model_cls.accepts:
+        raise ConfigError(_kind_mismatch(settings, model_cls.accepts, spec.kind))
+    model = MODELS.build(settings.model.name, **settings.model.params)
+    try:
+        model.check_input(spec)
+    except ValueError as err:
+        where = f" (modality={settings.modality.name} on {dataset.path})"
+        raise param_error("model", settings.model.params, ValueError(f"{err}{where}")) from err

@@ -20,11 +20,11 @@ import numpy as np
 
 from tactile_exp import keys, metrics
 from tactile_exp.cache import ModelCache, Trained
-from tactile_exp.config import Settings, param_error
+from tactile_exp.config import Settings, check_data_chain, param_error
 from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Instances, Split, Trials
 from tactile_exp.data.sources import DATA_SOURCES
-from tactile_exp.data.splits import make_split
+from tactile_exp.data.splits import label_splits
 from tactile_exp.errors import ConfigError
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.models.base import EpochCallback, History, Model
@@ -89,16 +89,21 @@ def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
         )
     except (TypeError, ValueError) as err:
         raise param_error("modality", settings.modality.params, err) from err
+    check_data_chain(settings, dataset, modality)
     limit, unit = modality.max_combine(dataset)
     if settings.combine > limit:
         raise ConfigError(
             f"combine: {settings.combine} {unit} per unit, but objects in {dataset.path} have at "
             f"most {limit} {unit}; allowed 1..{limit}"
         )
-    splits = {
-        a: make_split(dataset, a, settings.split, settings.seed, **settings.split_params)
-        for a in select_labels(dataset, settings.adjectives)
-    }
+    splits = label_splits(
+        dataset,
+        select_labels(dataset, settings.adjectives),
+        settings.split,
+        settings.seed,
+        settings.min_objects,
+        **settings.split_params,
+    )
     return dataset, modality, splits
 
 

@@ -17,8 +17,10 @@ from typing import Any
 from tactile_exp import metrics, recording
 from tactile_exp.config import Settings
 from tactile_exp.core import AdjectiveResult, load, open_data
+from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
+from tactile_exp.data.splits import object_counts
 from tactile_exp.runtime import workers
 
 log = logging.getLogger(__name__)
@@ -40,6 +42,37 @@ class JobResult:
         return {a: m["auc"] for a, m in self.val.items() if "auc" in m}
 
 
+def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -> dict[str, str]:
+    """Tags on the job's run, each logged once as a warning line: the labels
+    ``labels.min_objects`` dropped, with their object counts (``labels.dropped``), and those
+    scored on trials of an object seen in training (``labels.seen_object``: a class of one
+    object, split by trial)."""
+    notes = {}
+    dropped = [a for a in select_labels(dataset, settings.adjectives) if a not in splits]
+    if dropped:
+        counts = " ".join(
+            f"{a}(+{p}/-{n})" for a in dropped for p, n in [object_counts(dataset, a)]
+        )
+        notes["labels.dropped"] = f"{counts} min_objects={settings.min_objects}"
+        log.warning(
+            "labels.min_objects=%d: %d label(s) with fewer positive or negative objects dropped: "
+            "%s",
+            settings.min_objects,
+            len(dropped),
+            counts,
+        )
+    seen = [a for a, s in splits.items() if s.objects("train") & s.objects("test")]
+    if seen:
+        notes["labels.seen_object"] = " ".join(seen)
+        log.warning(
+            "%d label(s) have one object of a class, split by trial: scored on trials of an "
+            "object seen in training: %s",
+            len(seen),
+            " ".join(seen),
+        )
+    return notes
+
+
 def run(settings: Settings) -> JobResult:
     """Run (or skip, if already FINISHED) one job and log it to MLflow."""
     tracker = recording.open_tracker(settings)
@@ -59,7 +92,7 @@ def run(settings: Settings) -> JobResult:
     dataset, modality, splits = open_data(settings)
     with recording.job_run(tracker, settings) as parent_id:
         modality.check(dataset)
-        recording.record_data(tracker, parent_id, dataset)
+        recording.record_data(tracker, parent_id, dataset, label_notes(settings, dataset, splits))
         results: dict[str, AdjectiveResult] = {}
         headline = metrics.METRICS.build(settings.metrics[0])
         for i, result in enumerate(_adjectives(settings, tracker, parent_id, dataset, splits), 1):

@@ -97,11 +97,15 @@ def job_run(tracker: Tracker, settings: Settings) -> Iterator[str]:
         yield parent_id
 
 
-def record_data(tracker: Tracker, parent_id: str, dataset: Any) -> None:
-    """The checked data set on the job's run: its identity, labels and file."""
+def record_data(tracker: Tracker, parent_id: str, dataset: Any, notes: Mapping[str, str]) -> None:
+    """The checked data set on the job's run: its identity, labels, ``notes`` on them, its file."""
     tracker.set_tags(
         parent_id,
-        {"data.identity": dataset.identity(), "data.labels": " ".join(dataset.label_names)},
+        {
+            "data.identity": dataset.identity(),
+            "data.labels": " ".join(dataset.label_names),
+            **notes,
+        },
     )
     log_data(tracker, parent_id, dataset)
 

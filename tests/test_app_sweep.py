@@ -133,7 +133,10 @@ def test_smoke_sweep_and_report(cache_dir, mlflow_uri, tmp_path):
 
 # Issue 33's grid: model=haptic_cnn takes the haptic modality only, so its first cell is invalid.
 GRID = ["model=haptic_cnn,linear", "modality=visual,haptic", "schedule=tiny", "adjectives=[hard]"]
-INVALID_REASON = "modality: model=haptic_cnn takes modality haptic or signals, got 'visual'"
+INVALID_REASON = (
+    "modality: model=haptic_cnn takes (channels, time) signals, modality=visual gives feature "
+    "vectors; modality=haptic or signals would fit"
+)
 # A model that trains like `random` but raises while training for one seed: a job failing mid-sweep.
 FAILING_MODULE = '''
 """Random scores, or an error while training for one seed: a job that fails mid-sweep."""

@@ -43,8 +43,9 @@ def _options(group: str) -> list[str]:
 
 def _model_for(modality: str) -> str:
     """The default model if it takes ``modality``, else the first registered one that does."""
-    takes = [n for n in MODELS.names() if modality in MODELS[n].modalities]
-    takes_any = [n for n in MODELS.names() if not MODELS[n].modalities]
+    emits = MODALITIES[modality].emits
+    takes = [n for n in MODELS.names() if emits in MODELS[n].accepts]
+    takes_any = [n for n in MODELS.names() if not MODELS[n].accepts]
     return "haptic_cnn" if "haptic_cnn" in takes else (takes or takes_any)[0]
 
 
@@ -68,8 +69,9 @@ def test_every_option_composes_and_builds(compose_config, group, option, tmp_pat
         overrides.append(f"data.path={tmp_path}")  # only its existence is checked before a job
     if group == "modality":
         overrides.append(f"model={_model_for(option)}")
-    if group == "model" and MODELS[option].modalities:
-        overrides.append(f"modality={MODELS[option].modalities[0]}")
+    if group == "model" and MODELS[option].accepts:
+        fits = [m for m in MODALITIES.names() if MODALITIES[m].emits in MODELS[option].accepts]
+        overrides.append(f"modality={fits[-1]}")
     cfg = compose_config(overrides)
     settings = settings_from_config(cfg)  # builds the model through its registry
     if group in REGISTRIES:
@@ -260,7 +262,8 @@ def test_config_hash_ignores_tracking_only(compose_config):
         ("schedule.head.lr=0", "schedule.head.lr: lr must be > 0"),
         (
             "modality=visual",
-            "modality: model=haptic_cnn takes modality haptic or signals, got 'visual'",
+            "modality: model=haptic_cnn takes (channels, time) signals, modality=visual gives "
+            "feature vectors; modality=haptic or signals would fit",
         ),
         ("seed=-1", "seed: must be a whole number in 0..2**32-1, got -1"),
         ("model.kernel_sizes=[5,0,5]", "model.kernel_sizes: kernel_sizes must be >= 1"),
@@ -417,3 +420,68 @@ def test_a_metric_registered_after_import_is_accepted(compose_config, monkeypatc
     register("hits", needs_both_classes=False)(lambda y, s: float((s > 0).sum()))
     got = settings_from_config(compose_config(["metrics=[roc_auc,hits]"]))
     assert got.metrics == ("roc_auc", "hits")
+
+
+def test_labels_min_objects_left_out_of_the_hash_while_null(compose_config) -> None:
+    from tactile_exp.config import config_hash
+
+    settings = settings_from_config(compose_config([]))
+    without = {k: v for k, v in settings.resolved.items() if k != "labels"}
+    assert settings.config_hash == config_hash(without)  # jobs stored before the key existed
+    assert settings.min_objects is None
+    set_ = settings_from_config(compose_config(["labels.min_objects=2"]))
+    assert set_.min_objects == 2 and set_.config_hash != settings.config_hash
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "1.5", "true", "two"])
+def test_labels_min_objects_must_be_a_count(compose_config, value) -> None:
+    with pytest.raises(ConfigError, match="labels.min_objects: must be null .* or a whole number"):
+        settings_from_config(compose_config([f"labels.min_objects={value}"]))
+
+
+def _lab(root, channels: int, sensor: str):
+    import numpy as np
+
+    from tactile_exp.data.dataset import Sensor
+    from tactile_exp.data.folder import write_folder
+
+    names = [f"o{i}" for i in range(4)]
+    labels = {o: {"hard": int(i < 2)} for i, o in enumerate(names)}
+    chans = tuple(f"c{k}" for k in range(channels))
+    arrays = {o: [np.zeros((channels, 30))] * 2 for o in names}
+    return write_folder(root, Sensor(sensor, chans, 100.0), labels, arrays)
+
+
+@pytest.mark.parametrize(
+    "overrides,line",
+    [
+        (  # the sensor named as PHAC-2's: its layout is what counts
+            [],
+            "modality: modality=haptic needs trials in the phac2-biotac layout, which {path} "
+            "(sensor 'BioTac (2 fingers)', 48 channels at 100 Hz, no declared layout) does not "
+            "give; modality=signals would fit",
+        ),
+        (
+            ["modality=signals"],
+            "model.groups: groups=32 does not divide the 48 channels of each instance; "
+            "model.groups=48 (one group per channel, as M1 has one per signal; ours) or a "
+            "divisor of 48 (modality=signals on {path})",
+        ),
+    ],
+    ids=["biotac-name", "cnn-48-channels"],
+)
+def test_data_modality_model_checked_when_the_data_opens(
+    compose_config, tmp_path, overrides, line
+) -> None:
+    """The issue's failures, now one line when the data opens (no run, no traceback)."""
+    from tactile_exp.experiment import open_data
+
+    path = _lab(tmp_path / "bt", 48, "BioTac (2 fingers)")
+    cfg = compose_config(["data=folder", f"data.path={path}", "split=random", *overrides])
+    settings = settings_from_config(cfg)
+    with pytest.raises(ConfigError) as err:
+        open_data(settings)
+    assert str(err.value).startswith(line.format(path=path))
+    base = ["data=folder", f"data.path={path}", "split=random"]
+    fits = settings_from_config(compose_config([*base, "modality=signals", "model.groups=48"]))
+    open_data(fits)  # the value the message names works

@@ -65,7 +65,9 @@ def _check(compose_config, cache_dir, values: dict[str, object]) -> None:
         message = str(err)
         assert "\n" not in message
         key = message.split(":", 1)[0]
-        assert key in values or key == "model", message  # the key typed (or its group)
+        # the key typed (or its group); model.groups when a modality value (pca_components)
+        # changes the channels the ConvNet's groups must divide, checked when the data opens
+        assert key in values or key in ("model", "model.groups"), message
         event(f"refused: {key}")
         return
     steps = int(s.modality.params["steps"])

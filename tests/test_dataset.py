@@ -91,14 +91,21 @@ def _runs(uri: str) -> list:
             f"{', '.join(ADJECTIVES)} (or adjectives=null for all of them)",
         ),
         (
-            ["data=folder", "data.path={folder}", "modality=signals", "split=published"],
+            [
+                "data=folder",
+                "data.path={folder}",
+                "modality=signals",
+                "model=linear",
+                "split=published",
+            ],
             "error: {path}: split=published is PHAC-2's published split and this data set is "
             "not PHAC-2; use split=random or split=folds",
         ),
         (
             ["data=folder", "data.path={folder}", "split=random"],  # modality=haptic: BioTac's
-            "error: {path}: Haptic reads BioTac (2 fingers) trials, this data set's sensor is "
-            "'glove' (modality=signals reads any sensor's channels)",
+            "error: modality: modality=haptic needs trials in the phac2-biotac layout, which "
+            "{path} (sensor 'glove', 6 channels at 50 Hz, no declared layout) does not give; "
+            "modality=signals would fit",
         ),
         (
             [
@@ -106,6 +113,7 @@ def _runs(uri: str) -> list:
                 "data.path={folder}",
                 "split=random",
                 "modality=signals",
+                "model=linear",
                 "adjectives=[hard]",
             ],
             "error: adjectives: unknown ['hard'] for the data set {path}; its labels: grippy, "

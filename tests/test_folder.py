@@ -386,3 +386,30 @@ def test_random_and_folds_splits_work_and_published_is_refused(tmp_path: Path) -
         make_split(ds, "soft", "published")
     with pytest.raises(DataError, match="unknown adjective 'hard'.*labels: soft, rough"):
         make_split(ds, "hard", "random")
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "\ufeffobject,soft,rough\r\nsponge,1,0\r\nbrick,0,1\r\nfelt,1,1\r\ncork,0,0\r\n",  # BOM
+        "object;soft;rough\nsponge;TRUE;FALSE\nbrick;FALSE;TRUE\nfelt;TRUE;TRUE\ncork;FALSE;FALSE\n",
+        "object\tsoft\trough\nsponge\t1.0\t0.0\nbrick\t0.0\t1.0\nfelt\t1.0\t1.0\ncork\t0.0\t0.0\n",
+        ",object,soft,rough\n0,sponge,True,False\n1,brick,False,True\n2,felt,True,True\n"
+        "3,cork,False,False\n",  # pandas' to_csv: index column, booleans
+    ],
+    ids=["bom", "semicolon-true-false", "tab-floats", "pandas-index"],
+)
+def test_labels_as_spreadsheets_and_pandas_write_them(folder: Path, text: str) -> None:
+    (folder / "labels.csv").write_bytes(text.encode())
+    ds = FolderDataSet(folder)
+    assert ds.label_names == ("soft", "rough")
+    assert {ds.object_name(i): row for i, row in ds.labels().items()} == LABELS
+
+
+def test_labels_written_by_pandas_read_back(folder: Path) -> None:
+    import pandas as pd
+
+    frame = pd.DataFrame(LABELS).T.astype(float).rename_axis("object")
+    frame.to_csv(folder / "labels.csv", sep=";")
+    ds = FolderDataSet(folder)
+    assert {ds.object_name(i): row for i, row in ds.labels().items()} == LABELS

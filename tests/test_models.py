@@ -222,7 +222,8 @@ def test_bad_inputs_raise_clear_errors():
 
 
 # One example row per modality a model may declare; models that declare none take any rows.
-EXAMPLE_ROWS = {"haptic": (32, 40), "visual": (832,)}
+EXAMPLE_ROWS = {"signals": (32, 40), "features": (832,)}  # by accepted kind
+KIND_MODALITY = {"signals": "haptic", "features": "visual"}  # a modality giving each kind
 
 
 def _contract_case(shape: tuple[int, ...], n: int = 60) -> Instances:
@@ -240,9 +241,9 @@ def test_every_registered_model_keeps_the_contract(compose_config, name):
     from tactile_exp.config import settings_from_config
     from tactile_exp.models.base import clone
 
-    declared = MODELS[name].modalities
+    declared = MODELS[name].accepts
     overrides = [f"model={name}", "schedule=tiny", "device=cpu"]
-    overrides += [f"modality={declared[0]}"] if declared else []
+    overrides += [f"modality={KIND_MODALITY[declared[0]]}"] if declared else []
     params = settings_from_config(compose_config(overrides)).model.params
     model = MODELS.build(name, **params)
     if "schedule" in params:  # the schedule node, held as one Schedule value
@@ -254,7 +255,7 @@ def test_every_registered_model_keeps_the_contract(compose_config, name):
     assert all(len(v) >= 1 for v in history.values())
     scores = model.decision_function(train.X)
     assert scores.shape == (len(train),) and np.isfinite(scores).all()
-    if declared == ("haptic",):
+    if declared == ("signals",):
         model.check_steps(train.X.shape[-1])  # the steps it was just fitted on are fine
 
     twin = clone(model)
@@ -277,13 +278,13 @@ def test_every_registered_model_declares_what_the_engine_reads(tmp_path, name):
     storable model, ``state``/``restore`` that give back the same scores (artifacts.py's round
     trip); a model that is not storable says so."""
     from tactile_exp import artifacts
-    from tactile_exp.modalities import MODALITIES
+    from tactile_exp.data.layout import INSTANCE_KINDS
 
     cls = MODELS[name]
     assert isinstance(cls.learns_representation, bool) and isinstance(cls.storable, bool)
-    assert isinstance(cls.modalities, tuple) and set(cls.modalities) <= set(MODALITIES.names())
+    assert isinstance(cls.accepts, tuple) and set(cls.accepts) <= set(INSTANCE_KINDS)
     assert cls.input_shape_ is None
-    declared = cls.modalities
+    declared = cls.accepts
     shape = EXAMPLE_ROWS.get(declared[0] if declared else "", (24,))
     model = MODELS.build(
         name, **({"schedule": TINY, "device": "cpu"} if "schedule" in _parameters(cls) else {})

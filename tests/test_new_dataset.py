@@ -88,3 +88,107 @@ def test_a_new_sensor_in_the_folder_layout_runs_end_to_end(
                 assert predicted[unit.unit][label] == pytest.approx(unit.score, abs=1e-5)
                 compared += 1
     assert compared >= N_TRIALS
+
+
+def write_lab_data(root: Path, channels: int, sensor: str, labels_style: str) -> Path:
+    """5 objects x 3 trials of ``channels`` channels at 100 Hz; labels ``hard`` (+2/-3),
+    ``soft`` (+3/-2) and ``sticky`` (one positive object), written as a lab's tools write them:
+    ``pandas`` (index column, 1.0/0.0), ``excel`` (UTF-8 BOM, ``;``, TRUE/FALSE)."""
+    import pandas as pd
+
+    rng = np.random.default_rng(channels)
+    names = [f"obj{i}" for i in range(5)]
+    table = {
+        "hard": [1, 1, 0, 0, 0],
+        "soft": [0, 0, 1, 1, 1],
+        "sticky": [1, 0, 0, 0, 0],
+    }
+    trials = {
+        o: [table["hard"][i] + rng.normal(size=(channels, 60)) for _ in range(3)]
+        for i, o in enumerate(names)
+    }
+    labels = {o: {a: v[i] for a, v in table.items()} for i, o in enumerate(names)}
+    chans = tuple(f"ch{k:02d}" for k in range(channels))
+    root = write_folder(root, Sensor(sensor, chans, 100.0), labels, trials)
+    frame = pd.DataFrame({"object": names, **{a: np.array(v, float) for a, v in table.items()}})
+    if labels_style == "pandas":
+        frame.to_csv(root / "labels.csv")  # index column, 1.0 and 0.0
+    else:
+        rows = [";".join(["object", *table])]
+        rows += [";".join([o, *("TRUE" if v[i] else "FALSE" for v in table.values())])
+                 for i, o in enumerate(names)]  # fmt: skip
+        (root / "labels.csv").write_bytes(("\ufeff" + "\r\n".join(rows) + "\r\n").encode())
+    return root
+
+
+MODALITY_NAMES = ("haptic", "haptic_features", "multimodal", "signals", "visual")
+MODEL_NAMES = ("haptic_cnn", "haptic_lstm", "linear", "linear_svm", "random", "visual_googlenet")
+
+
+@pytest.mark.slow
+@pytest.mark.job
+@pytest.mark.parametrize(
+    "channels,sensor,labels_style",
+    [(48, "BioTac (2 fingers)", "pandas"), (3, "glove", "excel")],
+    ids=["48ch-phac2-name-pandas", "3ch-excel-bom"],
+)
+def test_every_modality_and_model_runs_or_is_refused_before_any_run(
+    tiny_config, mlflow_uri: str, tmp_path: Path, capsys, channels, sensor, labels_style
+) -> None:
+    """Each registered modality x model pair on a lab's folder data set: it runs to FINISHED, or
+    it stops with one error line before any run exists; never a traceback or a FAILED run."""
+    from tactile_exp.errors import EXIT_USER_ERROR, reported
+    from tactile_exp.modalities import MODALITIES
+    from tactile_exp.models.registry import MODELS
+
+    assert set(MODALITY_NAMES) == set(MODALITIES.names())  # a new one joins this test
+    assert set(MODEL_NAMES) == set(MODELS.names())
+    data = write_lab_data(tmp_path / "lab", channels, sensor, labels_style)
+    client = MlflowClient(mlflow_uri)
+    outcomes = {}
+    for modality in MODALITY_NAMES:
+        for model in MODEL_NAMES:
+            before = len(_all_runs(client))
+            overrides = [
+                "data=folder", f"data.path={data}", f"modality={modality}", f"model={model}",
+                "split=random",
+            ]  # fmt: skip
+            with pytest.raises(SystemExit) as done, reported():
+                run(settings_from_config(tiny_config(overrides, adjectives="null")))
+                raise SystemExit(0)
+            errors = capsys.readouterr().err.splitlines()
+            refused = [e for e in errors if e.startswith("error:")]
+            assert not any("Traceback" in e for e in errors), (modality, model)
+            if done.value.code == EXIT_USER_ERROR:
+                assert len(refused) == 1, (modality, model, refused)
+                assert len(_all_runs(client)) == before, (modality, model)  # before any run
+                outcomes[modality, model] = refused[0]
+            else:
+                assert done.value.code == 0 and not refused, (modality, model, refused)
+                outcomes[modality, model] = "ran"
+    assert {r.info.status for r in _all_runs(client)} == {"FINISHED"}
+    ran = sorted(pair for pair, outcome in outcomes.items() if outcome == "ran")
+    assert ran == [("signals", m) for m in ("haptic_lstm", "linear", "linear_svm", "random")]
+    for modality in ("haptic", "haptic_features", "multimodal"):  # PHAC-2's layout, by declaration
+        assert outcomes[modality, "linear"].startswith(
+            f"error: modality: modality={modality} needs trials in the phac2-biotac layout"
+        )
+        assert outcomes[modality, "linear"].endswith("modality=signals would fit")
+    assert outcomes["visual", "linear"].startswith("error: modality: modality=visual needs photo")
+    assert outcomes["signals", "haptic_cnn"] == (
+        f"error: model.groups: groups=32 does not divide the {channels} channels of each "
+        f"instance; model.groups={channels} (one group per channel, as M1 has one per signal; "
+        f"ours) or a divisor of {channels} (modality=signals on {data})"
+    )
+    assert outcomes["signals", "visual_googlenet"].startswith(
+        "error: modality: model=visual_googlenet takes feature vectors, modality=signals gives"
+    )
+    # sticky's one positive object is split by trial: flagged on every job that ran
+    parents = [r for r in _all_runs(client) if r.data.tags.get("run_level") == "parent"]
+    assert len(parents) == 4
+    assert all(r.data.tags["labels.seen_object"] == "sticky" for r in parents)
+    assert all(r.data.tags["data.labels"] == "hard soft sticky" for r in parents)
+
+
+def _all_runs(client: MlflowClient) -> list:
+    return client.search_runs([e.experiment_id for e in client.search_experiments()])

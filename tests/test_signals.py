@@ -103,9 +103,10 @@ def test_a_bad_trial_file_fails_check_before_any_fit(tmp_path: Path) -> None:
 
 def test_a_data_set_without_signals_is_refused_when_it_opens(tmp_path: Path) -> None:
     phac2 = PHAC2(write_file(tmp_path / "tiny.h5"))
-    with pytest.raises(DataError, match="modality=signals reads each trial as a .* use data=fold"):
-        Signals().max_combine(phac2)
-    assert Signals().max_combine(_folder(tmp_path / "d")) == (2, "trials")
+    assert Signals.lacks(phac2) == "trials as (channels, time) arrays"  # declared, not probed
+    folder = _folder(tmp_path / "d")
+    assert Signals.lacks(folder) is None
+    assert Signals().max_combine(folder) == (2, "trials")
 
 
 @pytest.mark.parametrize("steps", [1, 0, 2.5, True, "100"])

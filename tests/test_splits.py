@@ -337,3 +337,53 @@ def test_no_object_on_both_sides_of_any_split(sixty_objects, rule, seed):
             assert sum(v[adjective] == label for v in labels.values()) == 1, (adjective, obj)
         for side in (split.train, split.test):
             assert {split.labels[t] for t in side} == {0, 1}
+
+
+def _lab(tmp_path: Path, positives: dict[str, int], objects: int = 6, trials: int = 2):
+    """A folder data set whose label ``a`` has ``positives[a]`` positive objects."""
+    from tactile_exp.data.dataset import Sensor
+    from tactile_exp.data.folder import FolderDataSet, write_folder
+
+    names = [f"o{i}" for i in range(objects)]
+    labels = {o: {a: int(i < k) for a, k in positives.items()} for i, o in enumerate(names)}
+    arrays = {o: [np.zeros((1, 4))] * trials for o in names}
+    return FolderDataSet(write_folder(tmp_path / "d", Sensor("s", ("x",), 10.0), labels, arrays))
+
+
+def test_every_label_a_split_cannot_evaluate_is_listed_at_once(tmp_path: Path) -> None:
+    from tactile_exp.data.splits import label_splits
+
+    ds = _lab(tmp_path, {"a": 3, "b": 1, "c": 0, "d": 2})
+    with pytest.raises(DataError) as err:
+        label_splits(ds, ds.label_names, "folds", 0, folds=3, fold=0)
+    assert str(err.value) == (
+        f"{ds.path}: 3 label(s) cannot be evaluated under split=folds (each class needs "
+        "split.folds=3 objects): b (+1/-5 objects), c (+0/-6 objects), d (+2/-4 objects); "
+        "labels.min_objects=3 drops them, or adjectives=[a]"
+    )
+    splits = label_splits(ds, ds.label_names, "folds", 0, 3, folds=3, fold=0)
+    assert list(splits) == ["a"]
+    # split=random evaluates b (its one positive object split by trial), not c
+    with pytest.raises(DataError, match=r"1 label\(s\) .* c \(\+0/-6 objects\); labels.min_"):
+        label_splits(ds, ds.label_names, "random", 0)
+    assert list(label_splits(ds, ds.label_names, "random", 0, 1)) == ["a", "b", "d"]
+
+
+def test_folds_never_advise_fewer_than_two_folds(tmp_path: Path) -> None:
+    ds = _lab(tmp_path, {"a": 1})
+    with pytest.raises(DataError) as err:
+        make_split(ds, "a", "folds", 0, folds=5, fold=0)
+    assert "split.folds<=" not in str(err.value)
+    ds3 = _lab(tmp_path / "x", {"a": 3})
+    with pytest.raises(DataError, match=r"use split.folds<=3,"):
+        make_split(ds3, "a", "folds", 0, folds=5, fold=0)
+
+
+def test_when_no_label_would_be_left_other_folds_are_advised(tmp_path: Path) -> None:
+    from tactile_exp.data.splits import label_splits
+
+    ds = _lab(tmp_path, {"a": 3, "b": 3})
+    with pytest.raises(DataError, match="dropping them leaves no label; split.folds=3 or split="):
+        label_splits(ds, ds.label_names, "folds", 0, folds=5, fold=0)
+    with pytest.raises(DataError, match="labels.min_objects=4 leaves no label: a"):
+        label_splits(ds, ds.label_names, "folds", 0, 4, folds=3, fold=0)

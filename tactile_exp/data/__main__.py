@@ -1,4 +1,5 @@
-"""``python -m tactile_exp.data generate|inspect|validate``: make, show and check PHAC-2 files."""
+"""``python -m tactile_exp.data generate|inspect|validate|import-csv``: make, show and check
+PHAC-2 files; turn per-trial CSV recordings into the folder layout."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from tactile_exp.data.csv_import import DEFAULT_PATTERN, TIME_COLUMNS, TIME_UNITS, import_csv
 from tactile_exp.data.phac2 import PHAC2, DataError, default_cache_dir
 from tactile_exp.data.validate import summary, validate
 
@@ -71,8 +73,41 @@ def main(argv: list[str] | None = None) -> int:
     sub.choices["validate"].add_argument(
         "--no-photographs", action="store_true", help="skip the photograph checks"
     )
+    imp = sub.add_parser(
+        "import-csv",
+        help="per-trial CSV files -> the folder layout (data=folder)",
+        description="One CSV per trial (rows = samples, columns = channels, an optional time "
+        "column from which the rate is read), the object from each file's path, and a labels "
+        "table (object, then one 0/1 column per label): written as the folder layout.",
+    )
+    imp.add_argument("src", type=Path, help="the folder of per-trial CSV files")
+    imp.add_argument("dst", type=Path, help="the data set to write (a new folder)")
+    imp.add_argument("--labels", type=Path, help="labels table (default: SRC/labels.csv)")
+    imp.add_argument(
+        "--object-pattern",
+        default=DEFAULT_PATTERN,
+        help="regular expression on each file's path under SRC whose group 'object' (or first "
+        f"group) names its object (default {DEFAULT_PATTERN!r}: the folder it is in)",
+    )
+    imp.add_argument("--glob", default="**/*.csv", help="which files are trials (default **/*.csv)")
+    imp.add_argument("--time-column", help=f"default: the first of {', '.join(TIME_COLUMNS)}")
+    imp.add_argument("--time-unit", default="s", choices=sorted(TIME_UNITS))
+    imp.add_argument("--rate", type=float, help="samples per second, when there is no time column")
+    imp.add_argument("--sensor", help="the sensor's name (default: SRC's folder name)")
     args = parser.parse_args(argv)
 
+    if args.command == "import-csv":
+        try:
+            found = import_csv(
+                args.src, args.dst, labels=args.labels, pattern=args.object_pattern,
+                glob=args.glob, time_column=args.time_column, time_unit=args.time_unit,
+                rate=args.rate, sensor=args.sensor,
+            )  # fmt: skip
+        except DataError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 1
+        print("\n".join(found.summary()))
+        return 0
     if args.command == "generate":
         print(_generate(args))
         return 0

@@ -18,11 +18,28 @@ from tactile_exp.data.layout import DataError, TrialName
 
 @dataclass(frozen=True)
 class Sensor:
-    """The channels a data set's trials hold: what a modality checks before it reads them."""
+    """The channels a data set's trials hold: what a modality checks before it reads them.
+
+    ``name`` is for people only; what a modality may rely on is declared: the channels, the
+    rate and ``layout``, the physical record layout its trials follow, if any (PHAC-2's BioTac
+    frames: `PHAC2_LAYOUT`). A modality that needs a layout checks it, never the name.
+    """
 
     name: str
     channels: tuple[str, ...]
     rate_hz: float  # samples per second along a trial's time axis
+    layout: str | None = None  # e.g. PHAC2_LAYOUT; None: plain (channels, time) arrays
+
+    def describe(self) -> str:
+        """One phrase for messages: ``sensor 'glove', 3 channels at 50 Hz, no declared layout``."""
+        layout = f"layout {self.layout}" if self.layout else "no declared layout"
+        channels = f"{len(self.channels)} channels at {self.rate_hz:g} Hz"
+        return f"sensor {self.name!r}, {channels}, {layout}"
+
+
+# PHAC-2's trials: two BioTacs' frames (electrodes, PAC, PDC, TAC, TDC) with the controller's
+# states marking the four exploratory procedures (PHAC2_FORMAT.md §1), read by ``iter_trials``.
+PHAC2_LAYOUT = "phac2-biotac"
 
 
 @runtime_checkable

@@ -4,6 +4,8 @@
 
     DIR/dataset.yaml                  sensor: NAME, channels: [CH, ...], rate_hz: R
     DIR/labels.csv                    object[,object_id],LABEL,...   one row per object, 0/1 cells
+                                      (as spreadsheets and pandas write it: a BOM, ; or tab
+                                      separators, true/false or 1.0/0.0, pandas' index column)
     DIR/trials/<object>/<trial>.npy   one (channels, time) real array per trial (numpy.save)
     DIR/photos/<object>/*.jpg         optional photographs
 
@@ -41,6 +43,27 @@ NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")  # object and label names: safe 
 MAX_OBJECT_ID = 999  # three digits in a trial name
 MAX_TRIALS = 99  # two digits in a trial name
 MIN_SAMPLES = 2  # a trial needs a duration to be resampled
+
+
+# A label cell as spreadsheets and pandas write it (1.0 for an int column that had a NaN).
+FLAGS = {"0": 0, "1": 1, "0.0": 0, "1.0": 1, "false": 0, "true": 1}
+SEPARATORS = (
+    ",",
+    ";",
+    "\t",
+)  # what spreadsheets export: comma, semicolon (decimal-comma locales), tab
+
+
+def read_table(file: Path) -> list[tuple[int, list[str]]]:
+    """A small CSV/TSV table as (line number, cells) of its non-blank lines: UTF-8 with or
+    without a byte-order mark, the separator the header line uses most (``,``, ``;`` or tab).
+    OSError, UnicodeDecodeError and csv.Error propagate."""
+    with open(file, newline="", encoding="utf-8-sig") as f:
+        text = f.read()
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    separator = max(SEPARATORS, key=first.count)
+    lines = enumerate(csv.reader(text.splitlines(), delimiter=separator), 1)
+    return [(n, row) for n, row in lines if any(map(str.strip, row))]
 
 
 def _one_line(err: Exception) -> str:
@@ -111,15 +134,15 @@ class FolderDataSet:
         """(label names, object id -> label -> 0/1, object id -> object name)."""
         expected = f"expected a header {OBJECT_COLUMN}[,{ID_COLUMN}],LABEL,... and a row per object"
         try:
-            with open(file, newline="", encoding="utf-8") as f:
-                lines = enumerate(csv.reader(f), 1)
-                rows = [(n, row) for n, row in lines if any(map(str.strip, row))]
+            rows = read_table(file)
         except OSError as e:
             raise DataError(f"{file}: cannot read ({e.strerror}); {expected}") from e
         except (UnicodeDecodeError, csv.Error) as e:
             raise DataError(f"{file}: not a readable CSV ({_one_line(e)}); {expected}") from e
         if not rows:
             raise DataError(f"{file}: empty; {expected}")
+        if rows[0][1][0].strip() == "" and len(rows[0][1]) > 1:  # pandas' unnamed index column
+            rows = [(n, row[1:]) for n, row in rows]
         header = [h.strip() for h in rows[0][1]]
         if header[0] != OBJECT_COLUMN:
             raise DataError(f"{file}: first column {header[0]!r}; {expected}")
@@ -156,9 +179,11 @@ class FolderDataSet:
                 given[name] = FolderDataSet._object_id(row[1], where)
             cells = row[2 if has_ids else 1 :]
             for label, cell in zip(names, cells, strict=True):
-                if cell not in ("0", "1"):
-                    raise DataError(f"{where}: {name} {label}={cell!r}, expected 0 or 1")
-            labels[name] = {label: int(cell) for label, cell in zip(names, cells, strict=True)}
+                if cell.lower() not in FLAGS:
+                    raise DataError(
+                        f"{where}: {name} {label}={cell!r}, expected 0 or 1 (true/false, 1.0/0.0)"
+                    )
+            labels[name] = {label: FLAGS[c.lower()] for label, c in zip(names, cells, strict=True)}
         if has_ids:
             ids = given
             seen: dict[int, str] = {}

@@ -249,6 +249,31 @@ class Trials:
         return out
 
 
+# The kinds of instance rows a modality gives and a model takes, as messages describe them.
+INSTANCE_KINDS: dict[str, str] = {
+    "signals": "(channels, time) signals",
+    "features": "feature vectors",
+    "images": "images",
+}
+
+
+@dataclass(frozen=True)
+class InstanceSpec:
+    """What each row of a modality's `Instances` is, declared when the data opens (before any
+    run): its kind (`INSTANCE_KINDS`) and shape, ``None`` where only fitting will tell."""
+
+    kind: str
+    shape: tuple[int | None, ...] = ()
+
+    def describe(self) -> str:
+        """E.g. ``(channels, time) signals of shape (48, 100)``."""
+        what = INSTANCE_KINDS.get(self.kind, self.kind)
+        if not self.shape:
+            return what
+        dims = ", ".join("?" if d is None else str(d) for d in self.shape)
+        return f"{what} of shape ({dims}{',' if len(self.shape) == 1 else ''})"
+
+
 @dataclass
 class Instances:
     """Model inputs with the bookkeeping needed to combine, split and evaluate them."""

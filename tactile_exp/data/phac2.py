@@ -19,7 +19,7 @@ import cv2
 import h5py
 import numpy as np
 
-from tactile_exp.data.dataset import Sensor
+from tactile_exp.data.dataset import PHAC2_LAYOUT, Sensor
 from tactile_exp.data.layout import (
     ADC_MAX,
     ADJECTIVES,
@@ -55,6 +55,7 @@ BIOTAC = Sensor(
         for channel in (*(f"electrode_{i:02d}" for i in range(1, 20)), "pac", "pdc", "tac", "tdc")
     ),
     rate_hz=ROW_RATE_HZ,
+    layout=PHAC2_LAYOUT,
 )
 
 

@@ -1,9 +1,16 @@
-"""Where a job's data set comes from: the ``data`` config group, one entry per source."""
+"""Where a job's data set comes from: the ``data`` config group, one entry per source.
+
+A source that reads a file or folder takes it as its ``path`` argument and may declare which
+(`opens`): the config check makes sure it exists before any run, and predict finds the source
+for a path it is given (`open_path`) among every registered one, a plugin's as well.
+"""
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from tactile_exp.data.dataset import DataSet
 from tactile_exp.data.folder import FolderDataSet
@@ -12,11 +19,28 @@ from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.registry import Registry
 
 DATA_SOURCES: Registry[DataSet] = Registry("data source")
-# A source's data.path and what it must name: checked before any run (`check_source_params`).
-PATHS: dict[str, tuple[str, str]] = {  # source -> (file | folder, what the user should give)
-    "phac2": ("file", "the PHAC-2 HDF5 file"),
-    "folder": ("folder", "a folder holding dataset.yaml, labels.csv and trials/"),
-}
+F = TypeVar("F", bound=Callable[..., DataSet])
+
+
+def opens(kind: str, what: str) -> Callable[[F], F]:
+    """Declare what a source's ``path`` names: ``kind`` file or folder, ``what`` in words."""
+    if kind not in ("file", "folder"):
+        raise ValueError(f"opens: kind must be 'file' or 'folder', got {kind!r}")
+
+    def declare(source: F) -> F:
+        source.opens = (kind, what)  # type: ignore[attr-defined]
+        return source
+
+    return declare
+
+
+def path_kind(name: str) -> tuple[str, str] | None:
+    """(file | folder | any, what) for a source that reads a ``path``; None for one that
+    does not (``synthetic`` makes its own)."""
+    source = DATA_SOURCES[name]
+    if "path" not in inspect.signature(source).parameters:
+        return None
+    return getattr(source, "opens", ("any", "what the source reads"))
 
 
 @DATA_SOURCES.register("synthetic")
@@ -44,6 +68,7 @@ def synthetic(
 
 
 @DATA_SOURCES.register("phac2")
+@opens("file", "the PHAC-2 HDF5 file")
 def phac2(path: str | Path, photo_dir: str | Path | None = None) -> DataSet:
     """The real release file (``phac_train_test_pos_neg_90_10_1_20.h5``)."""
     path = Path(path).expanduser()
@@ -53,24 +78,48 @@ def phac2(path: str | Path, photo_dir: str | Path | None = None) -> DataSet:
 
 
 @DATA_SOURCES.register("folder")
+@opens("folder", "a folder holding dataset.yaml, labels.csv and trials/")
 def folder(path: str | Path) -> DataSet:
     """A lab's recordings of any sensor in the folder layout (`tactile_exp.data.folder`)."""
     return FolderDataSet(path)
 
 
-def open_path(path: str | Path) -> DataSet:
-    """The data set at ``path`` as its source reads it: a folder in the folder layout, else a
-    PHAC-2-layout HDF5 file (what predict is given, or finds in a job's record)."""
+def open_path(
+    path: str | Path, source: str | None = None, params: Mapping[str, Any] | None = None
+) -> DataSet:
+    """The data set at ``path`` (what predict is given, or finds in a job's record): read by
+    ``source`` (with its other ``params``) when that source reads such a path, else by the
+    first registered source that reads one and opens it; DataError when none does."""
     path = Path(path).expanduser()
-    return FolderDataSet(path) if path.is_dir() else PHAC2(path)
+    if not path.exists():
+        raise DataError(f"{path}: no such file or folder")
+    kind = "folder" if path.is_dir() else "file"
+    names = [n for n in DATA_SOURCES.names() if (path_kind(n) or ("",))[0] in (kind, "any")]
+    if source in names:
+        names.remove(source)
+        names.insert(0, source)
+    errors = []
+    for name in names:
+        kwargs = {**(params or {}), "path": path} if name == source else {"path": path}
+        try:
+            return DATA_SOURCES.build(name, **kwargs)
+        except DataError as err:
+            errors.append(f"data={name}: {err}")
+    if not errors:
+        raise DataError(f"{path}: no registered data source reads a {kind}")
+    raise DataError(f"{path}: no data source reads it ({'; '.join(errors)})")
 
 
 def check_source_params(name: str, params: dict[str, Any]) -> None:
     """A source's ``path`` names an existing file or folder, before any data is read:
     ValueError naming the key otherwise."""
-    if name not in PATHS or "path" not in params:
+    declared = path_kind(name) if name in DATA_SOURCES else None
+    if declared is None or "path" not in params:
         return
-    kind, what = PATHS[name]
+    kind, what = declared
     path = Path(str(params["path"])).expanduser()
-    if not (path.is_file() if kind == "file" else path.is_dir()):
-        raise ValueError(f"path: {path}: no such {kind}; expected {what}")
+    exists = {"file": path.is_file, "folder": path.is_dir}.get(kind, path.exists)()
+    if not exists:
+        raise ValueError(
+            f"path: {path}: no such {'path' if kind == 'any' else kind}; expected {what}"
+        )

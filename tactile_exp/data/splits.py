@@ -42,6 +42,80 @@ def make_split(
     return SPLITS[rule](dataset, adjective, seed, **params)
 
 
+def object_counts(dataset: DataSet, label: str) -> tuple[int, int]:
+    """(positive, negative) objects of ``label`` that have trials."""
+    labels = dataset.labels()
+    values = [labels[i][label] for i in dataset.object_ids()]
+    return sum(values), len(values) - sum(values)
+
+
+def _counts(dataset: DataSet, labels: list[str]) -> str:
+    return ", ".join(
+        f"{a} (+{p}/-{n} objects)" for a in labels for p, n in [object_counts(dataset, a)]
+    )
+
+
+def label_splits(
+    dataset: DataSet,
+    labels: tuple[str, ...],
+    rule: str,
+    seed: int = 0,
+    min_objects: int | None = None,
+    **params: int,
+) -> dict[str, Split]:
+    """Each label's split under ``rule``, for the labels that can be evaluated under it.
+
+    ``min_objects`` K (``labels.min_objects``, ours) first leaves out every label with fewer
+    than K positive or K negative objects; any other label that cannot be split is refused,
+    all such labels in one `DataError` with their object counts and the K that drops them."""
+    kept = [
+        a for a in labels if min_objects is None or min(object_counts(dataset, a)) >= min_objects
+    ]
+    if not kept:
+        raise DataError(
+            f"{dataset.path}: labels.min_objects={min_objects} leaves no label: "
+            f"{_counts(dataset, list(labels))}"
+        )
+    splits: dict[str, Split] = {}
+    errors: dict[str, DataError] = {}
+    for a in kept:
+        try:
+            splits[a] = make_split(dataset, a, rule, seed, **params)
+        except DataError as err:
+            errors[a] = err
+    if not errors:
+        return splits
+    if not splits and all(repr(a) not in str(e) for a, e in errors.items()):
+        raise next(iter(errors.values()))  # the rule refuses this data set, not its labels
+    bad = list(errors)
+    k = max(min(object_counts(dataset, a)) for a in bad) + 1
+    also = [a for a in splits if min(object_counts(dataset, a)) < k]
+    spared = [a for a in kept if a not in bad and a not in also]
+    if spared:
+        ways = f"labels.min_objects={k} drops them" + (f" (and {', '.join(also)})" if also else "")
+        ways += f", or adjectives=[{','.join(spared)}]"
+    else:
+        most = max(min(object_counts(dataset, a)) for a in kept)
+        ways = "dropping them leaves no label; " + (
+            f"split.folds={most} or split=random"
+            if rule == "folds" and most >= 2
+            else "bring more objects, or another split"
+        )
+    raise DataError(
+        f"{dataset.path}: {len(bad)} label(s) cannot be evaluated under split={rule}"
+        f"{_need(rule, params)}: {_counts(dataset, bad)}; {ways}"
+    )
+
+
+def _need(rule: str, params: dict[str, int]) -> str:
+    """What the rule needs of each class, as a parenthesis (empty for an unknown rule)."""
+    if rule == "folds":
+        return f" (each class needs split.folds={params.get('folds')} objects)"
+    if rule == "random":
+        return " (each class needs an object; a single one, two trials)"
+    return ""
+
+
 def check_split_params(rule: str, params: dict[str, object]) -> None:
     """A rule's parameters, before any data is read: ValueError naming the key otherwise."""
     allowed = {"folds": ("folds", "fold")}.get(rule, ())
@@ -225,10 +299,11 @@ def folds_split(
     for label, objs in sorted(_trials_by_object(dataset, adjective).items(), reverse=True):
         if len(objs) < folds:
             word = "positive" if label == 1 else "negative"
+            fewer = f"use split.folds<={len(objs)}, " if len(objs) >= 2 else ""
             raise DataError(
                 f"{dataset.path} (folds split): {adjective!r} has {len(objs)} {word} object(s), "
-                f"fewer than split.folds={folds}; every fold needs one (use split.folds<="
-                f"{len(objs)}, leave it out of adjectives=, or use split=random)"
+                f"fewer than split.folds={folds}; every fold needs one ({fewer}leave it out of "
+                "adjectives=, or use split=random)"
             )
         for k, i in enumerate(int(i) for i in rng.permutation(sorted(objs))):
             (test if (start + k) % folds == fold else train).extend(objs[i])

@@ -15,7 +15,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import DataError, Instances, TrialName, Trials
+from tactile_exp.data.layout import Instances, InstanceSpec, TrialName, Trials
 from tactile_exp.models.base import Model
 from tactile_exp.registry import Component, Registry
 
@@ -27,21 +27,36 @@ class Modality(ABC):
     # What the data set must give for new trials: trials (signals), photographs, or both.
     takes_trials: bool = True
     takes_photographs: bool = False
-    # The sensors (``Sensor.name``) whose trials it knows how to read; () = any.
-    sensors: tuple[str, ...] = ()
+    # What it needs from a data set, declared (checked by `lacks` when the data opens, never
+    # by the sensor's name): trials in a physical layout (``Sensor.layout``, e.g. PHAC-2's
+    # BioTac frames), or trials as (channels, time) arrays (``signals(name)``).
+    needs_layout: str | None = None
+    needs_signals: bool = False
+    # The kind of instance rows it gives (`INSTANCE_KINDS`); `output` adds their shape.
+    emits: str = ""
 
     def __init__(self, *, cache_dir: Path | None = None) -> None:
         self.cache_dir = cache_dir
 
+    @classmethod
+    def lacks(cls, dataset: Any) -> str | None:
+        """What ``dataset`` does not give that this modality needs (a phrase), else None."""
+        if cls.needs_layout and dataset.sensor.layout != cls.needs_layout:
+            return f"trials in the {cls.needs_layout} layout"
+        if cls.needs_signals and not callable(getattr(dataset, "signals", None)):
+            return "trials as (channels, time) arrays"
+        if cls.takes_photographs and not dataset.photographs():
+            return "photographs"
+        return None
+
+    def output(self, dataset: Any) -> InstanceSpec:
+        """What each instance row will be on ``dataset``: checked against the model when the
+        data opens. Its kind, shape unknown, unless overridden."""
+        return InstanceSpec(self.emits)
+
     def max_combine(self, dataset: Any) -> tuple[int, str]:
         """The largest ``combine`` (instances of one object grouped as a unit) and its unit name.
-        Called when the data opens, before any run: a data set of another sensor stops here."""
-        if self.sensors and dataset.sensor.name not in self.sensors:
-            raise DataError(
-                f"{dataset.path}: {type(self).__name__} reads {' or '.join(self.sensors)} trials, "
-                f"this data set's sensor is {dataset.sensor.name!r} (modality=signals reads any "
-                "sensor's channels)"
-            )
+        Called when the data opens, before any run."""
         return int(max(np.bincount([t.object_id for t in dataset.trials]))), "trials"
 
     @abstractmethod

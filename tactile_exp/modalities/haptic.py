@@ -8,8 +8,8 @@ from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import Instances, TrialData, TrialName, Trials
-from tactile_exp.data.phac2 import BIOTAC
+from tactile_exp.data.dataset import PHAC2_LAYOUT
+from tactile_exp.data.layout import Instances, InstanceSpec, TrialData, TrialName, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
 
 
@@ -41,7 +41,8 @@ class Haptic(Modality):
     checked (a new object's, in predict) are read when transformed.
     """
 
-    sensors = (BIOTAC.name,)
+    needs_layout = PHAC2_LAYOUT  # reads each trial's BioTac frames and EP states
+    emits = "signals"
 
     def __init__(
         self,
@@ -69,6 +70,12 @@ class Haptic(Modality):
         self.pca_components = pca_components
         self.per_finger = per_finger
         self.fit_on = fit_on
+
+    def output(self, dataset: Any) -> InstanceSpec:
+        from tactile_exp.preprocess.haptic import EP_NAMES, N_SCALAR
+
+        channels = len(EP_NAMES) * (N_SCALAR + self.pca_components)  # 32 by default (P4)
+        return InstanceSpec(self.emits, (channels, self.steps))
 
     def _key(self, dataset: Any) -> tuple[Any, ...]:
         return dataset.identity(), self.steps, self.offsets, self.pac_downsample

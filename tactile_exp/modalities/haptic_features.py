@@ -8,8 +8,8 @@ from typing import Any, Self
 
 import numpy as np
 
+from tactile_exp.data.dataset import PHAC2_LAYOUT
 from tactile_exp.data.layout import Instances, Split, TrialData, TrialName, Trials
-from tactile_exp.data.phac2 import BIOTAC
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
 
 
@@ -45,7 +45,8 @@ class HapticFeatures(Modality):
     trials of its object among those transformed: one side of a split, or a new object's.
     """
 
-    sensors = (BIOTAC.name,)
+    needs_layout = PHAC2_LAYOUT  # the gripper, hand transforms and EP states of each trial
+    emits = "features"
 
     def __init__(
         self,

@@ -73,6 +73,8 @@ class Multimodal(Modality):
     """Haptic units (``trials`` trials of an object) with their object's ``views`` photographs."""
 
     takes_photographs = True
+    needs_layout = Haptic.needs_layout
+    emits = "features"  # conv3 activations of a unit's trials, then the views' trunk features
 
     def __init__(
         self,

@@ -15,7 +15,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import DataError, Instances, Trials
+from tactile_exp.data.layout import DataError, Instances, InstanceSpec, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
 
 log = logging.getLogger(__name__)
@@ -42,6 +42,9 @@ class Signals(Modality):
     was not checked (a new object's, in predict) are read when transformed.
     """
 
+    needs_signals = True
+    emits = "signals"
+
     def __init__(self, *, cache_dir: Path | None = None, steps: int = 100) -> None:
         super().__init__(cache_dir=cache_dir)
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
@@ -58,10 +61,8 @@ class Signals(Modality):
                 "use data=folder (or modality=haptic for PHAC-2's BioTac signals)"
             )
 
-    def max_combine(self, dataset: Any) -> tuple[int, str]:
-        # Called when the data opens, before any run: the data set's kind is refused here.
-        self._require_signals(dataset)
-        return super().max_combine(dataset)
+    def output(self, dataset: Any) -> InstanceSpec:
+        return InstanceSpec(self.emits, (len(dataset.sensor.channels), self.steps))
 
     def check(self, dataset: Any) -> None:
         self._require_signals(dataset)

@@ -8,7 +8,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import Instances, Trials
+from tactile_exp.data.layout import Instances, InstanceSpec, Trials
 from tactile_exp.data.splits import divide_views
 from tactile_exp.modalities.base import MODALITIES, Modality
 
@@ -46,6 +46,7 @@ class Visual(Modality):
     pad_units = False
     takes_trials = False
     takes_photographs = True
+    emits = "features"
 
     def __init__(
         self,
@@ -85,6 +86,11 @@ class Visual(Modality):
         self.seed = seed
         self.batch_size = batch_size
         self.device = device
+
+    def output(self, dataset: Any) -> InstanceSpec:
+        from tactile_exp.preprocess.trunk import INCEPTION5A_CHANNELS
+
+        return InstanceSpec(self.emits, (INCEPTION5A_CHANNELS,))
 
     def max_combine(self, dataset: Any) -> tuple[int, str]:
         """The most views of one object: the largest ``combine`` that groups distinct views."""

@@ -15,7 +15,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from tactile_exp.data.layout import Instances
+from tactile_exp.data.layout import Instances, InstanceSpec
 
 # on_epoch(epoch, n_epochs, metrics): called after each epoch (1-based) to show progress.
 EpochCallback = Callable[[int, int, dict[str, float]], None]
@@ -30,10 +30,10 @@ class Model(ABC):
     """
 
     # Capabilities, declared (scikit-learn's tags). learns_representation False: transform()
-    # needs no fit (e.g. hand features). modalities: the `modality` options whose instances it
-    # takes; empty: any (it flattens rows).
+    # needs no fit (e.g. hand features). accepts: the kinds of instance rows it takes
+    # (`INSTANCE_KINDS`: signals, features, images); empty: any (it flattens rows).
     learns_representation: bool = True
-    modalities: tuple[str, ...] = ()
+    accepts: tuple[str, ...] = ()
     # storable: ``state()``/``restore()`` keep the fitted model as tensors and arrays (artifacts).
     storable: bool = False
     # applies: its scores depend on the input, so a finished job's model is worth applying to
@@ -66,6 +66,12 @@ class Model(ABC):
     def check_steps(self, n_steps: int) -> None:
         """Raise ValueError when instances of ``n_steps`` time steps do not suit this model:
         checked against ``modality.steps`` before any run. Any length, unless overridden."""
+        return None
+
+    def check_input(self, spec: InstanceSpec) -> None:
+        """Raise ValueError when rows ``spec`` describes do not suit this model, its message
+        starting with the parameter to change (``groups: ...``): checked when the data opens,
+        before any run. A declared kind (``accepts``) is checked before this is called."""
         return None
 
     def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

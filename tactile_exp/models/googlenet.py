@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from torch import nn
 
+from tactile_exp.data.layout import InstanceSpec
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.sgd import SGDModel
 from tactile_exp.preprocess.trunk import INCEPTION5A_CHANNELS
@@ -28,7 +29,14 @@ class VisualGoogLeNet(SGDModel):
 
     learns_representation = False  # the representation is the frozen trunk's, computed upstream
     head_standardize = False  # row L's head: the loss directly on the concatenated unit-norm rows
-    modalities = ("visual",)
+    accepts = ("features",)  # the visual modality's trunk features (check_input: their width)
+
+    def check_input(self, spec: InstanceSpec) -> None:
+        if spec.shape != (INCEPTION5A_CHANNELS,):
+            raise ValueError(
+                "visual_googlenet is the loss layer on the visual modality's "
+                f"({INCEPTION5A_CHANNELS},) trunk features, got {spec.describe()}"
+            )
 
     def _check_input(self, X: np.ndarray) -> None:
         if X.ndim != 2 or X.shape[1] != INCEPTION5A_CHANNELS:

@@ -20,6 +20,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from tactile_exp.data.layout import InstanceSpec
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import IMPLS, SGDModel
@@ -141,7 +142,7 @@ class HapticCNN(SGDModel):
     ``conv3_shape_`` for a channel x time map.
     """
 
-    modalities = ("haptic", "signals")  # (n, channels, time): groups must divide channels
+    accepts = ("signals",)  # (n, channels, time): groups must divide channels (check_input)
     # Fitted: conv3's (channels, time), the map each row of ``transform`` flattens (Fig. 6)
     conv3_shape_: tuple[int, int] | None = None
 
@@ -181,6 +182,19 @@ class HapticCNN(SGDModel):
     def check_steps(self, n_steps: int) -> None:
         """Raise ValueError unless the conv stack leaves time steps of an ``n_steps`` input."""
         GroupedTemporalConvNet(self.net_args["groups"], n_steps, **self.net_args)
+
+    def check_input(self, spec: InstanceSpec) -> None:
+        """Groups that divide the channels, and a conv stack that leaves time steps."""
+        channels, steps = spec.shape if len(spec.shape) == 2 else (None, None)
+        groups = self.net_args["groups"]
+        if channels is not None and channels % groups:
+            raise ValueError(
+                f"groups={groups} does not divide the {channels} channels of each instance; "
+                f"model.groups={channels} (one group per channel, as M1 has one per signal; ours) "
+                f"or a divisor of {channels}"
+            )
+        if steps is not None:
+            self.check_steps(steps)
 
     def _check_input(self, X: np.ndarray) -> None:
         groups = self.net_args["groups"]

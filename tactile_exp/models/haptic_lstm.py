@@ -64,7 +64,7 @@ class HapticLSTM(SGDModel):
     FC(1) with ``loss``. ``transform`` returns the FC(10) activations after the ReLU.
     """
 
-    modalities = ("haptic",)  # (n, channels, time) signals: 32 x fingers for PHAC-2
+    accepts = ("signals",)  # (n, channels, time): 32 per finger for PHAC-2, any C elsewhere
 
     def __init__(
         self,

@@ -9,6 +9,7 @@ adjective applies. ``python -m tactile_exp.predict --help`` is the command line.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -46,8 +47,9 @@ def predict(
     if MODALITIES[job.modality].takes_trials:
         data, data_line = _data_file(job, data)
     given = new_trials(
-        job.modality, data=data, trials=trials, object_id=object_id, photos=photos, job=job.id
-    )
+        job.modality, data=data, trials=trials, object_id=object_id, photos=photos, job=job.id,
+        source=job.config.get("data"),
+    )  # fmt: skip
     scored = apply(job.pipelines(adjectives), given)
     chosen = "" if run_id is not None else (
         f"no run id given: the newest FINISHED job of experiment {experiment!r}"
@@ -68,8 +70,10 @@ def new_trials(
     object_id: int | None,
     photos: str | Path | None,
     job: str,
+    source: Mapping[str, Any] | None = None,
 ) -> Trials:
-    """The new object's trials and/or photographs, as job ``job``'s modality takes them."""
+    """The new object's trials and/or photographs, as job ``job``'s modality takes them.
+    ``source``: the job's ``data`` node, whose source reads ``data`` first (`open_path`)."""
     modality = MODALITIES[modality_name]
     if modality.takes_trials and not (trials or object_id is not None):
         wanted = (
@@ -90,7 +94,7 @@ def new_trials(
     try:
         if not modality.takes_trials:
             return Trials(PhotoFolder(str(photos)), (), object_ids=(0,))
-        dataset: Any = open_path(str(data))
+        dataset: Any = _open(data, source)
         names = [dataset.trial_name(t) for t in trials]
         if object_id is not None:
             names += [t for t in dataset.trials if t.object_id == object_id and t not in names]
@@ -126,13 +130,30 @@ def apply(pipelines: Mapping[str, AdjectivePipeline], given: Trials) -> Predicti
     return Prediction("", names, list(pipelines), np.column_stack(columns))
 
 
+def _open(data: str | Path | None, source: Mapping[str, Any] | None) -> Any:
+    """``data`` read by the job's own data source if it reads such a path (a plugin's: its
+    ``_module_`` imported first), else by any registered source that does."""
+    node = dict(source or {})
+    module = node.pop("_module_", None)
+    if module:
+        try:
+            importlib.import_module(str(module))
+        except ImportError as err:
+            raise PredictError(
+                f"the job's data._module_ {module!r} cannot be imported ({err})"
+            ) from None
+    name = node.pop("name", None)
+    params = {k: v for k, v in node.items() if k != "path"}
+    return open_path(str(data), None if name is None else str(name), params)
+
+
 def _data_file(job: StoredJob, data: str | Path | None) -> tuple[str | Path, str]:
     """The data file to read trials from: the one given, else the job's own while it exists."""
     if data is not None:
         return data, f"{data} (given)"
     recorded = job.data_file()
     if recorded is None:
-        raise PredictError(f"run {job.id} records no data file: give --data FILE")
+        raise PredictError(f"run {job.id} records no data file: give --data PATH")
     if not recorded.exists():
-        raise PredictError(f"the job's data file {recorded} is no longer there: give --data FILE")
+        raise PredictError(f"the job's data file {recorded} is no longer there: give --data PATH")
     return recorded, f"{recorded} (the job's own data file; --data to read another)"

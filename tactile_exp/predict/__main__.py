@@ -21,7 +21,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tracking-uri", help="MLflow store (default: as the jobs use)")
     parser.add_argument(
         "--data",
-        help="a PHAC-2-layout HDF5 file holding the trials; default: the job's own data file",
+        help="the file or folder holding the trials (a PHAC-2 HDF5 file, a folder-layout data "
+        "set, or what any registered data source reads; the job's own source is tried first); "
+        "default: the job's own data",
     )
     parser.add_argument("--trial", action="append", default=[], help="a trial group (repeat)")
     parser.add_argument("--object", type=int, help="all trials of this object id")

@@ -44,6 +44,7 @@ from tactile_exp.report import comparisons, heldout
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
 from tactile_exp.report.figures import cd_diagram, fig5, fig6, numeric_axis
+from tactile_exp.report.labels import label_notes
 from tactile_exp.report.runs import (
     HAPTIC,
     Group,
@@ -127,6 +128,7 @@ def write(
     index = _index(groups, rows, source, visual, haptic, evidence, metric)
     index += claim_text + friedman_text + ablation_text
     index += fig6_text + _table3_text(table3_lines)
+    index += label_notes(groups, tracker)
     if skipped:
         index += "\n## Not run: invalid config\n\nCells of this sweep listed invalid before its "
         index += "first job and skipped (`sweep.on_invalid=skip`):\n\n"
