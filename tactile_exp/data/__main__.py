@@ -34,9 +34,13 @@ def _generate(args: argparse.Namespace) -> Path:
 
 
 def _default_file() -> Path:
-    from tactile_exp.data.synthetic import default_file
+    from tactile_exp import docs_test
+    from tactile_exp.data.synthetic import SyntheticSpec, default_file
 
-    return default_file(default_cache_dir())
+    small = docs_test.adjectives() is not None  # the documentation's command test
+    return default_file(
+        default_cache_dir(), SyntheticSpec(**docs_test.TINY_DATA) if small else SyntheticSpec()
+    )
 
 
 def _inspect(path: Path, photo_dir: Path | None) -> None:

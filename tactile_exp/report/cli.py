@@ -67,7 +67,7 @@ FIG6_ROWS = ("I", "H", "J")  # the jobs whose ConvNet Fig. 6 shows, first run fi
 class Choices:
     """What Fig. 6 and Table III show (command-line options)."""
 
-    fig6_adjectives: tuple[str, ...] = FIG6_ADJECTIVES
+    fig6_adjectives: tuple[str, ...] = ()  # default: FIG6_ADJECTIVES, drawn where run
     fig6_trials: tuple[str, ...] = ()  # default: N_TRIALS picked per adjective
     fig6_n_trials: int = N_TRIALS
     fig6_run: str | None = None  # default: row I's job (else H's, J's)
@@ -305,11 +305,12 @@ def _fig6(
     if job_id is None and group is None:
         return [], "\n".join([*lines, "Not drawn: none of rows I, H, J was run.", "", ""])
     job_id = job_id or group.first_run.run_id
+    adjectives = choices.fig6_adjectives or FIG6_ADJECTIVES
     try:
         data = conv3_maps(
             tracker=tracker,
             job_id=job_id,
-            adjectives=choices.fig6_adjectives,
+            adjectives=adjectives,
             trials=choices.fig6_trials,
             n_trials=choices.fig6_n_trials,
         )
@@ -330,10 +331,14 @@ def _fig6(
         "",
     ]
     paths = []
-    absent = [a for a in choices.fig6_adjectives if not any(m.adjective == a for m in data.maps)]
+    absent = [a for a in adjectives if not any(m.adjective == a for m in data.maps)]
+    if absent and choices.fig6_adjectives:  # asked for by name: an error, not a note
+        raise ReportError(
+            f"--fig6-adjective {', '.join(absent)}: no finished model in job {job_id}"
+        )
     if absent:
         lines += [f"Not drawn for {', '.join(absent)}: the job did not run them.", ""]
-    for adjective in choices.fig6_adjectives:
+    for adjective in adjectives:
         maps = [m for m in data.maps if m.adjective == adjective]
         if not maps:
             continue
@@ -398,9 +403,9 @@ def _index(
     lines = [
         "# Gao et al. (ICRA 2016), regenerated from tracked runs",
         "",
-        f"{source}; {len(groups)} configurations, {_n_runs(groups)} runs (each seed and fold "
-        f"once). Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by `{ENTRY_POINT}`"
-        + (f" at commit `{commit}`." if (commit := _commit()) else "."),
+        f"{source}; {_count(len(groups), 'configuration')}, {_count(_n_runs(groups), 'run')} "
+        f"(each seed and fold once). Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by "
+        f"`{ENTRY_POINT}`" + (f" at commit `{commit}`." if (commit := _commit()) else "."),
         "",
         *_metric_note(metric),
         f"## Table I: mean {shown.label} {over}",
@@ -465,6 +470,10 @@ def _metric_note(metric: str) -> list[str]:
 
 def _commit() -> str | None:
     return git_commit(Path(__file__).resolve().parents[2])
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _n_runs(groups: list[Group]) -> int:
@@ -545,7 +554,7 @@ def main(argv: list[str] | None = None) -> None:
         f", sweep `{args.sweep_id}`" if args.sweep_id else ""
     )
     choices = Choices(
-        fig6_adjectives=tuple(args.fig6_adjective or FIG6_ADJECTIVES),
+        fig6_adjectives=tuple(args.fig6_adjective or ()),
         fig6_trials=tuple(args.fig6_trial),
         fig6_n_trials=args.fig6_trials,
         fig6_run=args.fig6_run,

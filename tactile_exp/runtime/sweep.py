@@ -42,7 +42,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 WORKER_GRACE_S = 60.0  # how long a terminated sweep waits for its workers to mark runs FAILED
-ON_INVALID = ("skip", "fail")  # sweep.on_invalid
+ON_INVALID = ("skip", "fail", "check")  # sweep.on_invalid; check: list, then run nothing
 INVALID_FILE = "invalid.yaml"  # in the sweep folder: the cells not run, and why
 OUTCOMES = "outcomes"  # in the sweep folder: <hydra.job.num>.yaml, how each job ended
 EXIT_FAILED = 1  # a sweep with a FAILED job (a failed Hydra job exits 1 too)
@@ -235,7 +235,7 @@ class PrepareSweep(Callback):
         folder = sweep_folder(config.hydra)
         on_invalid = config.get("sweep", {}).get("on_invalid", "skip")
         if on_invalid not in ON_INVALID:
-            raise ConfigError(f"sweep.on_invalid: must be skip or fail, got {on_invalid!r}")
+            raise ConfigError(f"sweep.on_invalid: must be skip, fail or check, got {on_invalid!r}")
         for old in [folder / INVALID_FILE, *(folder / OUTCOMES).glob("*.yaml")]:
             old.unlink(missing_ok=True)  # an earlier sweep's, in the same folder
         jobs = sweep_jobs(config)
@@ -259,13 +259,16 @@ class PrepareSweep(Callback):
             _write(folder / INVALID_FILE, listing)
         if invalid:
             _show_invalid(listing, folder / INVALID_FILE)
-            if on_invalid == "fail":
+            if on_invalid in ("fail", "check"):
                 raise ConfigError(
-                    f"sweep.on_invalid=fail: {len(invalid)} of {len(self.jobs)} jobs have "
+                    f"sweep.on_invalid={on_invalid}: {len(invalid)} of {len(self.jobs)} jobs have "
                     "an invalid config (listed above); none run"
                 )
         if not valid:
             raise ConfigError(f"all {len(self.jobs)} jobs have an invalid config; none run")
+        if on_invalid == "check":  # composed and checked, as each job would be; nothing runs
+            log.info("sweep.on_invalid=check: all %d jobs valid; none run", len(valid))
+            sys.exit(0)
         tracker = Tracker(valid[0].tracking.uri, valid[0].tracking.experiment)
         if invalid:
             track_invalid(tracker, valid[0].sweep_id, listing)
