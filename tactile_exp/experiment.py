@@ -9,9 +9,11 @@ from __future__ import annotations
 import importlib
 import logging
 import os
+import sys
 import warnings
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -163,8 +165,18 @@ def _log_view(tracker: Tracker, settings: Settings) -> None:
     url = tracker.runs_view(columns, order_by=canonical_column("metrics", "mean_auc"))
     log.info("runs table (jobs by mean AUC, with what each sets): %s", url)
     if not tracker.uri.startswith(("http://", "https://")):
-        log.info("  serve it first: mlflow ui --backend-store-uri %s", tracker.uri)
+        log.info("  serve it first: %s ui --backend-store-uri %s", _mlflow_command(), tracker.uri)
     log.info("  (MLflow opened without this link shows its GenAI Overview: click 'Model training')")
+
+
+def _mlflow_command() -> str:
+    """This interpreter's ``mlflow`` (``.venv/bin/mlflow`` from the clone): a bare ``mlflow``
+    fails in a shell without the venv activated."""
+    path = Path(sys.executable).with_name("mlflow")
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
 
 
 def _adjectives(

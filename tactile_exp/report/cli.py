@@ -7,7 +7,8 @@ Table I's lines (``runs``) and writes into ``--out``:
   Table I row, whether it ran at the paper's settings (else what differs), mean AUC with its 95%
   object-bootstrap interval (``split=folds``: pooled out of fold, and the per-fold mean), its
   spread over seeds/splits, how many test objects each AUC rests on, the paper's figure, the data
-  file's identity and the run ids;
+  file's identity and the run ids; ``table1_summary.md`` the same lines in four columns (row,
+  method, mean AUC [95% CI], the paper's figure);
 - ``per_adjective.csv``: per-adjective AUC of every configuration, averaged over its seeds;
   ``per_adjective_intervals.csv`` the same with intervals and test-object counts;
 - ``fig5_per_adjective.png``: the best haptic against the best visual configuration per
@@ -54,7 +55,7 @@ from tactile_exp.report.runs import (
 )
 from tactile_exp.report.runs_table import runs_table
 from tactile_exp.report.scores import THRESHOLD, ReportError
-from tactile_exp.report.table1 import table1, table1_markdown
+from tactile_exp.report.table1 import table1, table1_markdown, table1_summary
 from tactile_exp.store import ArtifactError
 from tactile_exp.tracking import ExperimentNotFound, Tracker, git_commit
 
@@ -91,6 +92,7 @@ def write(
     evidence = {g.key: heldout.load(tracker, g, metric) for g in groups}
     rows = table1(groups, evidence, metric)
     (out / "table1.md").write_text(table1_markdown(rows, metric))
+    (out / "table1_summary.md").write_text(table1_summary(rows, metric))
     _write_csv(out / "table1.csv", rows)
     with open(out / "per_adjective.csv", "w", newline="") as f:
         writer = csv.writer(f)
@@ -103,6 +105,7 @@ def write(
     _write_csv(out / "per_adjective_intervals.csv", _interval_rows(groups, evidence, metric))
     paths = [
         out / "table1.md",
+        out / "table1_summary.md",
         out / "table1.csv",
         out / "per_adjective.csv",
         out / "per_adjective_intervals.csv",
