@@ -271,11 +271,15 @@ def _ablation(
     ]
     for values, g in sorted(view.configs.items()):
         lines.append(f"| {view.name(values)} | {evidence[g.key].interval()} | {len(g.seeds)} |")
+    same = _identical_axes(view, evidence)
     lines += ["", "| axis | comparison | combinations | difference and test |", "|---|---|---|---|"]
     for axis, cmp, n in view.effects:
-        lines.append(f"| {axis} | {cmp.a} vs {cmp.b} | {n} | {comparisons.describe(cmp)} |")
+        result = IDENTICAL if axis in same else comparisons.describe(cmp)
+        lines.append(f"| {axis} | {cmp.a} vs {cmp.b} | {n} | {result} |")
     for axis, levels, why in view.unpaired:
         lines.append(f"| {axis} | {levels} | 0 | not compared: {why} |")
+    for axis in same:
+        lines += ["", f"**`{axis}` changed no score here**: {_identical_note(axis)}"]
     paths = []
     for i, axis in enumerate(view.axes):
         try:
@@ -295,6 +299,40 @@ def _ablation(
     text = "\n".join(lines) + "\n\n"
     (out / "ablation.md").write_text(text)
     return text, [out / "ablation.md", *paths]
+
+
+IDENTICAL = "identical scores at every level: not compared (below)"
+
+
+def _identical_axes(view: comparisons.Ablation, evidence: dict[str, heldout.Evidence]) -> list[str]:
+    """The axes whose levels gave every adjective the same value in each combination of the
+    other axes: they changed no score, and a comparison of them is 0 by construction."""
+    out = []
+    for i, axis in enumerate(view.axes):
+        by_rest: dict[tuple[str, ...], list[dict[str, float]]] = {}
+        for values, g in view.configs.items():
+            rest = values[:i] + values[i + 1 :]
+            by_rest.setdefault(rest, []).append(_per_adjective(g, evidence[g.key]))
+        compared = [v for v in by_rest.values() if len(v) > 1]
+        if compared and all(all(x == v[0] for x in v[1:]) for v in compared):
+            out.append(axis)
+    return out
+
+
+def _identical_note(axis: str) -> str:
+    note = (
+        "each of its levels gave every adjective the same value in every combination of the "
+        "other axes, so the comparison above is 0 by construction, not evidence that the levels "
+        "are equivalent in general."
+    )
+    if axis == "loss":
+        note += (
+            " With `combine_instances=concat` the scores come from the classification layer "
+            "retrained on combined units (T4), and on separable units its hinge stage leaves the "
+            "logistic stage's layer unchanged (the jobs' FinetuneWarning): `loss=hinge` then "
+            "scores as `loss=logistic` does (conf/loss/hinge.yaml)."
+        )
+    return note
 
 
 def _fig6(

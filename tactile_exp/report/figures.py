@@ -169,6 +169,19 @@ def cd_diagram(result: Friedman, path: Path) -> None:
     plt.close(fig)
 
 
+def line_labels(lines: dict[str, list[tuple[float, Interval]]]) -> dict[str, str]:
+    """Each line's legend label; a line whose points equal an earlier one's (in name order) is
+    labelled identical to it (drawn apart by its marker and a small shift, not hidden under it)."""
+    first: dict[tuple, str] = {}
+    out = {}
+    for name, points in sorted(lines.items()):
+        key = tuple(sorted((x, iv.estimate) for x, iv in points))
+        shown = name or "(all)"
+        out[name] = f"{shown} (identical to {first[key]})" if key in first else shown
+        first.setdefault(key, shown)
+    return out
+
+
 def cd_labels(names: list[str], longest: int = 4) -> list[str]:
     """Short labels for the CD diagram: a row letter as it is, a longer name (an ablation's
     configuration) as c1, c2, ... in the given order, mapped to its full name in a legend."""
@@ -196,18 +209,13 @@ def numeric_axis(
     combination of the other axes."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.0, 4.0))
-    drawn: dict[tuple, str] = {}  # a line's points -> the first line drawn with them
+    labels = line_labels(lines)
     markers, styles = "osD^v<>", ("-", "--", ":", "-.")
     for n, (name, points) in enumerate(sorted(lines.items())):
         points = sorted(points, key=lambda p: p[0])
         xs = np.array([p[0] for p in points])
         ys = np.array([p[1].estimate for p in points])
-        key = tuple((x, round(y, 12)) for x, y in zip(xs, ys, strict=True))
-        label = name or "(all)"
-        if key in drawn:
-            label += f" (identical to {drawn[key]})"
-        else:
-            drawn[key] = name or "(all)"
+        label = labels[name]
         # Lines that coincide stay visible: each its own marker and dash, shifted a little.
         shift = 0.012 * n * (xs.max() - xs.min() or 1.0)
         (line,) = ax.plot(

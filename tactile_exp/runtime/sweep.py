@@ -255,6 +255,7 @@ class PrepareSweep(Callback):
                 len(invalid),
                 time.perf_counter() - start,
             )
+            _flag_loss_axis(jobs, valid)
             listing = {"on_invalid": on_invalid, "jobs": len(jobs), "invalid": invalid}
             _write(folder / INVALID_FILE, listing)
         if invalid:
@@ -293,6 +294,19 @@ class PrepareSweep(Callback):
             log.error("%s: %s", line, "; ".join(cell(o, where) for o in failed))
             sys.exit(EXIT_FAILED)
         log.info(line)
+
+
+def _flag_loss_axis(jobs: Sequence[Sequence[str]], valid: Sequence[Settings]) -> None:
+    """A ``loss`` axis over combined-instance jobs may change no score: say so before they run."""
+    swept = {jobs[0][i].split("=")[0].lstrip("+~") for i in axes(jobs) if i < len(jobs[0])}
+    if "loss" in swept and any(v.combiner == "concat" for v in valid):
+        log.warning(
+            "loss is swept over combine_instances=concat jobs: their scores come from the "
+            "classification layer retrained on combined units (T4), whose hinge stage does not "
+            "move on separable units (the haptic ConvNet's): loss=hinge then scores exactly as "
+            "loss=logistic (conf/loss/hinge.yaml); the report marks such an axis as changing no "
+            "score"
+        )
 
 
 def check_jobs(
