@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from tactile_exp.data.phac2 import PHAC2, DataError, default_cache_dir
-from tactile_exp.data.validate import summary, validate
+from tactile_exp.data.validate import checks, summary, validate
 
 
 def _image_size(text: str) -> tuple[int, int]:
@@ -43,8 +43,13 @@ def _default_file() -> Path:
     )
 
 
+def _progress(line: str) -> None:
+    """Progress of a long check on stderr, so that stdout stays the result."""
+    print(line, file=sys.stderr, flush=True)
+
+
 def _inspect(path: Path, photo_dir: Path | None) -> None:
-    s = summary(PHAC2(path, photo_dir))
+    s = summary(PHAC2(path, photo_dir), _progress)
     print(f"{s['path']}: {s['objects']} objects, {s['trials']} trials ({s['bad_trials']} bad)")
     for ep, st in s["ep_rows"].items():
         rows = f"{st['min']}..{st['max']} (median {st['median']:g})" if st else "none readable"
@@ -88,11 +93,13 @@ def main(argv: list[str] | None = None) -> int:
             print(e, file=sys.stderr)
             return 1
         return 0
-    problems = validate(path, args.photo_dir, photographs=not args.no_photographs)
+    photographs = not args.no_photographs
+    problems = validate(path, args.photo_dir, photographs=photographs, progress=_progress)
     for p in problems:
         print(p)
     if not problems:
-        print("OK")
+        print(f"OK: {path}")
+        print("".join(f"  checked: {what}\n" for what in checks(photographs)), end="")
     return 1 if problems else 0
 
 
