@@ -302,9 +302,10 @@ def _flag_loss_axis(jobs: Sequence[Sequence[str]], valid: Sequence[Settings]) ->
     if "loss" in swept and any(v.combiner == "concat" for v in valid):
         log.warning(
             "loss is swept over combine_instances=concat jobs: their scores come from the "
-            "classification layer retrained on combined units (T4), whose hinge stage does not "
-            "move on separable units (the haptic ConvNet's): loss=hinge then scores exactly as "
-            "loss=logistic (conf/loss/hinge.yaml); the report marks such an axis as changing no "
+            "classification layer retrained on combined units (T4), whose hinge stage moves "
+            "nothing once the logistic stage has separated them (the haptic ConvNet's on the "
+            "quick and paper schedules: FinetuneWarning); loss=hinge then scores exactly as "
+            "loss=logistic (conf/loss/hinge.yaml), and the report marks the axis as changing no "
             "score"
         )
 
