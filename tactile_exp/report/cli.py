@@ -627,4 +627,5 @@ def main(argv: list[str] | None = None) -> None:
     for path in paths:
         print(path)
     print(f"logged as MLflow run {run_id} (report) in {tracker.uri}")
-    print((args.out / "table1.md").read_text())
+    print(f"Table I (every column: {args.out / 'table1.md'}):")
+    print((args.out / "table1_summary.md").read_text())
