@@ -3,8 +3,8 @@
 Runs the README's main job (``experiment=quick_table1_i``: row I on the quick schedule, the
 embedded synthetic data) into a fresh MLflow store under ``--work``, builds the report from it,
 and copies the report's figures into ``docs/img/`` under the names the walkthrough shows. The
-report's ``table1.md`` is printed, so the README's table can be checked against it. Nothing is
-drawn here: every image is a file ``python -m tactile_exp.report`` wrote.
+report's ``table1.md`` and ``table1_summary.md`` are printed: getting-started.md quotes the
+latter. Nothing is drawn here: every image is a file ``python -m tactile_exp.report`` wrote.
 """
 
 from __future__ import annotations
@@ -69,6 +69,7 @@ def main(argv: list[str] | None = None) -> None:
         shutil.copyfile(report / src, IMG / dst)
         print(f"wrote {(IMG / dst).relative_to(ROOT)} (from {report / src})")
     print((report / "table1.md").read_text(), end="")
+    print((report / "table1_summary.md").read_text(), end="")  # getting-started.md's sample
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sys
 from pathlib import Path
 
 import hydra
@@ -52,5 +53,17 @@ def main(cfg: DictConfig) -> float:
     return float("nan")  # a sweep job that FAILED
 
 
+def _refuse_cfg_with_multirun(argv: list[str]) -> None:
+    """Hydra answers ``-m ... --cfg job`` with a traceback; say what to run instead."""
+    if {"-m", "--multirun"} & set(argv) and any(a in ("-c", "--cfg") for a in argv):
+        print(
+            "error: --cfg prints one job's config and Hydra refuses it with -m; to compose and "
+            "check every job of a sweep without running any, add sweep.on_invalid=check",
+            file=sys.stderr,
+        )
+        sys.exit(2)
+
+
 if __name__ == "__main__":
+    _refuse_cfg_with_multirun(sys.argv[1:])
     main()

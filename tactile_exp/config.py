@@ -17,6 +17,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from tactile_exp import docs_test
 from tactile_exp.errors import ConfigError
 from tactile_exp.registry import Component
 
@@ -256,6 +257,7 @@ def settings_from_config(
     overrides: tuple[str, ...] = (),
 ) -> Settings:
     """Resolve ``cfg`` and validate every value a job depends on."""
+    cfg = docs_test.shorten(cfg)  # a no-op outside the documentation's command test
     ours = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])  # hydra.* is Hydra's
     resolved: dict[str, Any] = OmegaConf.to_container(ours, resolve=True)  # type: ignore[assignment]
     # A Table I row is its config up to the seed (and every value interpolating it): runs that

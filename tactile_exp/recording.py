@@ -8,8 +8,10 @@ store (``store.MlflowCache``); everything it computes comes back in the ``Adject
 from __future__ import annotations
 
 import logging
+import sys
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -239,8 +241,18 @@ def log_view(tracker: Tracker, settings: Settings) -> None:
     url = tracker.runs_view(columns, order_by=canonical_column("metrics", "mean_auc"))
     log.info("runs table (jobs by mean AUC, with what each sets): %s", url)
     if not tracker.uri.startswith(("http://", "https://")):
-        log.info("  serve it first: mlflow ui --backend-store-uri %s", tracker.uri)
+        log.info("  serve it first: %s ui --backend-store-uri %s", _mlflow_command(), tracker.uri)
     log.info("  (MLflow opened without this link shows its GenAI Overview: click 'Model training')")
+
+
+def _mlflow_command() -> str:
+    """This interpreter's ``mlflow`` (``.venv/bin/mlflow`` from the clone): a bare ``mlflow``
+    fails in a shell without the venv activated."""
+    path = Path(sys.executable).with_name("mlflow")
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
 
 
 def _log_config(tracker: Tracker, run_id: str, settings: Settings) -> None:

@@ -235,6 +235,20 @@ def test_on_invalid_fail_runs_nothing(
     assert [e.name for e in MlflowClient(mlflow_uri).search_experiments()] == ["Default"]
 
 
+def test_on_invalid_check_composes_every_job_and_runs_none(multirun, mlflow_uri, capsys):
+    """What --cfg job is to one job: exit 0 when every cell is valid, 2 naming the invalid."""
+    valid = multirun("model=linear", "modality=visual,haptic", "schedule=tiny", "adjectives=[hard]")
+    valid.sweep.on_invalid = "check"
+    with pytest.raises(SystemExit) as stop:
+        sweep.PrepareSweep().on_multirun_start(valid)
+    assert stop.value.code == 0
+    with pytest.raises(SystemExit) as stop:
+        sweep.PrepareSweep().on_multirun_start(multirun(*GRID, "sweep.on_invalid=check"))
+    assert stop.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].startswith("error: sweep.on_invalid=check: 1")
+    assert [e.name for e in MlflowClient(mlflow_uri).search_experiments()] == ["Default"]
+
+
 def test_a_cell_without_a_config_file_is_left_to_hydra_s_own_error(multirun, tmp_path):
     """`model=nope`: the sweeper names the missing file before it launches anything."""
     sweep.PrepareSweep().on_multirun_start(multirun("model=linear,nope", "adjectives=[hard]"))

@@ -31,6 +31,20 @@ def test_cfg_job_prints_the_resolved_choices():
     assert cfg["model"]["name"] == "haptic_lstm" and cfg["combine"] == 10
 
 
+def test_cfg_with_multirun_is_one_error_line_not_hydra_s_traceback():
+    done = subprocess.run(
+        [sys.executable, "-m", "tactile_exp", "-m", "sweep=table1", "--cfg", "job"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr.splitlines() == [
+        "error: --cfg prints one job's config and Hydra refuses it with -m; to compose and "
+        "check every job of a sweep without running any, add sweep.on_invalid=check"
+    ]
+
+
 def test_info_defaults_tree():
     assert "experiment: null" in _run("--info", "defaults-tree")
 

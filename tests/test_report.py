@@ -128,6 +128,7 @@ def test_written_files_read_back(tracker, tmp_path):
     )
     assert [p.name for p in paths] == [
         "table1.md",
+        "table1_summary.md",
         "table1.csv",
         "per_adjective.csv",
         "per_adjective_intervals.csv",
@@ -290,6 +291,17 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
         expected = net.transform(test.X[first : first + 1]).reshape(net.conv3_shape_)
         assert m.activations == pytest.approx(expected, abs=1e-5)
         assert m.activations.min() >= 0 and m.activations.max() > 0  # ReLU'd, not all zero
+
+    # Asked for by name, what the job cannot show is one short error line (exit status 1).
+    args = ["--tracking-uri", settings.tracking.uri, "--experiment", settings.tracking.experiment]
+    args += ["--out", str(tmp_path / "r"), "--fig6-run", job.run_id]
+    with pytest.raises(SystemExit, match=r"^error: --fig6-adjective nosuch: no finished model"):
+        cli.main([*args, "--fig6-adjective", "nosuch"])
+    with pytest.raises(SystemExit) as err:
+        cli.main([*args, "--fig6-adjective", "metallic", "--fig6-trial", "nosuch_999_01"])
+    line = str(err.value.code)
+    assert "nosuch_999_01: not a test trial of metallic" in line
+    assert "\n" not in line and len(line) < 250
 
     path = tmp_path / "fig6.png"
     figures.fig6(data.maps, data.signals, "test", path)
@@ -499,3 +511,74 @@ def test_label_names_and_their_order_come_from_the_runs(mlflow_uri):
     assert (groups["two"].differences, groups["all"].differences) == (("2 adjectives",), ())
     assert groups["two"].n_labels == 3
     assert figures.fig5_adjectives(list(groups.values())) == ["warm", "grippy", "loud"]
+
+
+def test_an_axis_that_changed_no_score_is_flagged_not_compared(mlflow_uri, tmp_path):
+    """loss=hinge and loss=logistic scoring alike (the T4 head's hinge stage does not move on
+    separable units): the ablation view says the axis changed no score instead of testing it."""
+    tracker = Tracker(mlflow_uri, "identical_test")
+    for fold in (0, 1):
+        for loss in ("hinge", "logistic"):
+            for combine, quality in (("1", 0.3), ("10", 1.2)):
+                key = f"x-{loss[0]}-{combine}"  # equal lengths: the same scores for both losses
+                _fold_job(tracker, key, fold, f"loss={loss} combine={combine} seed=0", quality)
+    out = tmp_path / "out"
+    cli.write(
+        groups=runs.collect(tracker), out=out, source="t", tracker=tracker, choices=cli.Choices()
+    )
+    ablation = (out / "ablation.md").read_text()
+    effect = {line.split(" | ")[1]: line for line in ablation.splitlines() if line.startswith("| ")}
+    assert cli.IDENTICAL in effect["loss=logistic vs loss=hinge"]
+    assert cli.IDENTICAL not in effect["combine=10 vs combine=1"]
+    assert "**`loss` changed no score here**" in ablation and "FinetuneWarning" in ablation
+    assert "**`combine` changed no score here**" not in ablation
+
+
+def test_figures_never_assume_the_point_lies_inside_its_interval(tracker, tmp_path):
+    """A percentile bootstrap interval can leave out its point estimate (F1 on 2 positive
+    objects): Fig. 5 and the ablation plot draw it from its ends (matplotlib refuses a negative
+    error bar)."""
+    g = runs.collect(tracker)[0]
+    outside = {a: stats.Interval(0.57, 0.38, 0.56) for a in g.per_adjective()}
+    figures.fig5([("best haptic", g, outside)], "t", tmp_path / "fig5.png", "f1")
+    lines = {
+        "loss=hinge": [(1.0, stats.Interval(0.6, 0.2, 0.5)), (10.0, stats.Interval(0.1, 0.2, 0.4))]
+    }
+    figures.numeric_axis("combine", lines, tmp_path / "axis.png", "f1")
+    for name in ("fig5.png", "axis.png"):
+        with Image.open(tmp_path / name) as image:
+            assert np.asarray(image.convert("L")).std() > 10
+
+
+def test_coinciding_ablation_lines_are_labelled_identical():
+    same = [(1.0, stats.Interval(0.6, 0.5, 0.7)), (10.0, stats.Interval(0.7, 0.6, 0.8))]
+    other = [(1.0, stats.Interval(0.6, 0.5, 0.7)), (10.0, stats.Interval(0.65, 0.6, 0.8))]
+    labels = figures.line_labels({"loss=hinge": same, "loss=logistic": same, "loss=x": other})
+    assert labels == {
+        "loss=hinge": "loss=hinge",
+        "loss=logistic": "loss=logistic (identical to loss=hinge)",
+        "loss=x": "loss=x",
+    }
+
+
+def test_cd_diagram_labels_are_short_with_a_legend(tmp_path):
+    names = ["A", "(I)", "combine=1 loss=hinge", "combine=10 loss=hinge"]
+    assert figures.cd_labels(names) == ["A", "(I)", "c1", "c2"]
+    aucs = np.array([[0.7, 0.8, 0.6, 0.9], [0.6, 0.7, 0.5, 0.8], [0.5, 0.6, 0.7, 0.6]]).T
+    figures.cd_diagram(stats.friedman(names, aucs), tmp_path / "cd.png")
+    with Image.open(tmp_path / "cd.png") as image:
+        assert np.asarray(image.convert("L")).std() > 10
+
+
+def test_table3_names_an_object_without_a_display_name():
+    info = next(o for o in t3.objects() if o.object_id == 302)
+    assert info.display_name == "" and t3.object_name(info) == "colored cover book"
+
+
+def test_table1_summary_has_the_four_columns_a_reader_compares(tracker):
+    rows = table1.table1(runs.collect(tracker))
+    summary = table1.table1_summary(rows).splitlines()
+    assert summary[0] == "| row | method | mean AUC % [95% CI] | paper (real PHAC-2) |"
+    assert len(summary) == len(rows) + 2
+    assert all(line.count(" | ") == 3 for line in summary[2:])
+    assert any(line.startswith("| A | `table1_a_haptic_static_1trial` | ") for line in summary)

@@ -99,7 +99,11 @@ def test_summary(clean: Path) -> None:
 
 def test_cli_validate_and_inspect(clean: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["validate", str(clean)]) == 0
-    assert capsys.readouterr().out == "OK\n"
+    out, err = capsys.readouterr()
+    assert (
+        out.splitlines()[0] == f"OK: {clean}" and "  checked: a photograph of every object" in out
+    )
+    assert f"validate {clean}: 0/120 trials" in err and f"validate {clean}: 60/120 trials" in err
     with h5py.File(clean, "a") as f:
         del f["car_sponge_101_01/state"]
     assert main(["validate", str(clean)]) == 1

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from tactile_exp.data.csv_import import DEFAULT_PATTERN, TIME_COLUMNS, TIME_UNITS, import_csv
 from tactile_exp.data.phac2 import PHAC2, DataError, default_cache_dir
-from tactile_exp.data.validate import summary, validate
+from tactile_exp.data.validate import checks, summary, validate
 
 
 def _image_size(text: str) -> tuple[int, int]:
@@ -36,13 +36,22 @@ def _generate(args: argparse.Namespace) -> Path:
 
 
 def _default_file() -> Path:
-    from tactile_exp.data.synthetic import default_file
+    from tactile_exp import docs_test
+    from tactile_exp.data.synthetic import SyntheticSpec, default_file
 
-    return default_file(default_cache_dir())
+    small = docs_test.adjectives() is not None  # the documentation's command test
+    return default_file(
+        default_cache_dir(), SyntheticSpec(**docs_test.TINY_DATA) if small else SyntheticSpec()
+    )
+
+
+def _progress(line: str) -> None:
+    """Progress of a long check on stderr, so that stdout stays the result."""
+    print(line, file=sys.stderr, flush=True)
 
 
 def _inspect(path: Path, photo_dir: Path | None) -> None:
-    s = summary(PHAC2(path, photo_dir))
+    s = summary(PHAC2(path, photo_dir), _progress)
     print(f"{s['path']}: {s['objects']} objects, {s['trials']} trials ({s['bad_trials']} bad)")
     for ep, st in s["ep_rows"].items():
         rows = f"{st['min']}..{st['max']} (median {st['median']:g})" if st else "none readable"
@@ -119,11 +128,13 @@ def main(argv: list[str] | None = None) -> int:
             print(e, file=sys.stderr)
             return 1
         return 0
-    problems = validate(path, args.photo_dir, photographs=not args.no_photographs)
+    photographs = not args.no_photographs
+    problems = validate(path, args.photo_dir, photographs=photographs, progress=_progress)
     for p in problems:
         print(p)
     if not problems:
-        print("OK")
+        print(f"OK: {path}")
+        print("".join(f"  checked: {what}\n" for what in checks(photographs)), end="")
     return 1 if problems else 0
 
 

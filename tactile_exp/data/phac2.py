@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import cv2
@@ -235,12 +235,17 @@ class PHAC2:
             for t in trials:
                 yield self._read_group(f, t, optional)
 
-    def check_trials(self) -> tuple[list[str], list[str]]:
-        """(readable trial names, one problem line per unreadable trial), for skipping bad ones."""
+    def check_trials(
+        self, progress: Callable[[int, int], None] | None = None
+    ) -> tuple[list[str], list[str]]:
+        """(readable trial names, one problem line per unreadable trial), for skipping bad ones;
+        ``progress(done, total)`` is called before each trial is read."""
         good: list[str] = []
         problems: list[str] = []
         with self._open() as f:
-            for t in self.trials:
+            for i, t in enumerate(self.trials):
+                if progress is not None:
+                    progress(i, len(self.trials))
                 try:
                     self._read_group(f, t, optional=True)
                 except DataError as e:

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -15,16 +16,49 @@ from tactile_exp.data.layout import ADJECTIVES, EPS, DataError
 from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.data.splits import make_split
 
+Progress = Callable[[str], None]  # one line of progress: what is being checked now
+EVERY = 60  # trials between two progress lines
+
+
+def _quiet(line: str) -> None:
+    pass
+
+
+def trial_progress(say: Progress, what: str) -> Callable[[int, int], None]:
+    """A ``check_trials``/``summary`` callback saying ``what: done/total trials`` every
+    ``EVERY`` trials."""
+
+    def tick(done: int, total: int) -> None:
+        if done % EVERY == 0:
+            say(f"{what}: {done}/{total} trials")
+
+    return tick
+
+
+def checks(photographs: bool = True) -> list[str]:
+    """What ``validate`` checks, in order (the data CLI names them when the file passes)."""
+    out = [
+        "every trial readable: its BioTac signals and states present and finite",
+        "the labels of every object",
+        f"the published train/test split of each of the {len(ADJECTIVES)} adjectives",
+    ]
+    return out + (["a photograph of every object"] if photographs else [])
+
 
 def validate(
-    path: str | Path, photo_dir: str | Path | None = None, photographs: bool = True
+    path: str | Path,
+    photo_dir: str | Path | None = None,
+    photographs: bool = True,
+    progress: Progress = _quiet,
 ) -> list[str]:
-    """Every problem found in the file (and, unless ``photographs=False``, its photographs)."""
+    """Every problem found in the file (and, unless ``photographs=False``, its photographs);
+    ``progress`` gets a line per stage and every ``EVERY`` trials read."""
     try:
         dataset = PHAC2(path, photo_dir)
     except DataError as e:
         return [str(e)]
-    _, problems = dataset.check_trials()
+    _, problems = dataset.check_trials(trial_progress(progress, f"validate {dataset.path}"))
+    progress(f"validate {dataset.path}: labels and the published splits")
     try:
         dataset.labels()
     except DataError as e:
@@ -37,6 +71,7 @@ def validate(
         except DataError as e:
             problems.append(str(e))
     if photographs:
+        progress(f"validate {dataset.path}: photographs in {dataset.photo_dir}")
         problems += _photo_problems(dataset)
     return problems
 
@@ -54,11 +89,14 @@ def _photo_problems(dataset: PHAC2) -> list[str]:
     ]
 
 
-def summary(dataset: PHAC2) -> dict[str, Any]:
-    """Objects, trials, EP lengths, label counts, split sizes and photographs of one file."""
+def summary(dataset: PHAC2, progress: Progress = _quiet) -> dict[str, Any]:
+    """Objects, trials, EP lengths, label counts, split sizes and photographs of one file;
+    ``progress`` gets a line every ``EVERY`` trials read."""
     ep_rows: dict[str, list[int]] = {ep: [] for ep in EPS}
     bad = 0
-    for t in dataset.trials:
+    tick = trial_progress(progress, f"inspect {dataset.path}")
+    for i, t in enumerate(dataset.trials):
+        tick(i, len(dataset.trials))
         try:
             trial = dataset.read_trial(t, optional=False)
         except DataError:

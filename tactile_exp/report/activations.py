@@ -102,9 +102,10 @@ def conv3_maps(
         if trials:
             absent = [t for t in trials if t not in units]
             if absent:
+                some = ", ".join(sorted(units)[:3])
                 raise ReportError(
-                    f"{', '.join(absent)}: not test trials of {adjective} in run {job_id} "
-                    f"(those are {', '.join(sorted(units))})"
+                    f"{', '.join(absent)}: not a test trial of {adjective} in run {job_id} "
+                    f"(its {len(units)} test trials include {some})"
                 )
             chosen = [units[t] for t in trials]
         else:

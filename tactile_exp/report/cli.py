@@ -7,7 +7,8 @@ Table I's lines (``runs``) and writes into ``--out``:
   Table I row, whether it ran at the paper's settings (else what differs), mean AUC with its 95%
   object-bootstrap interval (``split=folds``: pooled out of fold, and the per-fold mean), its
   spread over seeds/splits, how many test objects each AUC rests on, the paper's figure, the data
-  file's identity and the run ids;
+  file's identity and the run ids; ``table1_summary.md`` the same lines in four columns (row,
+  method, mean AUC [95% CI], the paper's figure);
 - ``per_adjective.csv``: per-adjective AUC of every configuration, averaged over its seeds;
   ``per_adjective_intervals.csv`` the same with intervals and test-object counts;
 - ``fig5_per_adjective.png``: the best haptic against the best visual configuration per
@@ -56,7 +57,7 @@ from tactile_exp.report.runs import (
 )
 from tactile_exp.report.runs_table import runs_table
 from tactile_exp.report.scores import ReportError
-from tactile_exp.report.table1 import table1, table1_markdown
+from tactile_exp.report.table1 import table1, table1_markdown, table1_summary
 from tactile_exp.tracking import ExperimentNotFound, Tracker, git_commit
 
 ENTRY_POINT = "python -m tactile_exp.report"
@@ -68,7 +69,7 @@ FIG6_ROWS = ("I", "H", "J")  # the jobs whose ConvNet Fig. 6 shows, first run fi
 class Choices:
     """What Fig. 6 and Table III show (command-line options)."""
 
-    fig6_adjectives: tuple[str, ...] = FIG6_ADJECTIVES
+    fig6_adjectives: tuple[str, ...] = ()  # default: FIG6_ADJECTIVES, drawn where run
     fig6_trials: tuple[str, ...] = ()  # default: N_TRIALS picked per adjective
     fig6_n_trials: int = N_TRIALS
     fig6_run: str | None = None  # default: row I's job (else H's, J's)
@@ -92,6 +93,7 @@ def write(
     evidence = {g.key: heldout.load(tracker, g, metric) for g in groups}
     rows = table1(groups, evidence, metric)
     (out / "table1.md").write_text(table1_markdown(rows, metric))
+    (out / "table1_summary.md").write_text(table1_summary(rows, metric))
     _write_csv(out / "table1.csv", rows)
     with open(out / "per_adjective.csv", "w", newline="") as f:
         writer = csv.writer(f)
@@ -104,6 +106,7 @@ def write(
     _write_csv(out / "per_adjective_intervals.csv", _interval_rows(groups, evidence, metric))
     paths = [
         out / "table1.md",
+        out / "table1_summary.md",
         out / "table1.csv",
         out / "per_adjective.csv",
         out / "per_adjective_intervals.csv",
@@ -270,11 +273,15 @@ def _ablation(
     ]
     for values, g in sorted(view.configs.items()):
         lines.append(f"| {view.name(values)} | {evidence[g.key].interval()} | {len(g.seeds)} |")
+    same = _identical_axes(view, evidence)
     lines += ["", "| axis | comparison | combinations | difference and test |", "|---|---|---|---|"]
     for axis, cmp, n in view.effects:
-        lines.append(f"| {axis} | {cmp.a} vs {cmp.b} | {n} | {comparisons.describe(cmp)} |")
+        result = IDENTICAL if axis in same else comparisons.describe(cmp)
+        lines.append(f"| {axis} | {cmp.a} vs {cmp.b} | {n} | {result} |")
     for axis, levels, why in view.unpaired:
         lines.append(f"| {axis} | {levels} | 0 | not compared: {why} |")
+    for axis in same:
+        lines += ["", f"**`{axis}` changed no score here**: {_identical_note(axis)}"]
     paths = []
     for i, axis in enumerate(view.axes):
         try:
@@ -296,6 +303,40 @@ def _ablation(
     return text, [out / "ablation.md", *paths]
 
 
+IDENTICAL = "identical scores at every level: not compared (below)"
+
+
+def _identical_axes(view: comparisons.Ablation, evidence: dict[str, heldout.Evidence]) -> list[str]:
+    """The axes whose levels gave every adjective the same value in each combination of the
+    other axes: they changed no score, and a comparison of them is 0 by construction."""
+    out = []
+    for i, axis in enumerate(view.axes):
+        by_rest: dict[tuple[str, ...], list[dict[str, float]]] = {}
+        for values, g in view.configs.items():
+            rest = values[:i] + values[i + 1 :]
+            by_rest.setdefault(rest, []).append(_per_adjective(g, evidence[g.key]))
+        compared = [v for v in by_rest.values() if len(v) > 1]
+        if compared and all(all(x == v[0] for x in v[1:]) for v in compared):
+            out.append(axis)
+    return out
+
+
+def _identical_note(axis: str) -> str:
+    note = (
+        "each of its levels gave every adjective the same value in every combination of the "
+        "other axes, so the comparison above is 0 by construction, not evidence that the levels "
+        "are equivalent in general."
+    )
+    if axis == "loss":
+        note += (
+            " With `combine_instances=concat` the scores come from the classification layer "
+            "retrained on combined units (T4), and on separable units its hinge stage leaves the "
+            "logistic stage's layer unchanged (the jobs' FinetuneWarning): `loss=hinge` then "
+            "scores as `loss=logistic` does (conf/loss/hinge.yaml)."
+        )
+    return note
+
+
 def _fig6(
     groups: list[Group], out: Path, tracker: Tracker, choices: Choices
 ) -> tuple[list[Path], str]:
@@ -307,11 +348,12 @@ def _fig6(
     if job_id is None and group is None:
         return [], "\n".join([*lines, "Not drawn: none of rows I, H, J was run.", "", ""])
     job_id = job_id or group.first_run.run_id
+    adjectives = choices.fig6_adjectives or FIG6_ADJECTIVES
     try:
         data = conv3_maps(
             tracker=tracker,
             job_id=job_id,
-            adjectives=choices.fig6_adjectives,
+            adjectives=adjectives,
             trials=choices.fig6_trials,
             n_trials=choices.fig6_n_trials,
         )
@@ -332,10 +374,14 @@ def _fig6(
         "",
     ]
     paths = []
-    absent = [a for a in choices.fig6_adjectives if not any(m.adjective == a for m in data.maps)]
+    absent = [a for a in adjectives if not any(m.adjective == a for m in data.maps)]
+    if absent and choices.fig6_adjectives:  # asked for by name: an error, not a note
+        raise ReportError(
+            f"--fig6-adjective {', '.join(absent)}: no finished model in job {job_id}"
+        )
     if absent:
         lines += [f"Not drawn for {', '.join(absent)}: the job did not run them.", ""]
-    for adjective in choices.fig6_adjectives:
+    for adjective in adjectives:
         maps = [m for m in data.maps if m.adjective == adjective]
         if not maps:
             continue
@@ -400,9 +446,9 @@ def _index(
     lines = [
         "# Gao et al. (ICRA 2016), regenerated from tracked runs",
         "",
-        f"{source}; {len(groups)} configurations, {_n_runs(groups)} runs (each seed and fold "
-        f"once). Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by `{ENTRY_POINT}`"
-        + (f" at commit `{commit}`." if (commit := _commit()) else "."),
+        f"{source}; {_count(len(groups), 'configuration')}, {_count(_n_runs(groups), 'run')} "
+        f"(each seed and fold once). Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by "
+        f"`{ENTRY_POINT}`" + (f" at commit `{commit}`." if (commit := _commit()) else "."),
         "",
         *_metric_note(metric),
         f"## Table I: mean {shown.label} {over}",
@@ -467,6 +513,10 @@ def _metric_note(metric: str) -> list[str]:
 
 def _commit() -> str | None:
     return git_commit(Path(__file__).resolve().parents[2])
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _n_runs(groups: list[Group]) -> int:
@@ -547,7 +597,7 @@ def main(argv: list[str] | None = None) -> None:
         f", sweep `{args.sweep_id}`" if args.sweep_id else ""
     )
     choices = Choices(
-        fig6_adjectives=tuple(args.fig6_adjective or FIG6_ADJECTIVES),
+        fig6_adjectives=tuple(args.fig6_adjective or ()),
         fig6_trials=tuple(args.fig6_trial),
         fig6_n_trials=args.fig6_trials,
         fig6_run=args.fig6_run,
@@ -579,4 +629,5 @@ def main(argv: list[str] | None = None) -> None:
     for path in paths:
         print(path)
     print(f"logged as MLflow run {run_id} (report) in {tracker.uri}")
-    print((args.out / "table1.md").read_text())
+    print(f"Table I (every column: {args.out / 'table1.md'}):")
+    print((args.out / "table1_summary.md").read_text())

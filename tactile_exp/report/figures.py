@@ -58,13 +58,13 @@ def fig5(
         values = np.array([aucs.get(a, np.nan) for a in run])
         label = f"{kind}: {g.row + ' ' if g.row else ''}{g.method} ({len(g.seeds)} seed(s))"
         offset = x + (i - (len(shown) - 1) / 2) * width
-        errors = None
+        if intervals:
+            label += ", 95% interval"
+        ax.bar(offset, values, width, color=colour, label=label)
         if intervals:
             low = np.array([intervals[a].low if a in intervals else np.nan for a in run])
             high = np.array([intervals[a].high if a in intervals else np.nan for a in run])
-            errors = np.vstack([values - low, high - values])
-            label += ", 95% interval"
-        ax.bar(offset, values, width, color=colour, label=label, yerr=errors, capsize=2)
+            _interval_bars(ax, offset, low, high)
     if metric == "roc_auc":
         ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance (AUC 0.5)")
     ax.set_xticks(x, run, rotation=60, ha="right", fontsize=8)
@@ -78,6 +78,15 @@ def fig5(
     plt.close(fig)
 
 
+def _interval_bars(
+    ax, x: np.ndarray, low: np.ndarray, high: np.ndarray, colour: str = "k", caps: float = 2
+) -> None:
+    """Intervals drawn from their own ends: a bootstrap interval need not contain the point
+    estimate (a percentile interval of a skewed statistic can lie wholly on one side)."""
+    middle, half = (low + high) / 2, (high - low) / 2
+    ax.errorbar(x, middle, yerr=half, fmt="none", ecolor=colour, capsize=caps, lw=0.8)
+
+
 def fig5_adjectives(groups: list[Group]) -> list[str]:
     """The adjectives Fig. 5 draws: those any shown group ran (a missing one is no bar, not 0)."""
     return label_order(groups)
@@ -89,7 +98,9 @@ def cd_diagram(result: Friedman, path: Path) -> None:
     plt = _pyplot()
     order = np.argsort(result.mean_ranks)
     k = len(order)
-    fig, ax = plt.subplots(figsize=(8.0, 1.6 + 0.3 * k))
+    short = cd_labels(result.names)
+    legend = [f"{s} = {n}" for s, n in zip(short, result.names, strict=True) if s != n]
+    fig, ax = plt.subplots(figsize=(8.0, 1.9 + 0.3 * k + 0.16 * len(legend)))
     ax.set_xlim(0.5, k + 0.5)
     ax.set_ylim(-k * 0.35 - 0.5, 1.2)
     ax.axhline(0, color="k", lw=1)
@@ -105,7 +116,7 @@ def cd_diagram(result: Friedman, path: Path) -> None:
         ax.text(
             end,
             y + 0.05,
-            f"{result.names[i]} ({rank:.2f})",
+            f"{short[i]} ({rank:.2f})",
             fontsize=8,
             ha="left" if left else "right",
             va="bottom",
@@ -140,10 +151,48 @@ def cd_diagram(result: Friedman, path: Path) -> None:
         "not distinguishable (Nemenyi, 0.05)",
         fontsize=9,
     )
+    ax.text((k + 1) / 2, 0.45, "mean rank over adjectives (1 = best)", ha="center", fontsize=8)
+    if legend:
+        ax.text(
+            0.5,
+            -k * 0.35 - 0.6,
+            "\n".join(legend),
+            ha="left",
+            va="top",
+            fontsize=7,
+            family="monospace",
+        )
+        ax.set_ylim(-k * 0.35 - 0.7 - 0.16 * len(legend), 1.2)
     ax.axis("off")
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
+
+
+def line_labels(lines: dict[str, list[tuple[float, Interval]]]) -> dict[str, str]:
+    """Each line's legend label; a line whose points equal an earlier one's (in name order) is
+    labelled identical to it (drawn apart by its marker and a small shift, not hidden under it)."""
+    first: dict[tuple, str] = {}
+    out = {}
+    for name, points in sorted(lines.items()):
+        key = tuple(sorted((x, iv.estimate) for x, iv in points))
+        shown = name or "(all)"
+        out[name] = f"{shown} (identical to {first[key]})" if key in first else shown
+        first.setdefault(key, shown)
+    return out
+
+
+def cd_labels(names: list[str], longest: int = 4) -> list[str]:
+    """Short labels for the CD diagram: a row letter as it is, a longer name (an ablation's
+    configuration) as c1, c2, ... in the given order, mapped to its full name in a legend."""
+    out, n = [], 0
+    for name in names:
+        if len(name) <= longest:
+            out.append(name)
+        else:
+            n += 1
+            out.append(f"c{n}")
+    return out
 
 
 def _label(metric: str) -> str:
@@ -160,17 +209,26 @@ def numeric_axis(
     combination of the other axes."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.0, 4.0))
-    for name, points in sorted(lines.items()):
+    labels = line_labels(lines)
+    markers, styles = "osD^v<>", ("-", "--", ":", "-.")
+    for n, (name, points) in enumerate(sorted(lines.items())):
         points = sorted(points, key=lambda p: p[0])
         xs = np.array([p[0] for p in points])
         ys = np.array([p[1].estimate for p in points])
-        err = np.array(
-            [
-                [p[1].estimate - p[1].low for p in points],
-                [p[1].high - p[1].estimate for p in points],
-            ]
+        label = labels[name]
+        # Lines that coincide stay visible: each its own marker and dash, shifted a little.
+        shift = 0.012 * n * (xs.max() - xs.min() or 1.0)
+        (line,) = ax.plot(
+            xs + shift,
+            ys,
+            marker=markers[n % len(markers)],
+            ls=styles[n % len(styles)],
+            mfc="none" if n % 2 else None,
+            label=label,
         )
-        ax.errorbar(xs, ys, yerr=err, marker="o", capsize=3, label=name or "(all)")
+        low = np.array([p[1].low for p in points])
+        high = np.array([p[1].high for p in points])
+        _interval_bars(ax, xs + shift, low, high, line.get_color(), caps=3)
     if metric == "roc_auc":
         ax.axhline(0.5, color="k", lw=0.8, ls=":", label="chance")
     ax.set_xlabel(axis)

@@ -124,3 +124,24 @@ def table1_markdown(rows: list[dict[str, str]], metric: str = "roc_auc") -> str:
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def table1_summary(rows: list[dict[str, str]], metric: str = "roc_auc") -> str:
+    """Table I in the four columns a reader compares (row, method, mean with its 95% interval,
+    the paper's figure; a row letter in brackets ran with other settings than the paper's);
+    ``table1_markdown`` has the rest (settings, split, test objects, run ids)."""
+    shown = METRICS.build(metric)
+    key = shown.key
+    lines = [
+        f"| row | method | mean {shown.label} % [95% CI] | paper (real PHAC-2) |",
+        "|---|---|---|---|",
+    ]
+    for r in rows:
+        row = r["row"] if r["at_paper_settings"] == "True" or not r["row"] else f"({r['row']})"
+        mean = f"{float(r[f'mean_{key}']) * 100:.1f}"
+        if r[f"mean_{key}_ci_low"]:
+            low, high = float(r[f"mean_{key}_ci_low"]), float(r[f"mean_{key}_ci_high"])
+            mean += f" [{low * 100:.1f}, {high * 100:.1f}]"
+        paper = f"{float(r['paper_auc']) * 100:.1f}" if r["paper_auc"] else ""
+        lines.append(f"| {row} | `{r['method']}` | {mean} | {paper} |")
+    return "\n".join(lines) + "\n"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_exp.data.layout import objects
+from tactile_exp.data.layout import ObjectInfo, objects
 from tactile_exp.metrics import THRESHOLD
 from tactile_exp.report.runs import Group, label_order, row_group
 from tactile_exp.report.scores import UnitScore, read_scores
@@ -81,9 +81,15 @@ def choose_objects(rows: dict[str, RowScores | None], n: int | None = N_OBJECTS)
     return sorted(coverage, key=lambda o: (-coverage[o], o))[:n]
 
 
+def object_name(info: ObjectInfo) -> str:
+    """The object's display name, else its group stem without the id (some objects of the
+    published list have no display name): ``colored_cover_book_302`` -> ``colored cover book``."""
+    return info.display_name or info.group_stem.rsplit("_", 1)[0].replace("_", " ")
+
+
 def table3(rows: dict[str, RowScores | None], object_ids: list[int]) -> list[dict[str, str]]:
     """One line per object and row: tested adjectives, ground truth, predicted set, agreement."""
-    names = {o.object_id: o.display_name for o in objects()}
+    names = {o.object_id: object_name(o) for o in objects()}
     ran = [r for r in rows.values() if r is not None]
     lines = []
     for object_id in object_ids:
