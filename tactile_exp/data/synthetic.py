@@ -270,12 +270,14 @@ _VISUAL_NOISE = 0.12
 
 def object_properties(spec: SyntheticSpec) -> dict[int, dict[str, float]]:
     """Latent properties of each object of ``spec`` (the only input of every signal and image)."""
-    out = {}
-    for obj in _objects(spec):
-        rng = np.random.default_rng([spec.seed, obj.object_id, 0])
-        visual_rng = np.random.default_rng([spec.seed, obj.object_id, 0, 1])  # own stream
-        out[obj.object_id] = _draw(obj.material, obj.positives, rng, visual_rng)
-    return out
+    return {obj.object_id: _properties(spec.seed, obj) for obj in _objects(spec)}
+
+
+def _properties(seed: int, obj: ObjectInfo) -> dict[str, float]:
+    """One object's latent properties, from its own seeded streams."""
+    rng = np.random.default_rng([seed, obj.object_id, 0])
+    visual_rng = np.random.default_rng([seed, obj.object_id, 0, 1])  # own stream
+    return _draw(obj.material, obj.positives, rng, visual_rng)
 
 
 def draw_object_properties(material: str, rng: np.random.Generator) -> dict[str, float]:
@@ -700,8 +702,8 @@ def _write_links(f: h5py.File, objs: list[ObjectInfo], trials: int) -> None:
 
 def _write_part(part: Path, photos: Path, spec: SyntheticSpec, object_id: int) -> None:
     """One object's trials (and photographs) into a file of its own: one worker task."""
-    props = object_properties(spec)[object_id]
     obj = next(o for o in objects() if o.object_id == object_id)
+    props = _properties(spec.seed, obj)
     with h5py.File(part, "w") as f:
         for t in range(1, spec.trials + 1):
             rng = np.random.default_rng([spec.seed, object_id, t])
