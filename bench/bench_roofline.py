@@ -6,8 +6,9 @@ of them alike; best of ``--repeats``):
 
 - sgemm: torch's and numpy's BLAS on a 2000^3 single-precision product (the machine's rate, the
   ceiling the kernels are held against: the larger of the two), and BLAS at the shapes an im2col
-  or projection GEMM of the kernels would have (conv2's per-group product batched over the 32
-  groups; the LSTM's input projection over a chunk's time steps; its recurrence per step);
+  or projection GEMM of the kernels would have, on one thread (conv2's per-group product
+  batched over the 32 groups; the LSTM's input projection over a chunk's time steps; its
+  recurrence per step): the rate BLAS itself reaches at those shapes, per core;
 - the haptic ConvNet at the paper's size (32 signals x 150 steps, kernels 5, widths 4, strides
   2, batch 1000 of a 5,300-instance training set, rows read in place as in training): forward
   (conv stack + classification layer), backward (all gradients) and the two together, and each
@@ -53,6 +54,21 @@ SGEMM = 2000
 ROOT = Path(__file__).resolve().parent.parent
 
 Timer = Callable[[], tuple[float, float]]  # one timed call -> (wall s, CPU s)
+
+
+def _one_thread(fn: Callable[[], object]) -> Callable[[], object]:
+    """``fn`` on one torch thread: a kernel would run such small products inside each of its
+    threads, and two threads on a product this small mostly wait for each other."""
+
+    def run() -> object:
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            return fn()
+        finally:
+            torch.set_num_threads(threads)
+
+    return run
 
 
 def _timed(fn: Callable[[], object]) -> Timer:
@@ -105,7 +121,7 @@ def blas_gflop() -> dict[str, float]:
     return {
         "sgemm torch 2000^3": 2 * SGEMM**3 / 1e9,
         "sgemm numpy 2000^3": 2 * SGEMM**3 / 1e9,
-        "bmm conv2 im2col (32 x 4x20 @ 20x38000)": 2
+        "bmm conv2 im2col (32 x 4x20 @ 20x38000), 1 thread": 2
         * GROUPS
         * WIDTH
         * WIDTH
@@ -113,8 +129,14 @@ def blas_gflop() -> dict[str, float]:
         * conv2[2]
         * BATCH
         / 1e9,
-        "sgemm lstm projection (40x32 @ 32x9600)": 2 * 4 * HIDDEN * CHANNELS * STEPS * 64 / 1e9,
-        "sgemm lstm step (40x10 @ 10x1000)": 2 * 4 * HIDDEN * HIDDEN * BATCH / 1e9,
+        "sgemm lstm projection (40x32 @ 32x9600), 1 thread": 2
+        * 4
+        * HIDDEN
+        * CHANNELS
+        * STEPS
+        * 64
+        / 1e9,
+        "sgemm lstm step (40x10 @ 10x1000), 1 thread": 2 * 4 * HIDDEN * HIDDEN * BATCH / 1e9,
     }
 
 
@@ -130,9 +152,15 @@ def blas_timers() -> dict[str, Timer]:
     return {
         "sgemm torch 2000^3": _timed(lambda: torch.mm(a, a)),
         "sgemm numpy 2000^3": _timed(lambda: an @ an),
-        "bmm conv2 im2col (32 x 4x20 @ 20x38000)": _timed(lambda: torch.bmm(w, cols)),
-        "sgemm lstm projection (40x32 @ 32x9600)": _timed(lambda: torch.mm(wl, xl)),
-        "sgemm lstm step (40x10 @ 10x1000)": _timed(lambda: torch.mm(wh, hl)),
+        "bmm conv2 im2col (32 x 4x20 @ 20x38000), 1 thread": _timed(
+            _one_thread(lambda: torch.bmm(w, cols))
+        ),
+        "sgemm lstm projection (40x32 @ 32x9600), 1 thread": _timed(
+            _one_thread(lambda: torch.mm(wl, xl))
+        ),
+        "sgemm lstm step (40x10 @ 10x1000), 1 thread": _timed(
+            _one_thread(lambda: torch.mm(wh, hl))
+        ),
     }
 
 
@@ -330,7 +358,11 @@ def main() -> None:
         sys.path.insert(0, str(Path(__file__).parent))
         from record import write
 
-        notes = f"best of {args.repeats} interleaved, {args.threads} threads, batch {BATCH}"
+        notes = (
+            f"best of {args.repeats} interleaved, {args.threads} threads, batch {BATCH}; % of "
+            "sgemm per CPU s compares FLOPs per CPU second of all threads, steadier than wall "
+            "time when other work shares the cores"
+        )
         if args.before:
             notes += f"; before = git revision {args.before}, timed in a child process"
         write(args.json, "bench_roofline", figures, notes)
