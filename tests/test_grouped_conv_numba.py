@@ -4,6 +4,7 @@ The first compiled call in a run compiles the kernels (~35 s on 2 idle cores) in
 ``NUMBA_CACHE_DIR`` (conftest); every later test reuses them.
 """
 
+import logging
 import os
 import subprocess
 import sys
@@ -11,6 +12,7 @@ import sys
 import pytest
 import torch
 
+from tactile_exp.models import numba_setup
 from tactile_exp.models import scratch as scratch_module
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
 from tactile_exp.models.scratch import scratch
@@ -118,6 +120,28 @@ def test_threading_layer_is_workqueue_even_with_a_given_numba_cache_dir(tmp_path
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     ).stdout.split()
     assert out == ["workqueue", str(tmp_path)]
+
+
+def test_first_compile_is_announced_once_and_only_without_cached_code(
+    tmp_path, monkeypatch, caplog
+):
+    """The kernels' first compile is a silent minute: one line says so, when the cache holds
+    no compiled code of the module, once per process."""
+    monkeypatch.setattr(numba_setup.numba.config, "CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(numba_setup, "_CHECKED", set())
+    caplog.set_level(logging.INFO, logger=numba_setup.__name__)
+    module = "tactile_exp.models.grouped_conv_numba"
+    numba_setup.announce_compile(module)
+    numba_setup.announce_compile(module)
+    assert [r.getMessage().split(" (")[0] for r in caplog.records] == [
+        "compiling the grouped_conv_numba kernels"
+    ]
+    caplog.clear()
+    (tmp_path / "models_abc").mkdir()
+    (tmp_path / "models_abc" / "grouped_conv_numba.stack_forward-1.py311.nbi").touch()
+    monkeypatch.setattr(numba_setup, "_CHECKED", set())
+    numba_setup.announce_compile(module)
+    assert caplog.records == []
 
 
 def test_forwards_awaiting_their_backward_never_share_pooled_arrays():

@@ -453,12 +453,18 @@ def test_bad_spec_is_rejected(kwargs, key):
         SyntheticSpec(**kwargs)
 
 
-def test_worker_processes_write_the_same_file(tmp_path, monkeypatch):
+def test_worker_processes_write_the_same_file(tmp_path, monkeypatch, caplog):
+    """Objects are handed to the workers one at a time; the parent logs the progress."""
     spec = SyntheticSpec(object_ids=(101, 508, 703), trials=1, duration_scale=0.1, views=1,
                          image_width=96, image_height=64)  # fmt: skip
+    caplog.set_level(logging.INFO, logger=synthetic.__name__)
     serial = generate(tmp_path / "serial" / "x.h5", spec)
     monkeypatch.setattr(synthetic, "_workers", lambda spec, n: 2)
     parallel = generate(tmp_path / "parallel" / "x.h5", spec)
+    progress = [
+        r.getMessage().split(" (")[0] for r in caplog.records if "objects" in r.getMessage()
+    ]
+    assert progress == [f"synthetic PHAC-2: {i}/3 objects" for i in (1, 2, 3)] * 2
     with h5py.File(serial, "r") as a, h5py.File(parallel, "r") as b:
         assert sorted(a) == sorted(b)
         for name in ("car_sponge_101_01", "pinball_launcher_703_01"):

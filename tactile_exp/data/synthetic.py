@@ -61,7 +61,8 @@ through touch; thick and thin mostly through sight (the gripper sees thickness w
 nice and unpleasant only through the weak label effects of ``_LABEL_EFFECTS``.
 
 File: gzip level 1 + shuffle (4 % larger than level 4, a third faster to write); objects are
-spread over worker processes, each writing a part file that is copied in without recompression.
+spread over worker processes one at a time, each writing a part file that is copied in without
+recompression; the parent logs progress.
 
 Generator version 5 = version 4 with photographs whose views differ in what they show
 (``render``: a camera elevation per view index, from low side views that show the height to
@@ -142,7 +143,7 @@ import multiprocessing
 import os
 import shutil
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -269,12 +270,14 @@ _VISUAL_NOISE = 0.12
 
 def object_properties(spec: SyntheticSpec) -> dict[int, dict[str, float]]:
     """Latent properties of each object of ``spec`` (the only input of every signal and image)."""
-    out = {}
-    for obj in _objects(spec):
-        rng = np.random.default_rng([spec.seed, obj.object_id, 0])
-        visual_rng = np.random.default_rng([spec.seed, obj.object_id, 0, 1])  # own stream
-        out[obj.object_id] = _draw(obj.material, obj.positives, rng, visual_rng)
-    return out
+    return {obj.object_id: _properties(spec.seed, obj) for obj in _objects(spec)}
+
+
+def _properties(seed: int, obj: ObjectInfo) -> dict[str, float]:
+    """One object's latent properties, from its own seeded streams."""
+    rng = np.random.default_rng([seed, obj.object_id, 0])
+    visual_rng = np.random.default_rng([seed, obj.object_id, 0, 1])  # own stream
+    return _draw(obj.material, obj.positives, rng, visual_rng)
 
 
 def draw_object_properties(material: str, rng: np.random.Generator) -> dict[str, float]:
@@ -697,24 +700,21 @@ def _write_links(f: h5py.File, objs: list[ObjectInfo], trials: int) -> None:
                 g[name] = f[name]
 
 
-def _write_part(part: Path, photos: Path, spec: SyntheticSpec, object_ids: list[int]) -> None:
-    """Trials (and photographs) of some objects into their own file: one worker's share."""
-    props = object_properties(spec)
-    by_id = {o.object_id: o for o in objects()}
+def _write_part(part: Path, photos: Path, spec: SyntheticSpec, object_id: int) -> None:
+    """One object's trials (and photographs) into a file of its own: one worker task."""
+    obj = next(o for o in objects() if o.object_id == object_id)
+    props = _properties(spec.seed, obj)
     with h5py.File(part, "w") as f:
-        for i, oid in enumerate(object_ids):
-            if i % 10 == 0:
-                log.info("synthetic PHAC-2: %s, object %d/%d", part.name, i + 1, len(object_ids))
-            obj = by_id[oid]
-            for t in range(1, spec.trials + 1):
-                rng = np.random.default_rng([spec.seed, oid, t])
-                data = _trial(props[oid], spec.duration_scale, rng)
-                _write_trial(f, f"{obj.group_stem}_{t:02d}", data, obj)
-            for view in range(spec.views):
-                shot = render.render_view(
-                    props[oid], view, spec.image_width, spec.image_height, seed=(spec.seed, oid)
-                )
-                render.write_jpeg(photos / f"{obj.group_stem}_{view:02d}.jpg", shot.image)
+        for t in range(1, spec.trials + 1):
+            rng = np.random.default_rng([spec.seed, object_id, t])
+            _write_trial(
+                f, f"{obj.group_stem}_{t:02d}", _trial(props, spec.duration_scale, rng), obj
+            )
+    for view in range(spec.views):
+        shot = render.render_view(
+            props, view, spec.image_width, spec.image_height, seed=(spec.seed, object_id)
+        )
+        render.write_jpeg(photos / f"{obj.group_stem}_{view:02d}.jpg", shot.image)
 
 
 def _workers(spec: SyntheticSpec, n_objects: int) -> int:
@@ -722,12 +722,42 @@ def _workers(spec: SyntheticSpec, n_objects: int) -> int:
     return 1 if work < 60 else max(1, min(os.cpu_count() or 1, 8, n_objects))
 
 
+def _progress(done: int, total: int, start: float) -> None:
+    """One line per tenth of the objects: the default file takes a minute or more."""
+    if done == total or done % max(1, total // 10) == 0:
+        log.info(
+            "synthetic PHAC-2: %d/%d objects (%.0f s)", done, total, time.perf_counter() - start
+        )
+
+
+def _write_parts(parts: list[Path], photos: Path, spec: SyntheticSpec, ids: list[int]) -> None:
+    """Every object's part file, on ``_workers`` processes (objects handed out one at a time,
+    so a worker on a busier core takes fewer), with progress in this process's log."""
+    start, n_workers = time.perf_counter(), _workers(spec, len(ids))
+    if n_workers == 1:
+        for done, (part, oid) in enumerate(zip(parts, ids, strict=True), 1):
+            _write_part(part, photos, spec, oid)
+            _progress(done, len(ids), start)
+        return
+    ctx = multiprocessing.get_context("forkserver")  # safe when the parent has threads
+    with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
+        jobs = [
+            pool.submit(_write_part, part, photos, spec, oid)
+            for part, oid in zip(parts, ids, strict=True)
+        ]
+        for done, job in enumerate(as_completed(jobs), 1):
+            job.result()
+            _progress(done, len(ids), start)
+
+
 def generate(path: Path, spec: SyntheticSpec = SyntheticSpec()) -> Path:
     """Write the synthetic file at ``path`` and its JPEGs to ``path.parent / "photographs"``.
 
     Atomic: both are written under temporary names in the same folder and moved into place at
-    the end, so a failure leaves neither a partial file nor a partial photo folder. Objects are
-    spread over worker processes (one part file each, copied in without recompression).
+    the end, so a failure leaves neither a partial file nor a partial photo folder. Each object
+    is a worker task writing a part file, copied in (in object order, without recompression);
+    every object's signals come from its own seeded stream, so the data do not depend on the
+    number of workers.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -736,23 +766,11 @@ def generate(path: Path, spec: SyntheticSpec = SyntheticSpec()) -> Path:
     photos = path.parent / "photographs"
     tmp_photos = path.parent / f".photographs{tag}"
     objs = _objects(spec)
-    n_workers = _workers(spec, len(objs))
     ids = [o.object_id for o in objs]
-    shares = [ids[i::n_workers] for i in range(n_workers)]
-    parts = [path.with_name(f".{path.name}{tag}.part{i}") for i in range(n_workers)]
+    parts = [path.with_name(f".{path.name}{tag}.part{oid}") for oid in ids]
     try:
         tmp_photos.mkdir()
-        if n_workers == 1:
-            _write_part(parts[0], tmp_photos, spec, ids)
-        else:
-            ctx = multiprocessing.get_context("forkserver")  # safe when the parent has threads
-            with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
-                jobs = [
-                    pool.submit(_write_part, part, tmp_photos, spec, share)
-                    for part, share in zip(parts, shares, strict=True)
-                ]
-                for job in jobs:
-                    job.result()
+        _write_parts(parts, tmp_photos, spec, ids)
         with h5py.File(tmp_h5, "w") as f:
             f.attrs["TITLE"] = "Aggregated BOLT Data (synthetic)"
             f.attrs["GENERATOR_VERSION"] = GENERATOR_VERSION

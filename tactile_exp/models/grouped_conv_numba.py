@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch.autograd.function import once_differentiable
 
-from tactile_exp.models.numba_setup import numba
+from tactile_exp.models.numba_setup import announce_compile, numba
 from tactile_exp.models.scratch import scratch
 
 LANES = 16  # batch padding: two AVX2 float32 vectors
@@ -211,28 +211,62 @@ def _conv_relu(x, w, b, stride, out):  # pragma: no cover (compiled)
 
 
 @numba.njit(**_JIT)
-def _dots4x2(g0, g1, g2, g3, s0, s1, acc, o, i, j):  # pragma: no cover (compiled)
-    """acc[o + e, i, j + f] += g_e . s_f for four gradient rows and two source rows: eight
-    dot products reduced in registers, each loaded vector feeding several FMAs."""
-    d00 = d01 = d10 = d11 = d20 = d21 = d30 = d31 = np.float32(0.0)
+def _dots4x4(g0, g1, g2, g3, s0, s1, s2, s3, acc, o, i, j):  # pragma: no cover (compiled)
+    """acc[o + e, i, j + f] += g_e . s_f for four gradient rows and four source rows (four
+    taps): sixteen dot products reduced in registers, eight loads per sixteen FMAs."""
+    d00 = d01 = d02 = d03 = d10 = d11 = d12 = d13 = np.float32(0.0)
+    d20 = d21 = d22 = d23 = d30 = d31 = d32 = d33 = np.float32(0.0)
     for m in range(s0.shape[0]):
-        u, v = s0[m], s1[m]
-        d00 += g0[m] * u
-        d01 += g0[m] * v
-        d10 += g1[m] * u
-        d11 += g1[m] * v
-        d20 += g2[m] * u
-        d21 += g2[m] * v
-        d30 += g3[m] * u
-        d31 += g3[m] * v
+        u, v, p, z = s0[m], s1[m], s2[m], s3[m]
+        a, b, c, e = g0[m], g1[m], g2[m], g3[m]
+        d00 += a * u
+        d01 += a * v
+        d02 += a * p
+        d03 += a * z
+        d10 += b * u
+        d11 += b * v
+        d12 += b * p
+        d13 += b * z
+        d20 += c * u
+        d21 += c * v
+        d22 += c * p
+        d23 += c * z
+        d30 += e * u
+        d31 += e * v
+        d32 += e * p
+        d33 += e * z
     acc[o, i, j] += d00
     acc[o, i, j + 1] += d01
+    acc[o, i, j + 2] += d02
+    acc[o, i, j + 3] += d03
     acc[o + 1, i, j] += d10
     acc[o + 1, i, j + 1] += d11
+    acc[o + 1, i, j + 2] += d12
+    acc[o + 1, i, j + 3] += d13
     acc[o + 2, i, j] += d20
     acc[o + 2, i, j + 1] += d21
+    acc[o + 2, i, j + 2] += d22
+    acc[o + 2, i, j + 3] += d23
     acc[o + 3, i, j] += d30
     acc[o + 3, i, j + 1] += d31
+    acc[o + 3, i, j + 2] += d32
+    acc[o + 3, i, j + 3] += d33
+
+
+@numba.njit(**_JIT)
+def _dots4x1(g0, g1, g2, g3, s0, acc, o, i, j):  # pragma: no cover (compiled)
+    """acc[o + e, i, j] += g_e . s0 for four gradient rows: one tap."""
+    d0 = d1 = d2 = d3 = np.float32(0.0)
+    for m in range(s0.shape[0]):
+        u = s0[m]
+        d0 += g0[m] * u
+        d1 += g1[m] * u
+        d2 += g2[m] * u
+        d3 += g3[m] * u
+    acc[o, i, j] += d0
+    acc[o + 1, i, j] += d1
+    acc[o + 2, i, j] += d2
+    acc[o + 3, i, j] += d3
 
 
 @numba.njit(**_JIT)
@@ -241,14 +275,14 @@ def _grad_weight_bias(grad, x, stride, grad_w, grad_b):  # pragma: no cover (com
     by the ReLU): grad_w[o, i, j] = sum_{t, m} grad[o, t, m] x[i, t * stride - pad + j, m].
 
     Walks time once, with the gradient rows of a step in cache for every input row and tap
-    that uses them; taps go in pairs and output channels in fours (``_dots4x2``).
+    that uses them; output channels go in fours and taps in fours (``_dots4x4``: half the
+    loads per FMA of taps in pairs), the last taps one at a time.
     """
     c_in, t_in, n = x.shape
     c_out, k = grad_w.shape[0], grad_w.shape[2]
     pad = k // 2
-    acc = np.zeros((c_out, c_in, k + 1), np.float32)  # one spare tap column for odd pairs
+    acc = np.zeros((c_out, c_in, k), np.float32)
     grad_b[:] = 0.0
-    zeros = np.zeros(n, np.float32)
     for t in range(grad.shape[1]):
         for o in range(c_out):
             row, total = grad[o, t], np.float32(0.0)
@@ -257,26 +291,30 @@ def _grad_weight_bias(grad, x, stride, grad_w, grad_b):  # pragma: no cover (com
             grad_b[o] += total
         j0 = max(0, pad - t * stride)  # the taps inside the input at this step
         j1 = min(k, t_in + pad - t * stride)
+        base = t * stride - pad
         for i in range(c_in):
-            for j in range(j0, j1, 2):
-                ti = t * stride - pad + j
-                s0 = x[i, ti]
-                s1 = x[i, ti + 1] if j + 1 < j1 else zeros  # the spare column takes it
-                o = 0
-                while o + 4 <= c_out:
-                    g0, g1, g2, g3 = grad[o, t], grad[o + 1, t], grad[o + 2, t], grad[o + 3, t]
-                    _dots4x2(g0, g1, g2, g3, s0, s1, acc, o, i, j)
-                    o += 4
-                while o < c_out:
-                    gr = grad[o, t]
-                    d0 = d1 = np.float32(0.0)
+            o = 0
+            while o + 4 <= c_out:
+                g0, g1, g2, g3 = grad[o, t], grad[o + 1, t], grad[o + 2, t], grad[o + 3, t]
+                j = j0
+                while j + 4 <= j1:
+                    s0, s1 = x[i, base + j], x[i, base + j + 1]
+                    s2, s3 = x[i, base + j + 2], x[i, base + j + 3]
+                    _dots4x4(g0, g1, g2, g3, s0, s1, s2, s3, acc, o, i, j)
+                    j += 4
+                while j < j1:
+                    _dots4x1(g0, g1, g2, g3, x[i, base + j], acc, o, i, j)
+                    j += 1
+                o += 4
+            while o < c_out:
+                gr = grad[o, t]
+                for j in range(j0, j1):
+                    s0, d0 = x[i, base + j], np.float32(0.0)
                     for m in range(n):
                         d0 += gr[m] * s0[m]
-                        d1 += gr[m] * s1[m]
                     acc[o, i, j] += d0
-                    acc[o, i, j + 1] += d1
-                    o += 1
-    grad_w[:] = acc[:, :, :k]
+                o += 1
+    grad_w[:] = acc
 
 
 @numba.njit(**_JIT)
@@ -448,6 +486,7 @@ def _forward(
     time, n_pad), and each group's share of the head's scores (groups, n_pad) (none: 0 rows)."""
     if x.requires_grad:
         raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
+    announce_compile(__name__)
     _, channels, steps = x.shape
     n_pad = _padded(len(rows))
     h = scratch(groups, channels // groups, steps, n_pad)

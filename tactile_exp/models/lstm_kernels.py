@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from tactile_exp.models.numba_setup import numba
+from tactile_exp.models.numba_setup import announce_compile, numba
 
 # error_model="numpy": no ZeroDivisionError check inside the loops, which blocks vectorisation.
 _JIT = dict(fastmath=True, error_model="numpy", cache=True)
@@ -405,4 +405,5 @@ def lstm_last_hidden(
     if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(x):
         raise IndexError(f"compiled LSTM: rows must lie in [0, {len(x)}), the rows of x")
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
+    announce_compile(__name__)
     return LSTMLastHidden.apply(x, rows, *params)

@@ -8,7 +8,9 @@ imported, hence this module: kernel modules import ``numba`` from here.
 
 from __future__ import annotations
 
+import logging
 import os
+from pathlib import Path
 
 from tactile_exp.data.phac2 import default_cache_dir
 
@@ -24,4 +26,25 @@ import numba  # noqa: E402  (after the variables above: numba reads them at impo
 numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
 numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
-__all__ = ["numba"]
+log = logging.getLogger(__name__)
+_CHECKED: set[str] = set()
+
+
+def announce_compile(module: str) -> None:
+    """Log one line when ``module``'s kernels have no compiled code in the cache yet: their
+    first compile takes about a minute, during which nothing else is printed. Checked once per
+    process (the cache's index files, one per compiled function, name their module)."""
+    if module in _CHECKED:
+        return
+    _CHECKED.add(module)
+    stem = module.rsplit(".", 1)[-1]
+    if not any(Path(numba.config.CACHE_DIR).glob(f"*/{stem}.*.nbi")):
+        log.info(
+            "compiling the %s kernels (numba, first use with this cache: about a minute, "
+            "cached in %s after)",
+            stem,
+            numba.config.CACHE_DIR,
+        )
+
+
+__all__ = ["announce_compile", "numba"]

@@ -1,0 +1,372 @@
+"""The ConvNet's and the LSTM's compiled passes against the machine's roofline: their GFLOP/s
+beside the same run's sgemm rate.
+
+In one run, interleaved (every repetition times each item once, in turn, so load changes hit all
+of them alike; best of ``--repeats``):
+
+- sgemm: torch's and numpy's BLAS on a 2000^3 single-precision product (the machine's rate, the
+  ceiling the kernels are held against: the larger of the two), and BLAS at the shapes an im2col
+  or projection GEMM of the kernels would have, on one thread (conv2's per-group product
+  batched over the 32 groups; the LSTM's input projection over a chunk's time steps; its
+  recurrence per step): the rate BLAS itself reaches at those shapes, per core;
+- the haptic ConvNet at the paper's size (32 signals x 150 steps, kernels 5, widths 4, strides
+  2, batch 1000 of a 5,300-instance training set, rows read in place as in training): forward
+  (conv stack + classification layer), backward (all gradients) and the two together, and each
+  layer's weight-gradient kernel alone over all groups;
+- the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): forward and backward through
+  ``lstm_last_hidden``.
+
+FLOPs are counted from the shapes, 2 per multiply-add, only the arithmetic a pass needs: forward
+convolutions and the head; backward the weight gradients of every layer, the input gradients of
+conv2 and conv3 (conv1's input needs none) and the head's; LSTM forward 2 x 4H(C + H) per step
+and instance, backward 2 x 4H(C + H) (weight gradient) + 2 x 4H x H (the state's gradient).
+Nonlinearities, layout changes and the LSTM's recomputed forward are not counted: they are the
+kernels' overhead, so a rate here is the useful arithmetic per second.
+
+``--before REV`` also times the package at git revision ``REV`` (exported once per commit under
+the cache folder, with its own numba cache) in a child process, interleaved item by item with
+this checkout's: a before/after in one run.
+
+Run: ``.venv/bin/python bench/bench_roofline.py [--repeats 7] [--threads 2] [--before REV]
+[--json bench/results/bench_roofline.json]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import subprocess
+import sys
+import tarfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+
+N_TRAIN, CHANNELS, STEPS, BATCH = 5300, 32, 150, 1000
+GROUPS, KERNEL, WIDTH, STRIDE = 32, 5, 4, 2
+HIDDEN = 10
+SGEMM = 2000
+ROOT = Path(__file__).resolve().parent.parent
+
+Timer = Callable[[], tuple[float, float]]  # one timed call -> (wall s, CPU s)
+
+
+def _one_thread(fn: Callable[[], object]) -> Callable[[], object]:
+    """``fn`` on one torch thread: a kernel would run such small products inside each of its
+    threads, and two threads on a product this small mostly wait for each other."""
+
+    def run() -> object:
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            return fn()
+        finally:
+            torch.set_num_threads(threads)
+
+    return run
+
+
+def _timed(fn: Callable[[], object]) -> Timer:
+    def timer() -> tuple[float, float]:
+        start, start_cpu = time.perf_counter(), time.process_time()
+        fn()
+        return time.perf_counter() - start, time.process_time() - start_cpu
+
+    return timer
+
+
+def conv_layers() -> list[tuple[int, int, int]]:
+    """(c_in, t_in, t_out) per group of conv1..conv3 at the paper's size."""
+    layers, c_in, length = [], CHANNELS // GROUPS, STEPS
+    for _ in range(3):
+        t_out = (length + 2 * (KERNEL // 2) - KERNEL) // STRIDE + 1
+        layers.append((c_in, length, t_out))
+        c_in, length = WIDTH, t_out
+    return layers
+
+
+def conv_gflop() -> dict[str, float]:
+    """Useful GFLOP per pass of one batch (see the module docstring)."""
+    convs = [
+        2 * GROUPS * WIDTH * c_in * KERNEL * t_out * BATCH / 1e9 for c_in, _, t_out in conv_layers()
+    ]
+    head = 2 * GROUPS * WIDTH * conv_layers()[-1][2] * BATCH / 1e9
+    forward = sum(convs) + head
+    backward = sum(convs) + sum(convs[1:]) + 2 * head
+    flops = {"convnet forward": forward, "convnet backward": backward}
+    flops["convnet forward+backward"] = forward + backward
+    for layer, gflop in enumerate(convs, 1):
+        flops[f"convnet conv{layer} weight gradient"] = gflop
+    return flops
+
+
+def lstm_gflop() -> dict[str, float]:
+    per_step = 2 * 4 * HIDDEN * (CHANNELS + HIDDEN)
+    forward = per_step * STEPS * BATCH / 1e9
+    backward = (per_step + 2 * 4 * HIDDEN * HIDDEN) * STEPS * BATCH / 1e9
+    return {
+        "lstm forward": forward,
+        "lstm backward": backward,
+        "lstm forward+backward": forward + backward,
+    }
+
+
+def blas_gflop() -> dict[str, float]:
+    conv2 = conv_layers()[1]
+    return {
+        "sgemm torch 2000^3": 2 * SGEMM**3 / 1e9,
+        "sgemm numpy 2000^3": 2 * SGEMM**3 / 1e9,
+        "bmm conv2 im2col (32 x 4x20 @ 20x38000), 1 thread": 2
+        * GROUPS
+        * WIDTH
+        * WIDTH
+        * KERNEL
+        * conv2[2]
+        * BATCH
+        / 1e9,
+        "sgemm lstm projection (40x32 @ 32x9600), 1 thread": 2
+        * 4
+        * HIDDEN
+        * CHANNELS
+        * STEPS
+        * 64
+        / 1e9,
+        "sgemm lstm step (40x10 @ 10x1000), 1 thread": 2 * 4 * HIDDEN * HIDDEN * BATCH / 1e9,
+    }
+
+
+def blas_timers() -> dict[str, Timer]:
+    rng = np.random.default_rng(0)
+    a = torch.randn(SGEMM, SGEMM)
+    an = rng.standard_normal((SGEMM, SGEMM), dtype=np.float32)
+    c_in, _, t_out = conv_layers()[1]
+    w = torch.randn(GROUPS, WIDTH, c_in * KERNEL)
+    cols = torch.randn(GROUPS, c_in * KERNEL, t_out * BATCH)
+    wl, xl = torch.randn(4 * HIDDEN, CHANNELS), torch.randn(CHANNELS, STEPS * 64)
+    wh, hl = torch.randn(4 * HIDDEN, HIDDEN), torch.randn(HIDDEN, BATCH)
+    return {
+        "sgemm torch 2000^3": _timed(lambda: torch.mm(a, a)),
+        "sgemm numpy 2000^3": _timed(lambda: an @ an),
+        "bmm conv2 im2col (32 x 4x20 @ 20x38000), 1 thread": _timed(
+            _one_thread(lambda: torch.bmm(w, cols))
+        ),
+        "sgemm lstm projection (40x32 @ 32x9600), 1 thread": _timed(
+            _one_thread(lambda: torch.mm(wl, xl))
+        ),
+        "sgemm lstm step (40x10 @ 10x1000), 1 thread": _timed(
+            _one_thread(lambda: torch.mm(wh, hl))
+        ),
+    }
+
+
+def kernel_timers() -> dict[str, Timer]:
+    """Timers of the compiled passes of the ``tactile_exp`` this process imports."""
+    from tactile_exp.models import grouped_conv_numba as conv
+    from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
+    from tactile_exp.models.lstm_kernels import lstm_last_hidden
+
+    torch.manual_seed(0)
+    X = torch.randn(N_TRAIN, CHANNELS, STEPS)
+    rows = torch.randperm(N_TRAIN)[:BATCH]
+    net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
+    head = torch.nn.Linear(net.n_features, 1)
+    lstm = torch.nn.LSTM(CHANNELS, HIDDEN, batch_first=True)
+    g_scores, g_hidden = torch.randn(BATCH), torch.randn(BATCH, HIDDEN)
+
+    def conv_forward() -> torch.Tensor:
+        return net.scores(X, head, rows=rows)
+
+    def conv_backward() -> tuple[float, float]:
+        scores = conv_forward()
+        return _timed(lambda: scores.backward(g_scores))()
+
+    def conv_both() -> None:
+        conv_forward().backward(g_scores)
+
+    def lstm_backward() -> tuple[float, float]:
+        hidden = lstm_last_hidden(X, lstm, rows)
+        return _timed(lambda: hidden.backward(g_hidden))()
+
+    def lstm_both() -> None:
+        lstm_last_hidden(X, lstm, rows).backward(g_hidden)
+
+    timers: dict[str, Timer] = {
+        "convnet forward": _timed(conv_forward),
+        "convnet backward": conv_backward,
+        "convnet forward+backward": _timed(conv_both),
+        "lstm forward": _timed(lambda: lstm_last_hidden(X, lstm, rows)),
+        "lstm backward": lstm_backward,
+        "lstm forward+backward": _timed(lstm_both),
+    }
+    timers.update(weight_gradient_timers(conv))
+    return timers
+
+
+def weight_gradient_timers(conv) -> dict[str, Timer]:
+    """Each layer's weight-gradient kernel over all groups, in the layout at batch 1000."""
+    numba = conv.numba
+
+    @numba.njit(parallel=True)
+    def wgrad(grad, x, stride, grad_w, grad_b):
+        for g in numba.prange(x.shape[0]):
+            conv._grad_weight_bias(grad[g], x[g], stride, grad_w[g], grad_b[g])
+
+    n_pad = -(-BATCH // conv.LANES) * conv.LANES
+    rng = np.random.default_rng(0)
+    timers = {}
+    for layer, (c_in, t_in, t_out) in enumerate(conv_layers(), 1):
+        x = rng.standard_normal((GROUPS, c_in, t_in, n_pad), dtype=np.float32)
+        grad = rng.standard_normal((GROUPS, WIDTH, t_out, n_pad), dtype=np.float32)
+        grad_w = np.empty((GROUPS, WIDTH, c_in, KERNEL), np.float32)
+        grad_b = np.empty((GROUPS, WIDTH), np.float32)
+        args = (grad, x, STRIDE, grad_w, grad_b)
+        timers[f"convnet conv{layer} weight gradient"] = _timed(lambda args=args: wgrad(*args))
+    return timers
+
+
+def _set_threads(threads: int) -> None:
+    from tactile_exp.models.numba_setup import numba
+
+    torch.set_num_threads(threads)
+    numba.set_num_threads(threads)
+
+
+def serve(threads: int) -> None:
+    """Child mode: time the named kernel pass once per line of stdin, answer on stdout."""
+    _set_threads(threads)
+    timers = kernel_timers()
+    print(json.dumps(sorted(timers)), flush=True)
+    for line in sys.stdin:
+        print(json.dumps(timers[line.strip()]()), flush=True)
+
+
+class Before:
+    """The package at a git revision, timing its passes in a child process on request."""
+
+    def __init__(self, rev: str, threads: int) -> None:
+        sha = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", rev], check=True, capture_output=True, text=True
+        ).stdout.strip()
+        cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
+        folder = cache / "bench-before" / sha  # kept: its kernels compile once per revision
+        if not (folder / "tactile_exp").exists():
+            archive = subprocess.run(
+                ["git", "-C", str(ROOT), "archive", sha, "tactile_exp"],
+                check=True,
+                capture_output=True,
+            ).stdout
+            folder.mkdir(parents=True, exist_ok=True)
+            with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+                tar.extractall(folder, filter="data")
+        env = {**os.environ, "PYTHONPATH": str(folder), "NUMBA_CACHE_DIR": str(folder / "numba")}
+        self.child = subprocess.Popen(
+            [sys.executable, str(Path(__file__).resolve()), "--serve", "--threads", str(threads)],
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            cwd=folder,
+        )
+        self.names = set(json.loads(self.child.stdout.readline()))
+
+    def timer(self, name: str) -> Timer:
+        def timer() -> tuple[float, float]:
+            self.child.stdin.write(name + "\n")
+            self.child.stdin.flush()
+            return tuple(json.loads(self.child.stdout.readline()))
+
+        return timer
+
+    def close(self) -> None:
+        self.child.stdin.close()
+        self.child.wait()
+
+
+def interleaved(timers: dict[str, Timer], repeats: int) -> dict[str, tuple[float, float]]:
+    """Best wall and CPU seconds of each timer: one warm-up each, then ``repeats`` rounds."""
+    for timer in timers.values():
+        timer()
+    best = {name: (float("inf"), float("inf")) for name in timers}
+    for _ in range(repeats):
+        for name, timer in timers.items():
+            wall, cpu = timer()
+            best[name] = (min(best[name][0], wall), min(best[name][1], cpu))
+    return best
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--before", default=None, help="also time the package at this git rev")
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    parser.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.serve:
+        serve(args.threads)
+        return
+    _set_threads(args.threads)
+    gflop = {**blas_gflop(), **conv_gflop(), **lstm_gflop()}
+    timers = blas_timers()
+    kernels = kernel_timers()
+    before = Before(args.before, args.threads) if args.before else None
+    for name, timer in kernels.items():
+        if before is not None and name in before.names:
+            timers[f"{name} (before)"] = before.timer(name)
+        timers[name] = timer
+    best = interleaved(timers, args.repeats)
+    if before is not None:
+        before.close()
+    sgemm = ("sgemm torch 2000^3", "sgemm numpy 2000^3")
+    ceiling = max(gflop[n] / best[n][0] for n in sgemm)
+    ceiling_cpu = max(gflop[n] / best[n][1] for n in sgemm)
+    load = os.getloadavg()[0]
+    print(
+        f"torch {torch.__version__}, {args.threads} threads, best of {args.repeats} "
+        f"(interleaved), load average {load:.1f} at the end; per CPU s: FLOPs over the CPU "
+        "time of all threads (steadier than wall time on a loaded machine)"
+    )
+    print(f"{'':48s} {'ms':>8s} {'GFLOP/s':>8s} {'% sgemm':>8s} {'per CPU s':>9s} {'% sgemm':>8s}")
+    figures: dict[str, float] = {
+        "sgemm, GFLOP/s (the ceiling: the faster BLAS)": round(ceiling, 1),
+        "sgemm, GFLOP per CPU s": round(ceiling_cpu, 1),
+    }
+    for name, (wall, cpu) in best.items():
+        work = gflop[name.removesuffix(" (before)")]
+        rate, rate_cpu = work / wall, work / cpu
+        share, share_cpu = 100 * rate / ceiling, 100 * rate_cpu / ceiling_cpu
+        print(
+            f"{name:48s} {wall * 1e3:8.2f} {rate:8.1f} {share:7.0f}% {rate_cpu:9.1f} "
+            f"{share_cpu:7.0f}%"
+        )
+        if name in sgemm:
+            continue
+        figures[f"{name}, GFLOP/s"] = round(rate, 1)
+        figures[f"{name}, % of sgemm"] = round(share, 1)
+        figures[f"{name}, % of sgemm per CPU s"] = round(share_cpu, 1)
+    for name in ("convnet forward+backward", "lstm forward+backward"):
+        if f"{name} (before)" in best:
+            speedup = best[f"{name} (before)"][0] / best[name][0]
+            print(f"{name}: before / now x{speedup:.2f} wall")
+            figures[f"{name}, before / now, wall"] = round(speedup, 2)
+    if args.json:
+        sys.path.insert(0, str(Path(__file__).parent))
+        from record import write
+
+        notes = (
+            f"best of {args.repeats} interleaved, {args.threads} threads, batch {BATCH}; % of "
+            "sgemm per CPU s compares FLOPs per CPU second of all threads, steadier than wall "
+            "time when other work shares the cores"
+        )
+        if args.before:
+            notes += f"; before = git revision {args.before}, timed in a child process"
+        write(args.json, "bench_roofline", figures, notes)
+
+
+if __name__ == "__main__":
+    main()
