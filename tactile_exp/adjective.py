@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -155,14 +156,18 @@ def run_adjective(
         if "val" in sides:
             scored["val"] = pipeline.decision_function(sides["val"])
         values = metrics.compute(settings.metrics, units.y, scores)
-        diagnostics = _diagnostics(scored)
+        diagnostics = _diagnostics(scored, settings.metrics)
         sizes = _sizes(split, sides, pipeline, test, units, scored.get("val"))
         sizes["seconds"] = time.perf_counter() - start
-        logged = {**values, **sizes, **diagnostics, **pipeline.preprocess.metrics()}
+        # A search trial logs no test metric and no test score: what selects stays blind to them.
+        trial = settings.study_tags.get("search.role") == "trial"
+        tested = {} if trial else values
+        logged = {**tested, **sizes, **diagnostics, **pipeline.preprocess.metrics()}
         tracker.log_metrics(run_id, logged)
         log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in diagnostics.items()))
         tracker.log_curves(run_id, history)
-        tracker.log_text(run_id, scores_table(scores, units), "scores.csv")
+        if not trial:
+            tracker.log_text(run_id, scores_table(scores, units), "scores.csv")
         # The run turns FINISHED only after the pipeline is written, and lookups take FINISHED
         # runs only, so a job killed while writing leaves nothing reusable.
         store.log_folder(tracker, run_id, "", pipeline.save)
@@ -217,13 +222,17 @@ def _sizes(
     }
 
 
-def _diagnostics(scored: dict[str, tuple[np.ndarray, Instances]]) -> dict[str, float]:
-    """Training AUC, and the held-out training objects' AUC when they hold both classes."""
+def _diagnostics(
+    scored: dict[str, tuple[np.ndarray, Instances]], names: Sequence[str]
+) -> dict[str, float]:
+    """Training AUC, and the held-out training objects' metrics (``names``: val_auc, val_f1, ...,
+    what a search objective reads) when they hold both classes."""
     out = {}
-    for name in ("train", "val"):
+    for name, measured in (("train", ("roc_auc",)), ("val", names)):
         if name in scored and len(np.unique(scored[name][1].y)) == 2:
             scores, units = scored[name]
-            out[f"{name}_auc"] = metrics.METRICS.build("roc_auc")(units.y, scores)
+            found = metrics.compute(measured, units.y, scores)
+            out.update({f"{name}_{key}": v for key, v in found.items()})
     return out
 
 

@@ -38,9 +38,10 @@ class JobResult:
     mean_auc: float
     results: dict[str, AdjectiveResult]
     skipped: bool = False
-    # Per adjective, the held-out validation objects' AUC (where they hold both classes): what
-    # the job's objective is computed from (tactile_exp.objective); read back when skipped.
-    val_aucs: dict[str, float] = field(default_factory=dict)
+    # Per adjective, the held-out validation objects' metrics by key (where they hold both
+    # classes): what the job's objective is computed from (tactile_exp.objective); read back
+    # when skipped.
+    validation: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 def load(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
@@ -80,6 +81,8 @@ def run(settings: Settings) -> JobResult:
     if settings.tracking.skip_finished:
         identity = DATA_SOURCES.build(settings.data.name, **settings.data.params).identity()
         done = tracker.finished_run(settings.config_hash, data_identity=identity)
+        if done is not None and not _trial(settings) and not tracker.child_metrics(done, "auc"):
+            done = None  # a search trial's job: it logged no test metric, so run it again
         if done is not None:
             log.info(
                 "skipping %s: run %s already FINISHED with this config on this data file",
@@ -88,7 +91,11 @@ def run(settings: Settings) -> JobResult:
             )
             _log_view(tracker, settings)
             return JobResult(
-                done, float("nan"), {}, skipped=True, val_aucs=_val_aucs(tracker, done)
+                done,
+                float("nan"),
+                {},
+                skipped=True,
+                validation=_validation(tracker, done, settings.metrics),
             )
     tracker.end_stale_runs(settings.config_hash)
     dataset, modality, splits = open_data(settings)
@@ -120,48 +127,69 @@ def run(settings: Settings) -> JobResult:
         log_data(tracker, parent_id, dataset)
         results: dict[str, AdjectiveResult] = {}
         headline = metrics.METRICS.build(settings.metrics[0])
+        trial = _trial(settings)
+        # A search trial shows and logs its validation AUC only: test metrics wait for the
+        # study's final evaluation.
+        shown, label = ("val_auc", "validation AUC") if trial else (headline.key, headline.label)
         for i, result in enumerate(_adjectives(settings, tracker, parent_id, dataset, splits), 1):
             results[result.adjective] = result
+            values = result.diagnostics if trial else result.metrics
             log.info(
                 "[%d/%d] %s %s %.3f (%.1f s)",
                 i,
                 len(splits),
                 result.adjective,
-                headline.label,
-                result.metrics[headline.key],
+                label,
+                values.get(shown, float("nan")),
                 result.sizes["seconds"],
             )
         logged = metrics.summary({a: r.metrics for a, r in results.items()})
-        mean = logged["mean_auc"]
-        held_out = {a: stats.HeldOut(r.objects, r.y, r.scores) for a, r in results.items()}
-        ci = stats.mean_interval([held_out])  # over test objects (issue 27)
-        tracker.log_metrics(
-            parent_id,
-            logged | _means(results) | {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high},
-        )
-        _log_summary(tracker, parent_id, settings, dataset, results)
-        key, label = headline.key, headline.label
-        log.info("mean %s over %d adjectives: %.4f", label, len(results), logged[f"mean_{key}"])
-    val_aucs = {
-        a: r.diagnostics["val_auc"] for a, r in results.items() if "val_auc" in r.diagnostics
+        mean = float("nan") if trial else logged["mean_auc"]
+        if trial:
+            tracker.log_metrics(parent_id, _means(results))
+        else:
+            held_out = {a: stats.HeldOut(r.objects, r.y, r.scores) for a, r in results.items()}
+            ci = stats.mean_interval([held_out])  # over test objects (issue 27)
+            ends = {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high}
+            tracker.log_metrics(parent_id, logged | _means(results) | ends)
+            _log_summary(tracker, parent_id, settings, dataset, results)
+            key = headline.key
+            log.info("mean %s over %d adjectives: %.4f", label, len(results), logged[f"mean_{key}"])
+    validation = {
+        a: {k.removeprefix("val_"): v for k, v in r.diagnostics.items() if k.startswith("val_")}
+        for a, r in results.items()
     }
     _log_view(tracker, settings)
-    return JobResult(parent_id, mean, results, val_aucs=val_aucs)
+    return JobResult(
+        parent_id, mean, results, validation={a: v for a, v in validation.items() if v}
+    )
 
 
-def _val_aucs(tracker: Tracker, parent_id: str) -> dict[str, float]:
-    """A finished job's per-adjective validation AUCs, from its adjectives' runs."""
-    return tracker.child_metrics(parent_id, "val_auc")
+def _validation(
+    tracker: Tracker, parent_id: str, names: tuple[str, ...]
+) -> dict[str, dict[str, float]]:
+    """A finished job's per-adjective validation metrics, from its adjectives' runs."""
+    out: dict[str, dict[str, float]] = {}
+    for key in (metrics.METRICS.build(n).key for n in names):
+        for adjective, v in tracker.child_metrics(parent_id, f"val_{key}").items():
+            out.setdefault(adjective, {})[key] = v
+    return out
+
+
+def _trial(settings: Settings) -> bool:
+    return settings.study_tags.get("search.role") == "trial"
 
 
 def _log_view(tracker: Tracker, settings: Settings) -> None:
-    """The last lines of a job's log: where its sweep's runs table is, with its numbers."""
-    columns = [canonical_column("metrics", "mean_auc")]
+    """The last lines of a job's log: where its sweep's runs table is, with its numbers (a
+    search trial's: by validation AUC, no test metric shown)."""
+    sort, what = ("mean_val_auc", "validation AUC") if _trial(settings) else ("mean_auc", "AUC")
+    columns = [canonical_column("metrics", sort)]
     columns += [canonical_column("params", f"axis.{k}") for k in settings.axes]
     if not settings.axes:
         columns += [canonical_column("params", k) for k in ("choice.model", "combine")]
-    url = tracker.runs_view(columns, order_by=canonical_column("metrics", "mean_auc"))
-    log.info("runs table (jobs by mean AUC, with what each sets): %s", url)
+    url = tracker.runs_view(columns, order_by=canonical_column("metrics", sort))
+    log.info("runs table (jobs by mean %s, with what each sets): %s", what, url)
     if not tracker.uri.startswith(("http://", "https://")):
         log.info("  serve it first: mlflow ui --backend-store-uri %s", tracker.uri)
     log.info("  (MLflow opened without this link shows its GenAI Overview: click 'Model training')")

@@ -65,9 +65,18 @@ def test_objective_is_a_validation_metric(tiny_config):
     with pytest.raises(ConfigError, match=r"^objective: mean_auc is scored on the test objects"):
         settings_from_config(tiny_config(["objective=mean_auc"]))
     settings = settings_from_config(tiny_config(["objective=min_val_auc"]))
-    assert value(settings.objective, {"a": 0.9, "b": 0.6}) == 0.6
-    assert value("mean_val_auc", {"a": 0.9, "b": 0.6}) == pytest.approx(0.75)
+    validation = {"a": {"auc": 0.9, "f1": 0.2}, "b": {"auc": 0.6, "f1": 0.4}, "c": {"f1": 0.9}}
+    assert value(settings.objective, validation) == 0.6
+    assert value("mean_val_auc", validation) == pytest.approx(0.75)  # c has no AUC
+    # Any registered metric, on the validation side: mean_val_<key> and min_val_<key>.
+    assert value("mean_val_f1", validation) == pytest.approx(0.5)
+    assert value("min_val_f1", validation) == pytest.approx(0.2)
+    assert settings_from_config(tiny_config(["objective=mean_val_f1"])).objective == "mean_val_f1"
     assert math.isnan(value("mean_val_auc", {}))  # validation.fraction=0: nothing to select on
+    assert math.isnan(value("min_val_average_precision", validation))
+    search.check_objective("mean_val_f1", ("roc_auc", "f1"))
+    with pytest.raises(ConfigError, match=r"^objective: min_val_f1 reads the validation f1, "):
+        search.check_objective("min_val_f1", ("roc_auc",))
 
 
 def test_search_trial_needs_validation_objects(tiny_config):
@@ -99,6 +108,22 @@ def test_search_space_from_hydra_expressions():
     assert not space["schedule.momentum"].log
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.params\.validation\.fraction: "):
         search.search_space({"validation.fraction": "interval(0.1, 0.3)"})
+    # Keys that change the data, the split or the labels change the question: one line each.
+    for key in ("split", "split.folds", "data", "data.path", "+data", "adjectives",
+                "modality.fit_on", "seed", "tracking.uri", "study.name", "objective"):  # fmt: skip
+        with pytest.raises(ConfigError) as refused:
+            search.search_space({key: "choice(1,2)"})
+        line = str(refused.value)
+        assert line.startswith(f"hydra.sweeper.params.{key}: {key} is fixed in a search, not ")
+        assert "\n" not in line and line.endswith(search.fixed_reason(key))
+    assert "the question, not the answer" in search.fixed_reason("split.fold")
+    assert (
+        search.fixed_reason("adjectives")
+        == "it changes the labels, so the question, not the answer"
+    )
+    for free in ("modality.window", "seeds", "database", "model.widths.0", "splitter"):
+        assert search.fixed_reason(free) == ""
+    assert set(search.search_space({"modality.window": "choice(1,2)"})) == {"modality.window"}
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.params\.schedule\.lr: expected"):
         search.search_space({"schedule.lr": "0.01"})
 
@@ -174,7 +199,8 @@ def test_returned_objective_is_the_validation_mean_not_the_test_mean(
     monkeypatch, tmp_path, cache_dir, mlflow_uri
 ):
     """Test objects made easy (each replaced by a training instance of its label, which the
-    model has fitted), validation objects as they are: the study receives the validation mean."""
+    model has fitted), validation objects as they are: the study receives the validation mean,
+    and the trial shows and logs no test metric."""
     real_transform = Haptic.transform
     fitted: list[Instances] = []
 
@@ -196,7 +222,14 @@ def test_returned_objective_is_the_validation_mean_not_the_test_mean(
     assert set(val_aucs) == {"hard", "soft"}
     assert trial.value == pytest.approx(np.mean(list(val_aucs.values())), abs=1e-12)
     assert trial.value == pytest.approx(parent.data.metrics["mean_val_auc"], abs=1e-12)
-    assert parent.data.metrics["mean_auc"] > trial.value + 0.2  # the easy test objects
+    # A trial logs no test metric and no test score, in its job's run or its adjectives'.
+    assert not [k for k in parent.data.metrics if k.startswith(("mean_auc", "auc."))]
+    client = MlflowClient(mlflow_uri)
+    for child in client.search_runs(
+        [parent.info.experiment_id], f"tags.mlflow.parentRunId = '{parent.info.run_id}'"
+    ):
+        assert "auc" not in child.data.metrics and "val_auc" in child.data.metrics
+        assert "scores.csv" not in {a.path for a in client.list_artifacts(child.info.run_id)}
 
 
 @pytest.mark.slow
@@ -259,7 +292,7 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     """Sentinel: with every test object's score set to NaN the objective is unchanged."""
     overrides = ["validation.fraction=0.3", "tracking.skip_finished=false"]
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
-    clean = value(settings.objective, experiment.run(settings).val_aucs)
+    clean = value(settings.objective, experiment.run(settings).validation)
 
     real_score, real_compute = AdjectivePipeline.score, metrics.compute
 
@@ -281,7 +314,7 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     monkeypatch.setattr(experiment, "_log_summary", lambda *args: None)  # ROC of NaN scores
     sentinel = experiment.run(settings)
     assert math.isnan(sentinel.mean_auc)  # the test scores were NaN
-    assert math.isfinite(clean) and value(settings.objective, sentinel.val_aucs) == clean
+    assert math.isfinite(clean) and value(settings.objective, sentinel.validation) == clean
 
 
 SEARCHES = {  # each search file, and the Table I row it is meant for
@@ -310,3 +343,26 @@ def test_search_files_sample_keys_that_exist(name, compose_config):
         for part in key.split("."):
             node = node[int(part)] if part.isdigit() else node[part]
         assert str(node) == str(v)
+
+
+class _Views:
+    """A tracker that records the runs view a job's log links to."""
+
+    uri = "http://mlflow"
+
+    def runs_view(self, columns, *, order_by):
+        self.columns, self.order_by = list(columns), order_by
+        return "http://mlflow/#view"
+
+
+def test_a_trials_runs_link_sorts_and_shows_validation_not_test_metrics(tiny_config, caplog):
+    views = _Views()
+    trial = settings_from_config(tiny_config(["search=haptic_cnn"]))
+    with caplog.at_level("INFO", logger="tactile_exp.experiment"):
+        experiment._log_view(views, trial)
+    assert views.order_by == "metrics.`mean_val_auc`"
+    assert not [c for c in views.columns if "mean_auc" in c]
+    assert "runs table (jobs by mean validation AUC" in caplog.text
+    plain = settings_from_config(tiny_config([]))
+    experiment._log_view(views, plain)
+    assert views.order_by == "metrics.`mean_auc`"

@@ -1,0 +1,145 @@
+"""The rules that turn the report's numbers into words: what makes a verdict, the family Holm
+corrects over, pairing, non-inferiority against the margin, and Fig. 5's rows picked from the
+data (a simulation: the family over every candidate row pair keeps false claims at nominal)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from stats_fixture import simulate
+
+from tactile_exp import stats
+from tactile_exp.report import comparisons
+from tactile_exp.report.heldout import Evidence
+from tactile_exp.report.runs import Group, Run
+
+
+def _group(key: str, row: str = "", modality: str = "haptic", model: str = "m") -> Group:
+    run = Run(key, 0, 0, 0.5, {}, "data", "sweep")
+    return Group(key, key, key, row, None, "paper", "", "folds", modality, model, 24, (), {}, {},
+                 {(0, -1): run})  # fmt: skip
+
+
+def _cmp(low: float, high: float, p: float, rank: float, eq: tuple = (0.0, 0.0)):
+    return stats.Comparison(
+        "I", "J", stats.Interval((low + high) / 2, low, high), p, 24, p, p, rank,
+        ("hard",), ("soft",), stats.Interval(0.0, *eq),
+    )  # fmt: skip
+
+
+def test_judge_turns_a_verdict_into_a_claims_result() -> None:
+    assert comparisons.judge(">", _cmp(0.01, 0.05, 0.001, 5)) == "supported"
+    assert comparisons.judge(">", _cmp(-0.05, -0.01, 0.001, -5)) == "contradicted"
+    assert comparisons.judge(">", _cmp(0.01, 0.05, 0.2, 5)) == "not distinguishable"
+    assert comparisons.judge(">", _cmp(0.01, 0.05, 0.001, -5)) == "mixed"
+    assert comparisons.judge(">=", _cmp(0.01, 0.05, 0.001, -5)) == "mixed"
+    # ">=": non-inferiority; a non-significant difference alone is no support
+    assert comparisons.judge(">=", _cmp(-0.019, 0.05, 0.5, 1)).startswith("supported")
+    wide = comparisons.judge(">=", _cmp(-0.08, 0.05, 0.5, 1))
+    assert wide == "not distinguishable (the interval allows a loss beyond 0.020)"
+    assert comparisons.judge(">=", _cmp(-0.08, 0.05, 0.5, 1), margin=0.1).startswith("supported")
+    assert comparisons.judge(">=", _cmp(-0.05, -0.01, 0.001, -5)) == "contradicted"
+    assert comparisons.judge(">=", _cmp(0.01, 0.05, 0.001, 5)).startswith("supported")
+
+
+def test_describe_says_equivalent_only_when_tost_rules_out_the_margin() -> None:
+    near = _cmp(-0.03, 0.03, 0.5, 1, eq=(-0.015, 0.012))
+    assert "equivalent within +-0.020 (TOST: 90% interval [-0.015, +0.012])" in (
+        comparisons.describe(near)
+    )
+    far = _cmp(-0.03, 0.03, 0.5, 1, eq=(-0.025, 0.012))
+    assert comparisons.describe(far).endswith(": not distinguishable")
+    won = _cmp(0.01, 0.03, 0.001, 1, eq=(0.012, 0.015))
+    assert comparisons.describe(won).endswith(": I beats J")  # a win is not "equivalent"
+    text = comparisons.describe(won)
+    assert "I - J = +0.020 [+0.010, +0.030] over 24 adjectives (1 higher, 1 lower)" in text
+    assert "Wilcoxon p = 0.001, bootstrap p = 0.001, Holm p = 0.001" in text
+
+
+def _evidence(rng, shifts: dict[str, float]) -> dict[str, Evidence]:
+    evs = simulate(rng, "folds", tuple(shifts.values()))
+    return {k: Evidence([ev]) for k, ev in zip(shifts, evs, strict=True)}
+
+
+def test_claims_are_paired_holm_corrected_over_those_compared_and_judged() -> None:
+    rng = np.random.default_rng(11)
+    rows = {"I": 0.08, "A": 0.0, "G": 0.08, "J": 0.079}
+    evidence = _evidence(rng, rows)
+    groups = [_group(r, r) for r in rows]
+    lines = {c.claim: c for c in comparisons.claims(groups, evidence)}
+    assert [c.claim for c in comparisons.claims(groups, evidence)] == [
+        f"{c.better} {c.relation} {c.worse}" for c in comparisons.CLAIMS
+    ]
+    assert lines["I > A"].result == "supported"
+    assert lines["I > G"].result == "not distinguishable"
+    assert lines["I >= J"].result.startswith("supported") or "loss beyond" in lines["I >= J"].result
+    assert lines["I > H"].result == "not run" and lines["I > H"].detail == "row H not run"
+    assert lines["L > K"].detail == "row L and K not run"
+    # Holm's family is the three claims compared (I > A, I > G, I >= J), nothing else.
+    compared = [
+        stats.compare(a, evidence[a].evaluations, b, evidence[b].evaluations)
+        for a, b in (("I", "A"), ("I", "G"), ("I", "J"))
+    ]
+    for line, cmp in zip(("I > A", "I > G", "I >= J"), stats.with_holm(compared), strict=True):
+        assert f"Holm p = {cmp.p_holm:.3g}:" in lines[line].detail
+    # Another split for A: not compared paired, and the line says why.
+    moved = {
+        adj: stats.HeldOut(h.object_id + 1000, h.label, h.score)
+        for adj, h in evidence["A"].evaluations[0].items()
+    }
+    lines = {c.claim: c for c in comparisons.claims(groups, evidence | {"A": Evidence([moved])})}
+    assert lines["I > A"].result == "not compared"
+    assert lines["I > A"].detail.startswith("not paired: different test objects")
+    lines = {c.claim: c for c in comparisons.claims(groups, evidence | {"A": Evidence([], "x")})}
+    assert (lines["I > A"].result, lines["I > A"].detail) == ("not compared", "x")
+
+
+def test_selection_family_counts_the_candidate_row_pairs() -> None:
+    haptic = [_group(f"h{i}") for i in range(3)] + [_group("r", model="random")]
+    visual = [_group(f"v{i}", modality="visual") for i in range(2)]
+    assert comparisons.selection_family(haptic + visual) == 6
+    paper = [_group("I", "I"), *haptic, *visual]  # the paper's settings are preferred
+    assert comparisons.selection_family(paper) == 2
+    assert comparisons.selection_family([]) == 1
+
+
+def test_best_of_rows_no_longer_inflates_fig5_claims() -> None:
+    """Three haptic and three visual rows, all alike in the population; the best of each by
+    test mean AUC (as Fig. 5 picks them) compared on Fig. 5's adjectives. Over the family of
+    every candidate pair the rate of data sets with any claim stays at or below 0.05."""
+    rng = np.random.default_rng(41)
+    n_sets, found = 150, {1: 0, 9: 0}
+    names = ["h0", "h1", "h2", "v0", "v1", "v2"]
+    groups = [_group(n, modality="visual" if n[0] == "v" else "haptic") for n in names]
+    assert comparisons.selection_family(groups) == 9
+    for _ in range(n_sets):
+        evidence = _evidence(rng, dict.fromkeys(names, 0.0))
+        mean = {n: np.mean([h.value for h in evidence[n].evaluations[0].values()]) for n in names}
+        haptic = max(groups[:3], key=lambda g: mean[g.key])
+        visual = max(groups[3:], key=lambda g: mean[g.key])
+        for candidates in found:
+            lines = comparisons.by_modality(haptic, visual, evidence, candidates)
+            found[candidates] += any(c.result != "not distinguishable" for c in lines)
+    assert found[9] / n_sets <= 0.05, found
+    assert found[1] >= found[9], found
+
+
+def test_fig5_line_says_how_its_rows_were_picked_and_when_there_is_no_interval() -> None:
+    rng = np.random.default_rng(12)
+    evidence = _evidence(rng, {"h": 0.0, "v": 0.0})
+    h, v = _group("h"), _group("v", modality="visual")
+    line = comparisons.by_modality(h, v, evidence, 6)[0]
+    assert line.claim == "thick: better by sight"
+    assert "(99.79% interval: Bonferroni over 4 adjectives x 6 candidate row pair(s)" in line.detail
+    one = {"thick": stats.HeldOut(np.arange(4), np.array([1, 0, 0, 0]), np.arange(4.0))}
+    lines = comparisons.by_modality(h, v, {"h": Evidence([one]), "v": Evidence([one])})
+    assert lines[0].result == "not distinguishable"
+    assert lines[0].detail == "v - h = +0.000 (no interval: 1 positive test object)"
+    assert lines[1].result == "not run"  # thin is not among these rows' adjectives
+    assert comparisons.by_modality(None, v, evidence)[0].result == "not run"
+
+
+@pytest.mark.parametrize("relation", [">", ">="])
+def test_every_claim_relation_is_judged(relation: str) -> None:
+    assert {c.relation for c in comparisons.CLAIMS} == {">", ">="}
+    assert comparisons.judge(relation, _cmp(-0.05, -0.01, 0.001, -5)) == "contradicted"
