@@ -103,6 +103,7 @@ def test_selection_family_counts_the_candidate_row_pairs() -> None:
     assert comparisons.selection_family([]) == 1
 
 
+@pytest.mark.simulation
 def test_best_of_rows_no_longer_inflates_fig5_claims() -> None:
     """Three haptic and three visual rows, all alike in the population; the best of each by
     test mean AUC (as Fig. 5 picks them) compared on Fig. 5's adjectives. Over the family of

@@ -51,6 +51,7 @@ class _resampling:
         stats.RESAMPLING = self.before
 
 
+@pytest.mark.simulation
 def test_joint_bootstrap_covers_where_adjectives_share_objects_and_independent_does_not() -> None:
     # Pooled folds: every adjective tests every object; half of an object effect's variance is
     # the object's own difficulty in every adjective, so adjectives' AUCs covary.
@@ -62,6 +63,7 @@ def test_joint_bootstrap_covers_where_adjectives_share_objects_and_independent_d
     assert independent["fwer"] >= 0.15, independent
 
 
+@pytest.mark.simulation
 def test_independent_adjectives_cover_either_way_and_keep_false_positives_down() -> None:
     for how in ("joint", "independent"):
         found = _known_answers("folds", 0.0, 150, n_adjectives=8, resampling=how)
@@ -71,6 +73,7 @@ def test_independent_adjectives_cover_either_way_and_keep_false_positives_down()
 
 
 @pytest.mark.slow
+@pytest.mark.simulation
 def test_five_folds_24_adjectives_cover_keep_false_positives_down_and_detect_a_tenth() -> None:
     found = _known_answers("folds", 0.5, N_SETS)
     assert 0.92 <= found["coverage"] <= 0.985, found
@@ -78,6 +81,7 @@ def test_five_folds_24_adjectives_cover_keep_false_positives_down_and_detect_a_t
     assert found["power"] >= 0.80, found
 
 
+@pytest.mark.simulation
 def test_published_split_undercovers_because_most_adjectives_have_one_positive_object() -> None:
     """A known limit, not a goal: 15 of the published split's 24 adjectives test one positive
     object, whose draw never varies, so the mean's interval is too narrow even when the
