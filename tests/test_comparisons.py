@@ -144,3 +144,82 @@ def test_fig5_line_says_how_its_rows_were_picked_and_when_there_is_no_interval()
 def test_every_claim_relation_is_judged(relation: str) -> None:
     assert {c.relation for c in comparisons.CLAIMS} == {">", ">="}
     assert comparisons.judge(relation, _cmp(-0.05, -0.01, 0.001, -5)) == "contradicted"
+
+
+def _swept(key: str, sweep: str = "s", **overrides: str) -> Group:
+    run = Run(key, 0, 0, 0.5, {}, "data", sweep)
+    return Group(key, key, "haptic_cnn", "", None, "paper", "", "folds", "haptic", "m", 24,
+                 (), {}, dict(overrides), {(0, -1): run})  # fmt: skip
+
+
+def test_ablation_names_configurations_by_what_differs_and_pairs_each_axis() -> None:
+    rng = np.random.default_rng(13)
+    shifts = {"c1h": 0.0, "c10h": 0.1, "c1l": 0.0, "c10l": 0.1, "lone": 0.0, "row": 0.0}
+    evidence = _evidence(rng, shifts)
+    groups = [
+        _swept("c1h", combine="1", loss="hinge", seed="0", **{"split.fold": "0"}),
+        _swept("c10h", combine="10", loss="hinge", seed="1"),
+        _swept("c1l", combine="1", loss="logistic"),
+        _swept("c10l", combine="10", loss="logistic", **{"hydra.job": "x"}),
+        _swept("lone", sweep="other", combine="5"),
+        _group("row", "I"),  # a Table I row: not in the ablation
+    ]
+    view = comparisons.ablation(groups, evidence)
+    assert view.axes == {"combine": ["1", "10"], "loss": ["hinge", "logistic"]}
+    assert view.configs[("10", "hinge")].key == "c10h" and len(view.configs) == 4
+    assert view.name(("10", "hinge")) == "combine=10 loss=hinge"
+    (combine, c_cmp, c_n), (loss, l_cmp, l_n) = view.effects
+    assert (combine, c_cmp.a, c_cmp.b, c_n) == ("combine", "combine=10", "combine=1", 2)
+    assert (loss, l_cmp.a, l_cmp.b, l_n) == ("loss", "loss=logistic", "loss=hinge", 2)
+    # combinations pooled: combine=10 over both losses against combine=1 over both
+    pooled = stats.compare(
+        "combine=10", [evidence["c10h"].evaluations[0], evidence["c10l"].evaluations[0]],
+        "combine=1", [evidence["c1h"].evaluations[0], evidence["c1l"].evaluations[0]],
+    )  # fmt: skip
+    holm = stats.with_holm([pooled, l_cmp])
+    assert c_cmp.difference == pooled.difference and c_cmp.p_holm == holm[0].p_holm
+    assert c_cmp.verdict == "combine=10 beats combine=1"
+    assert view.unpaired == []
+    # Levels in numeric order; a level pair with no paired combination is listed, with why.
+    moved = {j: stats.HeldOut(h.object_id + 500, h.label, h.score)
+             for j, h in evidence["c10l"].evaluations[0].items()}  # fmt: skip
+    three = [*groups[:4], _swept("c2h", combine="2", loss="hinge")]
+    evidence3 = evidence | {"c2h": Evidence([moved])}
+    view = comparisons.ablation(three, evidence3)
+    assert view.axes["combine"] == ["1", "2", "10"]
+    assert ("combine", "combine=2 vs combine=1", "not paired: different test objects (absorbent:"
+            " another split rule, seed or fold)") in view.unpaired  # fmt: skip
+    assert ("combine", "combine=10 vs combine=2", "not paired: different test objects (absorbent:"
+            " another split rule, seed or fold)") in view.unpaired  # fmt: skip
+    missing = ("combine", "combine=2 vs combine=1", "no combination of the other axes has both")
+    assert missing not in view.unpaired
+    assert comparisons.ablation(groups[4:], evidence) is None  # no sweep of two
+    alike = [_swept("x1", a="1"), _swept("x2", a="1")]
+    assert comparisons.ablation(alike, _evidence(rng, {"x1": 0.0, "x2": 0.0})) is None
+    assert comparisons._level_key("10") < comparisons._level_key("9x")
+
+
+def test_friedman_ranks_the_largest_set_on_the_same_objects() -> None:
+    rng = np.random.default_rng(14)
+    evidence = _evidence(rng, {"A": 0.0, "I": 0.1, "G": 0.05})
+    other = simulate(rng, "published", (0.0,))[0]
+    evidence["K"] = Evidence([other])
+    evidence["X"] = Evidence([], "no scores")
+    groups = [_group(r, r) for r in ("A", "I", "G", "K", "X")]
+    assert [g.key for g in comparisons.friedman_set(groups, evidence)] == ["A", "I", "G"]
+    result = comparisons.friedman(groups, evidence)
+    adjectives = sorted(evidence["A"].evaluations[0])
+    aucs = np.array([[evidence[r].evaluations[0][j].value for j in adjectives] for r in "AIG"])
+    want = stats.friedman(["A", "I", "G"], aucs)
+    assert result.names == ("A", "I", "G") and result.statistic == pytest.approx(want.statistic)
+    assert result.mean_ranks == pytest.approx(want.mean_ranks)
+    assert comparisons.friedman(groups[:2] + groups[3:], evidence) is None
+    assert comparisons.friedman_set(groups[:2], evidence) == []
+
+
+def test_labels_name_rows_variants_and_methods() -> None:
+    assert comparisons.label(_group("I", "I")) == "I"
+    varied = _group("I", "I")
+    varied.differences = ("schedule=quick",)
+    assert comparisons.label(varied) == "(I)"
+    assert comparisons.label(_group("k")) == "k"

@@ -317,3 +317,80 @@ def test_percentile_interval_need_not_contain_its_estimate() -> None:
     assert (iv.low, iv.high) == pytest.approx((0.11, 0.49))
     assert not iv.low <= iv.estimate <= iv.high
     assert str(iv) == "0.900 [0.110, 0.490]"
+
+
+def test_another_metric_is_recomputed_on_each_replicates_units() -> None:
+    from sklearn.metrics import f1_score
+
+    obj = np.repeat(np.arange(6), 2)
+    label = (obj < 3).astype(int)
+    score = np.random.default_rng(8).normal(label - 0.3, 1.0, len(obj))
+    held = stats.HeldOut(obj, label, score, "f1")
+    assert held.value == pytest.approx(f1_score(label, score > 0))
+    boots = stats.bootstrap(held, "hard", 50, 3)
+    cp = stats._draws("hard+", (0, 1, 2), 50, 3, stats.RESAMPLING)
+    cn = stats._draws("hard-", (3, 4, 5), 50, 3, stats.RESAMPLING)
+    for b in range(50):
+        times = np.r_[cp[b], cn[b]][obj].astype(int)  # each unit as often as its object
+        want = f1_score(np.repeat(label, times), np.repeat(score, times) > 0)
+        assert boots[b] == pytest.approx(want)
+    assert stats.bootstrap(held, "hard", 50, 3) is boots  # kept on the evaluation
+
+
+def test_mean_interval_is_the_mean_over_adjectives_then_evaluations() -> None:
+    rng = np.random.default_rng(9)
+    a, b = simulate(rng, "folds", (0.0, 0.05), 0.0, 3)
+    estimate, replicates = stats.bootstrap_mean([a, b], 200, 1)
+    per = [np.mean([t.value for t in ev.values()]) for ev in (a, b)]
+    assert estimate == pytest.approx(np.mean(per))
+    boots = [np.mean([stats.bootstrap(t, j, 200, 1) for j, t in sorted(ev.items())], axis=0)
+             for ev in (a, b)]  # fmt: skip
+    assert replicates == pytest.approx(np.mean(boots, axis=0))
+    iv = stats.mean_interval([a, b], 200, 1)
+    assert (iv.low, iv.high) == pytest.approx(tuple(np.quantile(replicates, [0.025, 0.975])))
+    assert iv.estimate == pytest.approx(estimate)
+    wide = stats.percentile(estimate, replicates, level=0.99)
+    assert wide.low < iv.low < iv.high < wide.high
+    per_adjective = stats.adjective_intervals([a, b], 200, 1)
+    assert sorted(per_adjective) == sorted(a)
+    j = sorted(a)[0]
+    assert per_adjective[j].estimate == pytest.approx((a[j].value + b[j].value) / 2)
+    both = (stats.bootstrap(a[j], j, 200, 1) + stats.bootstrap(b[j], j, 200, 1)) / 2
+    assert per_adjective[j].low == pytest.approx(np.quantile(both, 0.025))
+
+
+def test_pairing_needs_the_same_adjectives_objects_and_evaluations() -> None:
+    rng = np.random.default_rng(10)
+    a, b = simulate(rng, "folds", (0.0, 0.0), 0.0, 3)
+    assert stats.unpaired_reason([a], [b]) is None
+    fewer = dict(list(b.items())[:2])
+    assert stats.unpaired_reason([a], [fewer]) == "different adjectives"
+    assert stats.unpaired_reason([a, a], [b, fewer]) == "different adjectives"
+    with pytest.raises(ValueError, match=r"^x vs y: not on the same test objects \(1 vs 2"):
+        stats.compare("x", [a], "y", [b, b])
+    with pytest.raises(ValueError, match="not on the same test objects"):
+        stats.adjective_difference([a], [b, b], sorted(a)[0])
+    cmp = stats.compare("x", [a], "y", [b], 200)
+    diffs = {j: a[j].value - b[j].value for j in sorted(a)}
+    assert cmp.a_better == tuple(j for j, d in diffs.items() if d > 0)
+    assert cmp.b_better == tuple(j for j, d in diffs.items() if d < 0)
+    assert cmp.signed_rank == pytest.approx(stats.signed_rank(np.array(list(diffs.values()))))
+    assert cmp.p == pytest.approx(stats.wilcoxon_p(np.array(list(diffs.values()))))
+    assert cmp.n_adjectives == 3 and (cmp.a, cmp.b) == ("x", "y")
+    replicates = stats.bootstrap_mean([a], 200)[1] - stats.bootstrap_mean([b], 200)[1]
+    assert cmp.p_bootstrap == pytest.approx(stats.bootstrap_p(replicates))
+    assert cmp.equivalence.low == pytest.approx(np.quantile(replicates, 0.05))
+
+
+def test_independent_draws_are_n_minus_1_of_n_per_adjective() -> None:
+    draws = stats._draws("hard+", (1, 2, 3), 500, 0, "independent")
+    assert set(draws.sum(axis=1)) == {2}
+    other = stats._draws("soft+", (1, 2, 3), 500, 0, "independent")
+    assert not np.array_equal(draws, other)  # each adjective on its own
+    assert not draws.flags.writeable
+
+
+def test_mixed_verdict_says_when_no_adjective_goes_one_way() -> None:
+    iv = stats.Interval(0.02, 0.01, 0.03)
+    cmp = stats.Comparison("I", "A", iv, 0.01, 3, 0.01, 0.01, -2.0, (), ("a", "b"))
+    assert cmp.verdict == "mixed: I better on 0, A better on 2 (a, b)"
