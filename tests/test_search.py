@@ -366,3 +366,67 @@ def test_a_trials_runs_link_sorts_and_shows_validation_not_test_metrics(tiny_con
     plain = settings_from_config(tiny_config([]))
     experiment._log_view(views, plain)
     assert views.order_by == "metrics.`mean_auc`"
+
+
+def test_summary_run_trials_csv_and_storage_beside_the_store(tmp_path, mlflow_uri, capsys):
+    from tactile_exp.tracking import Tracker
+
+    assert search.default_storage(mlflow_uri) == (
+        f"sqlite:///{Path(mlflow_uri.removeprefix('sqlite:///')).parent / 'optuna.db'}"
+    )
+    served = search.default_storage("http://mlflow:5000")  # a server: beside the default store
+    assert served.startswith("sqlite:///") and served.endswith("/optuna.db")
+    storage = f"sqlite:///{tmp_path}/optuna.db"
+    assert search.trials_made("s2", storage) == 0
+    study = search.open_study(
+        "s2", storage, direction="maximize", sampler=optuna.samplers.RandomSampler(seed=1)
+    )
+    search.check_same_search(study, ["experiment=x"], "mean_val_f1")
+    space = search.search_space(
+        {"schedule.lr": "interval(0.001, 0.1)", "model.kernel_sizes": "choice([3,3],[5,5])"}
+    )
+    for score in (0.6, 0.8, 0.7):
+        study.tell(study.ask(space), score)
+    search.failed(study, study.ask(space), "ValueError: job failed")
+    assert search.trials_made("s2", storage) == 4
+    csv_text = search.trials_csv(study)
+    lines = csv_text.splitlines()
+    assert lines[0] == "number,state,value,model.kernel_sizes,schedule.lr,error"
+    assert lines[2].startswith("1,COMPLETE,0.800000,\"[") and lines[2].endswith(",")
+    assert lines[4].startswith("3,FAIL,,") and lines[4].endswith(",ValueError: job failed")
+    tracker = Tracker(mlflow_uri, "searches")
+    run_id = search.log_summary(study, tracker)
+    run = MlflowClient(mlflow_uri).get_run(run_id)
+    assert run.info.run_name == "study=s2" and run.info.status == "FINISHED"
+    tags = run.data.tags
+    assert (tags["run_level"], tags["search.study"], tags["search.objective"]) == (
+        "study", "s2", "mean_val_f1"
+    )  # fmt: skip
+    assert (tags["search.fixed_overrides"], tags["search.best_trial"]) == ("experiment=x", "1")
+    assert run.data.metrics == {
+        "n_trials": 4.0, "n_complete": 3.0, "best_value": 0.8, "best_trial": 1.0
+    }  # fmt: skip
+    best = study.best_trial.params
+    assert run.data.params == {k: search.as_override(v) for k, v in best.items()}
+    listed = {a.path for a in MlflowClient(mlflow_uri).list_artifacts(run_id)}
+    assert listed == {"trials.csv", "optimization_history.png", "param_importances.png"}
+    empty = search.open_study(
+        "s3", storage, direction="minimize", sampler=optuna.samplers.RandomSampler(seed=1)
+    )
+    run = MlflowClient(mlflow_uri).get_run(search.log_summary(empty, tracker))
+    assert run.data.metrics == {"n_trials": 0.0, "n_complete": 0.0} and not run.data.params
+    with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.direction: study 's3' in .* was made"):
+        search.open_study(
+            "s3", storage, direction="maximize", sampler=optuna.samplers.RandomSampler()
+        )
+    with pytest.raises(ConfigError, match=r"^study 's3': no finished trial yet"):
+        search.best_report(empty)
+    with pytest.raises(ConfigError, match=r"^study 'nope': not in .*; studies there: s2, s3"):
+        search.load_study("nope", storage)
+
+
+def test_a_jobs_return_value_becomes_a_finite_objective_or_nan():
+    assert search.objective_or_nan(0.75) == 0.75 and search.objective_or_nan("0.5") == 0.5
+    for bad in (None, "x", float("inf"), float("nan"), [1]):
+        assert math.isnan(search.objective_or_nan(bad))
+    assert search.as_override([[3, 3], 5]) == "[[3,3],5]" and search.as_override(0.1) == "0.1"
