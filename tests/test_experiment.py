@@ -242,7 +242,8 @@ def test_children_log_train_and_validation_auc_without_test_objects(tiny_config,
         assert np.isfinite([metrics["train_auc"], metrics["val_auc"]]).all()  # both logged
         assert metrics["n_val_objects"] >= 2 and metrics["n_val_positive_objects"] >= 1
         res = result.results[adjective]
-        assert res.diagnostics == {k: metrics[k] for k in ("train_auc", "val_auc")}
+        validation = ("val_auc", "val_average_precision", "val_f1")  # each listed metric
+        assert res.diagnostics == {k: metrics[k] for k in ("train_auc", *validation)}
         split = splits[adjective]
         assert set(res.objects) <= split.objects("test")  # test AUC: test objects only
         n_train = metrics["n_train_objects"] + metrics["n_val_objects"]
