@@ -223,3 +223,63 @@ def test_labels_name_rows_variants_and_methods() -> None:
     varied.differences = ("schedule=quick",)
     assert comparisons.label(varied) == "(I)"
     assert comparisons.label(_group("k")) == "k"
+
+
+def _clear(perfect: bool, first: int) -> stats.HeldOut:
+    """20 positive and 20 negative objects: AUC 1 (perfect) or 0.5 (interleaved)."""
+    pos = np.arange(20.0) + (100 if perfect else 0)
+    score = np.r_[pos, np.arange(20.0)]
+    return stats.HeldOut(first + np.arange(40), (np.arange(40) < 20).astype(int), score)
+
+
+def test_fig5_lines_for_every_case_at_the_family_level() -> None:
+    haptic = _group("h")
+    visual = _group("L", "L", modality="visual")
+    hv = {"thick": (False, True), "thin": (True, False), "squishy": (True, True)}
+    ev_h = {a: _clear(h, 100 * i) for i, (a, (h, _)) in enumerate(hv.items())}
+    ev_v = {a: _clear(v, 100 * i) for i, (a, (_, v)) in enumerate(hv.items())}
+    evidence = {"h": Evidence([ev_h]), "L": Evidence([ev_v])}
+    lines = comparisons.by_modality(haptic, visual, evidence, 3)
+    level = 1 - 0.05 / 12
+    rest = "(99.58% interval: Bonferroni over 4 adjectives x 3 candidate row pair(s), the rows "
+    rest += "picked by test mean AUC)"
+    want = []
+    for adjective, result in (("thick", "supported"), ("thin", "contradicted")):
+        iv = stats.adjective_difference([ev_v], [ev_h], adjective, level)
+        numbers = f"L - h = {iv.estimate:+.3f} [{iv.low:+.3f}, {iv.high:+.3f}] {rest}"
+        says = "sight" if adjective in ("thick", "thin") else "touch"
+        want.append(
+            comparisons.ClaimLine(f"{adjective}: better by {says}", "Fig. 5", result, numbers)
+        )
+    assert lines[:2] == want
+    assert lines[0].detail.startswith("L - h = +0.500 [+0.")
+    assert lines[2] == comparisons.ClaimLine(
+        "squishy: better by touch", "Fig. 5", "not distinguishable",
+        f"L - h = +0.000 [+0.000, +0.000] {rest}",
+    )  # fmt: skip
+    assert lines[3] == comparisons.ClaimLine(
+        "absorbent: better by touch", "Fig. 5", "not run",
+        "absorbent not among both rows' adjectives",
+    )  # fmt: skip
+    assert len(lines) == 4
+    # haptic better on squishy: supported; no rows, no scores, other objects: said so
+    squishy = {"squishy": _clear(True, 0)}
+    flat = {"squishy": _clear(False, 0)}
+    line = comparisons.by_modality(
+        haptic, visual, {"h": Evidence([squishy]), "L": Evidence([flat])}
+    )
+    assert line[2].result == "supported" and "(98.75% interval" in line[2].detail
+    none = comparisons.ClaimLine("thick: better by sight", "Fig. 5", "not run",
+                                 "needs a haptic and a visual row")  # fmt: skip
+    assert comparisons.by_modality(haptic, None, evidence)[0] == none
+    missing = {"h": Evidence([], "no scores.csv"), "L": evidence["L"]}
+    assert comparisons.by_modality(haptic, visual, missing)[0] == comparisons.ClaimLine(
+        "thick: better by sight", "Fig. 5", "not run", "no scores.csv"
+    )
+    missing = {"h": evidence["h"], "L": Evidence([], "no L scores")}
+    assert comparisons.by_modality(haptic, visual, missing)[1].detail == "no L scores"
+    moved = {a: stats.HeldOut(h.object_id + 1, h.label, h.score) for a, h in ev_v.items()}
+    other = comparisons.by_modality(haptic, visual, {"h": Evidence([ev_h]), "L": Evidence([moved])})
+    assert other[0] == comparisons.ClaimLine(
+        "thick: better by sight", "Fig. 5", "not compared", "not on the same test objects (thick)"
+    )

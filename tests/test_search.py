@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import signal
+import socket
 import sys
 from pathlib import Path
 
@@ -141,6 +142,11 @@ def test_resume_queues_interrupted_and_orphaned_trials_again(monkeypatch):
     search.claim(orphan)
     orphan.set_user_attr("pid", 2**22 + 1)  # above pid_max: no such process
     assert search.counted(study) == 2
+    assert broken.user_attrs == {"error": "ValueError: job failed"}
+    assert study.trials[stopped.number].user_attrs == {search.INTERRUPTED: True}
+    assert orphan.user_attrs["host"] == socket.gethostname()
+    assert study.trials[broken.number].state == optuna.trial.TrialState.FAIL
+    assert study.trials[stopped.number].state == optuna.trial.TrialState.FAIL
     assert search.resume(study) == 2
     assert search.resume(study) == 0  # queued once
     assert study.trials[orphan.number].state == optuna.trial.TrialState.FAIL
@@ -392,7 +398,7 @@ def test_summary_run_trials_csv_and_storage_beside_the_store(tmp_path, mlflow_ur
     csv_text = search.trials_csv(study)
     lines = csv_text.splitlines()
     assert lines[0] == "number,state,value,model.kernel_sizes,schedule.lr,error"
-    assert lines[2].startswith("1,COMPLETE,0.800000,\"[") and lines[2].endswith(",")
+    assert lines[2].startswith('1,COMPLETE,0.800000,"[') and lines[2].endswith(",")
     assert lines[4].startswith("3,FAIL,,") and lines[4].endswith(",ValueError: job failed")
     tracker = Tracker(mlflow_uri, "searches")
     run_id = search.log_summary(study, tracker)

@@ -194,7 +194,7 @@ def test_direction_case_a_worse_on_22_adjectives_with_two_big_wins_has_no_winner
             worse = good.copy()
             worse[-1] += 8 * (1 + j % 3)  # 8 to 24 positives fewer beat it: 0.5-1.5 AUC points
             a[name], b[name] = _held(worse, first), _held(good, first)
-    cmp = stats.with_holm([stats.compare("A", [a], "B", [b], 2000)])[0]
+    cmp = stats.with_holm([stats.compare("A", [a], "B", [b], 500)])[0]
     assert cmp.difference.low > 0 and cmp.p < 0.01 and cmp.p_holm < 0.05, cmp  # old rule: "A"
     assert cmp.signed_rank < 0 and cmp.a_better == ("adj00", "adj01") and len(cmp.b_better) == 22
     assert cmp.verdict.startswith("mixed: A better on 2 (adj00, adj01), B better on 22 (adj02")
@@ -394,3 +394,21 @@ def test_mixed_verdict_says_when_no_adjective_goes_one_way() -> None:
     iv = stats.Interval(0.02, 0.01, 0.03)
     cmp = stats.Comparison("I", "A", iv, 0.01, 3, 0.01, 0.01, -2.0, (), ("a", "b"))
     assert cmp.verdict == "mixed: I better on 0, A better on 2 (a, b)"
+
+
+def test_adjective_intervals_average_evaluations_and_refuse_when_any_has_one_object() -> None:
+    obj = np.repeat(np.arange(6), 2)
+    score = np.random.default_rng(15).normal(0, 1, len(obj))
+    fine = stats.HeldOut(obj, (obj < 3).astype(int), score)
+    thin = stats.HeldOut(obj, (obj < 1).astype(int), score)
+    out = stats.adjective_intervals([{"a": fine, "b": fine}, {"a": thin}], 100, 2)
+    assert out["a"] == stats.Interval((fine.auc + thin.auc) / 2, out["a"].low, out["a"].high,
+                                      "1 positive test object")  # fmt: skip
+    assert np.isnan(out["a"].low) and np.isnan(out["a"].high)
+    assert out["b"].estimate == pytest.approx(fine.auc) and not out["b"].missing
+    assert out["b"].low == pytest.approx(np.quantile(stats.bootstrap(fine, "b", 100, 2), 0.025))
+    diff = stats.adjective_difference([{"a": thin}], [{"a": thin}], "a", level=0.5)
+    assert (diff.estimate, diff.missing) == (0.0, "1 positive test object")
+    narrow = stats.adjective_difference([{"a": fine}], [{"a": fine}], "a", level=0.5)
+    assert (narrow.low, narrow.high, narrow.missing) == (0.0, 0.0, "")
+    assert str(stats.no_interval(0.5, "why")) == "0.500 (no interval: why)"
