@@ -1,5 +1,6 @@
-"""Known answers for the report's statistics: scipy's values, Demsar's table, and coverage,
-false-positive rate and power on 400 simulated data sets at PHAC-2's sizes (stats_fixture)."""
+"""Known answers for the report's statistics: scipy's values, Demsar's tables and worked example,
+exact constructions (the direction case), and coverage, false-positive rate and power on simulated
+data sets at PHAC-2's sizes (stats_fixture), for the joint and the independent object bootstrap."""
 
 from __future__ import annotations
 
