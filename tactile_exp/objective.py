@@ -10,6 +10,7 @@ the validation metrics it lists in ``metrics``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -26,20 +27,17 @@ TEST_METRICS = ("mean_auc", "auc")
 REDUCERS: dict[str, Callable[[list[float]], float]] = {"mean": np.mean, "min": min}
 
 
-def _objective(reduce: str, key: str) -> Callable[[Validation], float]:
-    def objective(validation: Validation) -> float:
-        """The adjectives' validation values of one metric, reduced; NaN when none has one
-        (validation.fraction=0, or no held-out object of a class)."""
-        values = [v[key] for v in validation.values() if key in v]
-        return float(REDUCERS[reduce](values)) if values else float("nan")
-
-    return objective
+def reduced(reduce: str, key: str, validation: Validation) -> float:
+    """The adjectives' validation values of one metric, reduced; NaN when none has one
+    (validation.fraction=0, or no held-out object of a class)."""
+    values = [v[key] for v in validation.values() if key in v]
+    return float(REDUCERS[reduce](values)) if values else float("nan")
 
 
 for _name in METRICS.names():
     for _reduce in REDUCERS:
         _key = METRICS.build(_name).key
-        OBJECTIVES.register(f"{_reduce}_val_{_key}")(_objective(_reduce, _key))
+        OBJECTIVES.register(f"{_reduce}_val_{_key}")(functools.partial(reduced, _reduce, _key))
 
 
 def metric_key(name: str) -> str:

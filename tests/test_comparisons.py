@@ -72,7 +72,12 @@ def test_claims_are_paired_holm_corrected_over_those_compared_and_judged() -> No
     ]
     assert lines["I > A"].result == "supported"
     assert lines["I > G"].result == "not distinguishable"
-    assert lines["I > H"].result == "not run" and lines["I > H"].detail == "row H not run"
+    assert lines["I > H"] == comparisons.ClaimLine(
+        "I > H", "combining instances beats scoring each alone", "not run", "row H not run"
+    )
+    wide = {c.claim: c for c in comparisons.claims(groups, evidence, margin=0.5)}
+    assert wide["I >= J"].result == "supported (not worse by 0.500 or more)"
+    assert ": equivalent within +-0.500 (TOST: 90% interval [" in wide["I >= J"].detail
     assert lines["L > K"].detail == "row L and K not run"
     # Holm's family is the three claims compared (I > A, I > G, I >= J), nothing else.
     compared = [
@@ -92,7 +97,9 @@ def test_claims_are_paired_holm_corrected_over_those_compared_and_judged() -> No
     assert lines["I > A"].result == "not compared"
     assert lines["I > A"].detail.startswith("not paired: different test objects")
     lines = {c.claim: c for c in comparisons.claims(groups, evidence | {"A": Evidence([], "x")})}
-    assert (lines["I > A"].result, lines["I > A"].detail) == ("not compared", "x")
+    assert lines["I > A"] == comparisons.ClaimLine(
+        "I > A", "deep (ConvNet) beats hand-designed features", "not compared", "x"
+    )
 
 
 def test_selection_family_counts_the_candidate_row_pairs() -> None:
@@ -135,8 +142,10 @@ def test_fig5_line_says_how_its_rows_were_picked_and_when_there_is_no_interval()
     assert "(99.79% interval: Bonferroni over 4 adjectives x 6 candidate row pair(s)" in line.detail
     one = {"thick": stats.HeldOut(np.arange(4), np.array([1, 0, 0, 0]), np.arange(4.0))}
     lines = comparisons.by_modality(h, v, {"h": Evidence([one]), "v": Evidence([one])})
-    assert lines[0].result == "not distinguishable"
-    assert lines[0].detail == "v - h = +0.000 (no interval: 1 positive test object)"
+    assert lines[0] == comparisons.ClaimLine(
+        "thick: better by sight", "Fig. 5", "not distinguishable",
+        "v - h = +0.000 (no interval: 1 positive test object)",
+    )  # fmt: skip
     assert lines[1].result == "not run"  # thin is not among these rows' adjectives
     assert comparisons.by_modality(None, v, evidence)[0].result == "not run"
 

@@ -30,3 +30,5 @@ def test_objectives_reduce_the_adjectives_that_have_the_metric() -> None:
     assert math.isnan(objective.value("min_val_auc", {}))
     assert objective.metric_key("mean_val_average_precision") == "average_precision"
     assert objective.metric_key("min_val_auc") == "auc"
+    assert objective.metric_key("mean_val_val_f1") == "val_f1"  # the first "_val_" splits
+    assert objective.reduced("min", "f1", VALIDATION) == pytest.approx(0.2)

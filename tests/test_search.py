@@ -180,6 +180,12 @@ def test_best_prints_overrides_and_the_final_command(tmp_path):
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.study_name: study 's1' was run with"):
         search.check_same_search(study, fixed, "mean_val_auc")
     assert search.main(["best", "s1", "--storage", storage]) == 0
+    import logging
+
+    assert logging.getLogger("optuna").level == logging.WARNING
+    with pytest.raises(SystemExit) as no_command:
+        search.main([])
+    assert no_command.value.code == 2
     with pytest.raises(SystemExit) as exit_info:
         search.main(["best", "nope", "--storage", storage])
     assert exit_info.value.code == 2

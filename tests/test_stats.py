@@ -206,6 +206,7 @@ def test_signed_rank_and_bootstrap_p_known_answers() -> None:
     # |d| ranks 1, 2, 3.5, 3.5 (tied), zero dropped: W+ = 1 + 3.5, W- = 2 + 3.5
     assert stats.signed_rank(np.array([0.1, -0.2, 0.3, 0.0, -0.3])) == pytest.approx(-1.0)
     assert stats.signed_rank(np.zeros(3)) == 0.0
+    assert stats.signed_rank(np.array([1.0, -0.5])) == pytest.approx(1.0)  # 2 - 1
     # 3 of 9 replicates at or below 0: 2 * (3 + 1) / 10
     assert stats.bootstrap_p(np.array([-1, 0, 0, 1, 2, 3, 4, 5, 6.0])) == pytest.approx(0.8)
     assert stats.bootstrap_p(np.ones(99)) == pytest.approx(0.02)  # never 0
@@ -371,6 +372,8 @@ def test_pairing_needs_the_same_adjectives_objects_and_evaluations() -> None:
         stats.compare("x", [a], "y", [b, b])
     with pytest.raises(ValueError, match="not on the same test objects"):
         stats.adjective_difference([a], [b, b], sorted(a)[0])
+    same = stats.compare("x", [a], "y", [a], 200)
+    assert (same.a_better, same.b_better, same.signed_rank, same.p) == ((), (), 0.0, 1.0)
     cmp = stats.compare("x", [a], "y", [b], 200)
     diffs = {j: a[j].value - b[j].value for j in sorted(a)}
     assert cmp.a_better == tuple(j for j, d in diffs.items() if d > 0)
