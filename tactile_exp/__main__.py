@@ -42,7 +42,7 @@ def main(cfg: DictConfig) -> float:
                 cfg, choices, sweep_id, Path(hc.runtime.output_dir), tuple(hc.overrides.task)
             )
             # The configured validation objective, never the test AUC: any sweeper may select on it.
-            return value(settings.objective, run(settings).val_aucs)
+            return value(settings.objective, run(settings).validation)
     except termination.Terminated:
         if hc.mode != RunMode.MULTIRUN:
             raise

@@ -93,6 +93,11 @@ class Settings:
     min_objects: int | None = None  # labels.min_objects: see `data.splits.label_splits`
 
     @property
+    def is_trial(self) -> bool:
+        """A search trial's job: it logs and shows no test metric (the study's final run does)."""
+        return self.study_tags.get("search.role") == "trial"
+
+    @property
     def split_key(self) -> str:
         """The split rule with its parameters: what a stored model's training key records."""
         params = ",".join(f"{k}={v}" for k, v in sorted(self.split_params.items()))

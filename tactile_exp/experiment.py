@@ -32,14 +32,10 @@ class JobResult:
     results: dict[str, AdjectiveResult]  # fitted pipelines released: kept in their runs
     means: dict[str, float] = field(default_factory=dict)  # mean_<key> over adjectives, ...
     skipped: bool = False
-    # Per adjective, the held-out validation objects' metrics (those defined on them: AUC
+    # Per adjective, the held-out validation objects' metrics by key (those defined on them: AUC
     # where they hold both classes): what the job's objective is computed from
     # (tactile_exp.objective); read back from the runs when the job is skipped.
-    val: dict[str, dict[str, float]] = field(default_factory=dict)
-
-    @property
-    def val_aucs(self) -> dict[str, float]:
-        return {a: m["auc"] for a, m in self.val.items() if "auc" in m}
+    validation: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -> dict[str, str]:
@@ -79,6 +75,8 @@ def run(settings: Settings) -> JobResult:
     if settings.tracking.skip_finished:
         identity = DATA_SOURCES.build(settings.data.name, **settings.data.params).identity()
         done = recording.finished_job(tracker, settings, identity)
+        if done is not None and not settings.is_trial and not tracker.child_metrics(done, "auc"):
+            done = None  # a search trial's job: it logged no test metric, so run it again
         if done is not None:
             log.info(
                 "skipping %s: run %s already FINISHED with this config on this data file",
@@ -86,8 +84,8 @@ def run(settings: Settings) -> JobResult:
                 done,
             )
             recording.log_view(tracker, settings)
-            val = recording.val_metrics(tracker, done)
-            return JobResult(done, {}, skipped=True, val=val)
+            validation = recording.val_metrics(tracker, done, settings.metrics)
+            return JobResult(done, {}, skipped=True, validation=validation)
     tracker.end_stale_runs(settings.config_hash)
     dataset, modality, splits = open_data(settings)
     with recording.job_run(tracker, settings) as parent_id:
@@ -95,23 +93,30 @@ def run(settings: Settings) -> JobResult:
         recording.record_data(tracker, parent_id, dataset, label_notes(settings, dataset, splits))
         results: dict[str, AdjectiveResult] = {}
         headline = metrics.METRICS.build(settings.metrics[0])
+        trial = settings.is_trial
+        # A search trial shows and logs its validation AUC only: test metrics wait for the
+        # study's final evaluation.
+        shown, label = ("auc", "validation AUC") if trial else (headline.key, headline.label)
         for i, result in enumerate(_adjectives(settings, tracker, parent_id, dataset, splits), 1):
             results[result.adjective] = replace(result, pipeline=None)  # kept in its run
+            values = result.sides["val"].metrics if trial and "val" in result.sides else {}
+            shown_value = values.get("auc", float("nan")) if trial else result.metrics[shown]
             log.info(
                 "[%d/%d] %s %s %.3f (%.1f s)",
                 i,
                 len(splits),
                 result.adjective,
-                headline.label,
-                result.metrics[headline.key],
+                label,
+                shown_value,
                 result.sizes["seconds"],
             )
         means = recording.record_summary(tracker, parent_id, settings, dataset, results)
-        key, label = headline.key, headline.label
-        log.info("mean %s over %d adjectives: %.4f", label, len(results), means[f"mean_{key}"])
-    val = {a: r.sides["val"].metrics for a, r in results.items() if "val" in r.sides}
+        if not trial:
+            key = headline.key
+            log.info("mean %s over %d adjectives: %.4f", label, len(results), means[f"mean_{key}"])
+    validation = {a: r.sides["val"].metrics for a, r in results.items() if "val" in r.sides}
     recording.log_view(tracker, settings)
-    return JobResult(parent_id, results, means, val=val)
+    return JobResult(parent_id, results, means, validation=validation)
 
 
 def _adjectives(

@@ -1,35 +1,50 @@
 """What a job returns to Hydra (issue 28): a metric of the held-out validation objects only.
 
 An optimising sweeper (``search=...``) selects on whatever the job returns, so the return value is
-computed from the per-adjective validation AUCs alone (``validation.fraction`` held-out training
-objects, never a test object): the signature admits no test score. The test AUC stays in MLflow.
+computed from the per-adjective validation metrics alone (``validation.fraction`` held-out
+training objects, never a test object): the signature admits no test score. The test metrics
+stay in MLflow. Every registered metric (``tactile_exp.metrics``) gives two objectives,
+``mean_val_<key>`` and ``min_val_<key>`` (``mean_val_auc``, ``min_val_f1``, ...); a job computes
+the validation metrics it lists in ``metrics``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import functools
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from tactile_exp.metrics import METRICS
 from tactile_exp.registry import Registry
 
+Validation = Mapping[str, Mapping[str, float]]  # adjective -> metric key -> validation value
 OBJECTIVES: Registry[float] = Registry("objective")
 # Metrics of the test objects: named in the error when a config asks for one.
 TEST_METRICS = ("mean_auc", "auc")
+# How an objective reduces the adjectives' values: the mean, or the worst adjective's (a
+# configuration good for every adjective).
+REDUCERS: dict[str, Callable[[list[float]], float]] = {"mean": np.mean, "min": min}
 
 
-@OBJECTIVES.register("mean_val_auc")
-def mean_val_auc(val_aucs: Mapping[str, float]) -> float:
-    """Mean validation AUC over the adjectives whose held-out objects hold both classes."""
-    return float(np.mean(list(val_aucs.values()))) if val_aucs else float("nan")
+def reduced(reduce: str, key: str, validation: Validation) -> float:
+    """The adjectives' validation values of one metric, reduced; NaN when none has one
+    (validation.fraction=0, or no held-out object of a class)."""
+    values = [v[key] for v in validation.values() if key in v]
+    return float(REDUCERS[reduce](values)) if values else float("nan")
 
 
-@OBJECTIVES.register("min_val_auc")
-def min_val_auc(val_aucs: Mapping[str, float]) -> float:
-    """The worst adjective's validation AUC: a configuration good for every adjective."""
-    return float(min(val_aucs.values())) if val_aucs else float("nan")
+for _name in METRICS.names():
+    for _reduce in REDUCERS:
+        _key = METRICS.build(_name).key
+        OBJECTIVES.register(f"{_reduce}_val_{_key}")(functools.partial(reduced, _reduce, _key))
 
 
-def value(name: str, val_aucs: Mapping[str, float]) -> float:
-    """Objective ``name`` of a job's per-adjective validation AUCs (NaN when there are none)."""
-    return OBJECTIVES[name](val_aucs)
+def metric_key(name: str) -> str:
+    """The metric key objective ``name`` reads (``mean_val_f1`` -> ``f1``)."""
+    return name.split("_val_", 1)[1]
+
+
+def value(name: str, validation: Validation) -> float:
+    """Objective ``name`` of a job's per-adjective validation metrics (NaN when there are none)."""
+    return OBJECTIVES[name](validation)

@@ -69,9 +69,15 @@ def finished_job(tracker: Tracker, settings: Settings, data_identity: str) -> st
     return tracker.finished_run(settings.config_hash, data_identity=data_identity)
 
 
-def val_metrics(tracker: Tracker, parent_id: str) -> dict[str, dict[str, float]]:
-    """A finished job's per-adjective validation metrics (``auc``), from its adjectives' runs."""
-    return {a: {"auc": v} for a, v in tracker.child_metrics(parent_id, "val_auc").items()}
+def val_metrics(
+    tracker: Tracker, parent_id: str, names: tuple[str, ...]
+) -> dict[str, dict[str, float]]:
+    """A finished job's per-adjective validation metrics (``names``), from its adjectives' runs."""
+    out: dict[str, dict[str, float]] = {}
+    for key in (metrics.METRICS.build(n).key for n in names):
+        for adjective, v in tracker.child_metrics(parent_id, f"val_{key}").items():
+            out.setdefault(adjective, {})[key] = v
+    return out
 
 
 @contextmanager
@@ -143,12 +149,13 @@ def record_adjective(
         )
         result = core.fit_adjective(settings, dataset, split, cache, progress=epoch_logger)
         others = side_metrics(result)
-        tracker.log_metrics(
-            run_id, {**result.metrics, **result.sizes, **others, **result.preprocess}
-        )
+        # A search trial logs no test metric and no test score: what selects stays blind to them.
+        tested = {} if settings.is_trial else result.metrics
+        tracker.log_metrics(run_id, {**tested, **result.sizes, **others, **result.preprocess})
         log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in others.items()))
         tracker.log_curves(run_id, result.history)
-        tracker.log_text(run_id, scores_table(result.test), scores_file.NAME)
+        if not settings.is_trial:
+            tracker.log_text(run_id, scores_table(result.test), scores_file.NAME)
         # The run turns FINISHED only after the pipeline is written, and lookups take FINISHED
         # runs only, so a job killed while writing leaves nothing reusable.
         store.log_folder(tracker, run_id, "", pipeline_of(result).save)
@@ -184,7 +191,12 @@ def record_summary(
     results: Mapping[str, core.AdjectiveResult],
 ) -> dict[str, float]:
     """The job's metrics (``mean_<key>``, ``<key>.<adjective>``, the side means, the interval),
-    its per-adjective table and ROC figure; returns the metrics logged."""
+    its per-adjective table and ROC figure; returns the metrics logged. A search trial's job logs
+    the side means alone: its test metrics wait for the study's final evaluation."""
+    if settings.is_trial:
+        logged = side_means(results)
+        tracker.log_metrics(run_id, logged)
+        return logged
     logged = metrics.summary({a: r.metrics for a, r in results.items()})
     held_out = {
         a: stats.HeldOut(r.test.objects, r.test.y, r.test.scores) for a, r in results.items()
@@ -233,13 +245,15 @@ def side_means(results: Mapping[str, core.AdjectiveResult]) -> dict[str, float]:
 
 
 def log_view(tracker: Tracker, settings: Settings) -> None:
-    """The last lines of a job's log: where its sweep's runs table is, with its numbers."""
-    columns = [canonical_column("metrics", "mean_auc")]
+    """The last lines of a job's log: where its sweep's runs table is, with its numbers (a
+    search trial's: by validation AUC, no test metric shown)."""
+    sort, what = ("mean_val_auc", "validation AUC") if settings.is_trial else ("mean_auc", "AUC")
+    columns = [canonical_column("metrics", sort)]
     columns += [canonical_column("params", f"axis.{k}") for k in settings.axes]
     if not settings.axes:
         columns += [canonical_column("params", k) for k in ("choice.model", "combine")]
-    url = tracker.runs_view(columns, order_by=canonical_column("metrics", "mean_auc"))
-    log.info("runs table (jobs by mean AUC, with what each sets): %s", url)
+    url = tracker.runs_view(columns, order_by=canonical_column("metrics", sort))
+    log.info("runs table (jobs by mean %s, with what each sets): %s", what, url)
     if not tracker.uri.startswith(("http://", "https://")):
         log.info("  serve it first: %s ui --backend-store-uri %s", _mlflow_command(), tracker.uri)
     log.info("  (MLflow opened without this link shows its GenAI Overview: click 'Model training')")

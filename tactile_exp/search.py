@@ -35,8 +35,18 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 STORAGE_FILE = "optuna.db"  # the default study storage, beside the MLflow sqlite store
-# Keys a search may not sample: they decide what is selected on and how it is recorded.
-FIXED_KEYS = ("validation.", "objective", "study.", "tracking.", "seed")
+# Keys (and config groups) a search may not sample, with why: a key and everything under it.
+FIXED_KEYS = {
+    "validation": "it decides the objects the search selects on",
+    "objective": "it decides what the search selects on",
+    "study": "it names the search and its trials",
+    "tracking": "it decides where trials are recorded",
+    "seed": "it decides the split and the initialisation: a search over seeds selects on luck",
+    "split": "it changes the split, so the question, not the answer",
+    "data": "it changes the data, so the question, not the answer",
+    "adjectives": "it changes the labels, so the question, not the answer",
+    "modality.fit_on": "it changes the objects the features are fitted on",
+}
 # Overrides that are the search itself, not the job: left out of the final evaluation's command.
 SEARCH_ONLY = ("validation.fraction=", "study.", "hydra.", "hydra/")
 INTERRUPTED = "interrupted"  # a trial's user attribute: stopped by a signal, to be run again
@@ -60,6 +70,30 @@ def as_override(value: Any) -> str:
     return str(value)
 
 
+def fixed_reason(key: str) -> str:
+    """Why a search may not sample ``key`` ("" when it may): the key, or a group's override
+    (``+data=...``, ``split@x=...``), is in ``FIXED_KEYS`` or under one of them."""
+    name = key.lstrip("+~").split("@")[0]
+    for fixed, why in FIXED_KEYS.items():
+        if name == fixed or name.startswith(f"{fixed}."):
+            return why
+    return ""
+
+
+def check_objective(objective: str, metrics: Sequence[str]) -> None:
+    """A search's objective reads a validation metric the jobs compute (one listed in
+    ``metrics``), else every trial would return NaN."""
+    from tactile_exp.metrics import METRICS
+    from tactile_exp.objective import metric_key
+
+    key = metric_key(objective)
+    if key not in [METRICS.build(n).key for n in metrics]:
+        raise ConfigError(
+            f"objective: {objective} reads the validation {key}, which metrics={list(metrics)} "
+            "does not compute; list its metric in metrics"
+        )
+
+
 def search_space(params: Mapping[str, Any]) -> dict[str, BaseDistribution]:
     """Optuna distributions of Hydra sweep expressions: ``choice(a,b)`` (lists allowed),
     ``range(lo,hi[,step])`` (whole numbers, hi excluded), ``interval(lo,hi)`` and
@@ -76,8 +110,9 @@ def search_space(params: Mapping[str, Any]) -> dict[str, BaseDistribution]:
     space: dict[str, BaseDistribution] = {}
     for key, expression in params.items():
         where = f"hydra.sweeper.params.{key}"
-        if str(key).startswith(FIXED_KEYS):
-            raise ConfigError(f"{where}: {key} is fixed in a search, not sampled")
+        why = fixed_reason(str(key))
+        if why:
+            raise ConfigError(f"{where}: {key} is fixed in a search, not sampled: {why}")
         try:
             override = parser.parse_override(f"{key}={expression}")
         except Exception as err:

@@ -4,14 +4,22 @@ What is uncertain is the test set: each adjective's AUC rests on a handful of te
 published split holds ~3 positive and ~4 negative objects per adjective). The bootstrap therefore
 resamples test objects (an object's units move together), positives and negatives separately,
 all adjectives in every replicate, so an interval is one of the mean over adjectives (Demsar 2006;
-Benavoli et al. 2017). Each class draws n-1 of its n objects (Hall's small-sample correction:
-drawing n understates the variance of a mean by (n-1)/n, which at n=3 costs ~5 points of
-coverage; ``tests/test_stats.py`` checks coverage on simulated PHAC-2-sized data).
+Benavoli et al. 2017); intervals are percentile intervals of the replicates. Each class draws n-1
+of its n objects (Hall's small-sample correction: drawing n understates the variance of a mean by
+(n-1)/n, which at n=3 costs ~5 points of coverage). A class of one object has no interval.
 
-A replicate's draws are a function of (seed, adjective, test objects): two configurations tested
-on the same objects get the same resampled objects, which is what makes a comparison paired.
-Evaluations of several seeds (or splits) are averaged replicate by replicate; what the interval
-covers is test-object sampling, not the spread of training seeds.
+Adjectives share test objects (the published split tests 21 objects across its 24 adjectives;
+pooled folds test every object for every adjective), so the draws are joint (``RESAMPLING``): an
+object's count in a replicate comes from one uniform number per (seed, object, replicate), shared
+by every adjective that tests it, through the multinomial's sequence of conditional binomials.
+Each class still draws exactly n-1 of its n objects, as before; what changes is that an object
+drawn twice for one adjective tends to be drawn twice for the others, so the interval of a mean
+over adjectives carries their covariance (``bench/bench_stats_power.py`` compares the two).
+
+A replicate's draws are a function of (seed, test objects): two configurations tested on the same
+objects get the same resampled objects, which is what makes a comparison paired. Evaluations of
+several seeds (or splits) are averaged replicate by replicate; what the interval covers is
+test-object sampling, not the spread of training seeds.
 
 The numbers are of a `HeldOut`'s ``metric`` (``tactile_exp.metrics``): ROC AUC by default, from
 object-pair sums without resampling units; any other metric, a function of the units' labels and
@@ -22,7 +30,7 @@ from __future__ import annotations
 
 import functools
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats as sps
@@ -30,6 +38,13 @@ from scipy import stats as sps
 ALPHA = 0.05
 N_BOOT = 2000
 SEED = 0
+# Ours (the paper tests no equivalence): how much worse, in AUC (0.02 = two AUC points), a
+# configuration may be and still count as "as good as" another: ">=" claims are non-inferiority
+# tests and "=" claims TOST equivalence tests against this margin.
+MARGIN = 0.02
+# "joint": an object's draws are shared by every adjective that tests it; "independent": each
+# adjective draws its objects on its own (kept to measure against: bench/bench_stats_power.py).
+RESAMPLING = "joint"
 
 
 @dataclass(frozen=True)
@@ -42,8 +57,8 @@ class HeldOut:
     metric: str = "roc_auc"  # what `value` and `bootstrap` compute (tactile_exp.metrics)
 
     @functools.cached_property
-    def replicates(self) -> dict[tuple[str, int, int], np.ndarray]:
-        """Bootstrap values by (adjective, n_boot, seed), filled by `bootstrap`."""
+    def replicates(self) -> dict[tuple[str, int, int, str], np.ndarray]:
+        """Bootstrap values by (adjective, n_boot, seed, resampling), filled by `bootstrap`."""
         return {}
 
     @functools.cached_property
@@ -52,6 +67,15 @@ class HeldOut:
         return tuple(
             tuple(np.unique(self.object_id[self.label == label]).tolist()) for label in (1, 0)
         )
+
+    @property
+    def too_few(self) -> str:
+        """Why no interval exists ("" when one does): a class of fewer than 2 test objects
+        cannot be resampled, and a zero-width interval would claim a certainty it lacks."""
+        for ids, side in zip(self.key, ("positive", "negative"), strict=True):
+            if len(ids) < 2:
+                return f"{len(ids)} {side} test object"
+        return ""
 
     @functools.cached_property
     def auc(self) -> float:
@@ -90,45 +114,127 @@ Evaluation = dict[str, HeldOut]  # adjective -> its test units, one seed (a seed
 
 @dataclass(frozen=True)
 class Interval:
+    """A percentile interval; ``missing`` says why there is none (then ``low``/``high`` are NaN).
+    The estimate is the value on every object, which a percentile interval need not contain."""
+
     estimate: float
     low: float
     high: float
+    missing: str = ""
 
     def __str__(self) -> str:
+        if self.missing:
+            return f"{self.estimate:.3f} (no interval: {self.missing})"
         return f"{self.estimate:.3f} [{self.low:.3f}, {self.high:.3f}]"
+
+
+def no_interval(estimate: float, why: str) -> Interval:
+    return Interval(estimate, float("nan"), float("nan"), why)
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """``a`` minus ``b``: the difference of mean AUC, its paired interval, Wilcoxon's p."""
+    """``a`` minus ``b``: the difference of mean AUC, its paired interval, Wilcoxon's test.
+
+    Wilcoxon's test takes the adjectives as independent, which shared test objects are not; the
+    paired bootstrap draws shared objects jointly. A comparison is significant only when both
+    tests are (an intersection-union test: its p is the larger of the two), after Holm."""
 
     a: str
     b: str
     difference: Interval
     p: float  # Wilcoxon signed-rank over the per-adjective differences (two-sided)
     n_adjectives: int
-    p_holm: float = float("nan")
+    p_holm: float = float("nan")  # Holm over the family of max(p, p_bootstrap)
+    p_bootstrap: float = 0.0  # the paired bootstrap's two-sided p (its replicates' side of 0)
+    signed_rank: float = 0.0  # W+ - W-: > 0 when the ranked differences favour ``a``
+    a_better: tuple[str, ...] = ()  # adjectives where a's value is higher
+    b_better: tuple[str, ...] = ()
+    equivalence: Interval | None = None  # the 1 - 2 ALPHA interval: TOST's two one-sided tests
 
     @property
     def verdict(self) -> str:
-        """From the Holm-corrected test and the interval together, never the estimate alone."""
-        significant = self.p_holm < ALPHA
-        if significant and self.difference.low > 0:
+        """A winner only when the Holm-corrected test, the interval and the direction of the
+        signed-rank statistic all agree; "mixed" when the interval and the ranks point opposite
+        ways; never from the estimate alone."""
+        d = self.difference
+        side = 1 if d.low > 0 else -1 if d.high < 0 else 0
+        ranks = int(np.sign(self.signed_rank))
+        if side and ranks and side != ranks:
+            return (
+                f"mixed: {self.a} better on {_listed(self.a_better)}, "
+                f"{self.b} better on {_listed(self.b_better)}"
+            )
+        if self.p_holm < ALPHA and side == ranks == 1:
             return f"{self.a} beats {self.b}"
-        if significant and self.difference.high < 0:
+        if self.p_holm < ALPHA and side == ranks == -1:
             return f"{self.b} beats {self.a}"
         return "not distinguishable"
 
+    def non_inferior(self, margin: float = MARGIN) -> bool:
+        """``a`` is at most ``margin`` worse than ``b``: the interval's lower end clears -margin."""
+        return self.difference.low > -margin
+
+    def equivalent(self, margin: float = MARGIN) -> bool:
+        """TOST: both one-sided tests at ALPHA reject a difference beyond the margin, i.e. the
+        1 - 2 ALPHA interval lies inside (-margin, margin)."""
+        e = self.equivalence
+        return e is not None and -margin < e.low and e.high < margin
+
+
+def _listed(adjectives: tuple[str, ...]) -> str:
+    return f"{len(adjectives)} ({', '.join(adjectives)})" if adjectives else "0"
+
+
+def _counts(uniforms: np.ndarray) -> np.ndarray:
+    """n-1 draws with replacement among n objects, as counts (n_boot x n), by the multinomial's
+    conditional binomials: object i's count is the inverse binomial CDF of its own uniform, with
+    the draws not yet given and probability 1 / (objects left); the last takes the rest."""
+    n_boot, n = uniforms.shape
+    left = np.full(n_boot, max(n - 1, 1))
+    counts = np.zeros((n_boot, n))
+    for i in range(n - 1):
+        p = 1.0 / (n - i)
+        u = uniforms[:, i]
+        count = np.zeros(n_boot, dtype=int)
+        pmf = (1 - p) ** left
+        cdf = pmf.copy()
+        active = np.flatnonzero((u > cdf) & (left > 0))
+        while active.size:  # the inverse CDF, stepping only the replicates not yet placed
+            c = count[active]
+            pmf[active] *= (left[active] - c) / (c + 1) * p / (1 - p)
+            count[active] = c + 1
+            cdf[active] += pmf[active]
+            active = active[(u[active] > cdf[active]) & (count[active] < left[active])]
+        counts[:, i] = count
+        left = left - count
+    counts[:, n - 1] = left
+    return counts
+
+
+@functools.lru_cache(maxsize=4096)
+def _uniforms(object_id: int, n_boot: int, seed: int) -> np.ndarray:
+    """The object's uniform number in each replicate: shared by every adjective testing it."""
+    return np.random.default_rng([seed, 1, int(object_id)]).random(n_boot)
+
 
 @functools.lru_cache(maxsize=256)
-def _draws(adjective: str, objects: tuple[int, ...], n_boot: int, seed: int) -> np.ndarray:
+def _draws(
+    adjective: str, objects: tuple[int, ...], n_boot: int, seed: int, resampling: str
+) -> np.ndarray:
     """How often each object is drawn in each replicate (n_boot x objects): n-1 of n, with
     replacement; the same for every evaluation on these objects."""
     n = len(objects)
-    tag = zlib.crc32(f"{adjective}:{objects}".encode())
-    picks = np.random.default_rng([seed, tag]).integers(0, n, size=(n_boot, max(n - 1, 1)))
-    flat = picks + n * np.arange(n_boot)[:, None]
-    counts = np.bincount(flat.ravel(), minlength=n_boot * n).reshape(n_boot, n).astype(float)
+    if resampling == "joint":
+        counts = _counts(np.column_stack([_uniforms(o, n_boot, seed) for o in objects]))
+    elif resampling == "independent":
+        tag = zlib.crc32(f"{adjective}:{objects}".encode())
+        picks = np.random.default_rng([seed, tag]).integers(0, n, size=(n_boot, max(n - 1, 1)))
+        flat = picks + n * np.arange(n_boot)[:, None]
+        counts = np.bincount(flat.ravel(), minlength=n_boot * n).reshape(n_boot, n)
+        counts = counts.astype(float)
+    else:
+        raise ValueError(f"resampling: expected joint or independent, got {resampling!r}")
     counts.flags.writeable = False  # cached: every evaluation on these objects shares it
     return counts
 
@@ -136,17 +242,17 @@ def _draws(adjective: str, objects: tuple[int, ...], n_boot: int, seed: int) -> 
 def bootstrap(test: HeldOut, adjective: str, n_boot: int = N_BOOT, seed: int = SEED) -> np.ndarray:
     """The adjective's metric in each bootstrap replicate (n_boot,); kept on ``test``, since a
     configuration enters several comparisons."""
-    kept = test.replicates.get((adjective, n_boot, seed))
+    kept = test.replicates.get((adjective, n_boot, seed, RESAMPLING))
     if kept is None:
         pos_ids, neg_ids = test.key
-        cp = _draws(f"{adjective}+", pos_ids, n_boot, seed)
-        cn = _draws(f"{adjective}-", neg_ids, n_boot, seed)
+        cp = _draws(f"{adjective}+", pos_ids, n_boot, seed, RESAMPLING)
+        cn = _draws(f"{adjective}-", neg_ids, n_boot, seed, RESAMPLING)
         if test.metric == "roc_auc":
             wins, u, v = test.pairs
             kept = np.einsum("bi,bi->b", cp @ wins, cn) / ((cp @ u) * (cn @ v))
         else:
             kept = _resampled(test, cp, cn)
-        test.replicates[(adjective, n_boot, seed)] = kept
+        test.replicates[(adjective, n_boot, seed, RESAMPLING)] = kept
     return kept
 
 
@@ -189,12 +295,18 @@ def mean_interval(
 def adjective_intervals(
     evaluations: list[Evaluation], n_boot: int = N_BOOT, seed: int = SEED
 ) -> dict[str, Interval]:
-    """Each adjective's AUC (mean over evaluations) with its interval: Fig. 5's error bars."""
+    """Each adjective's AUC (mean over evaluations) with its interval: Fig. 5's error bars; none
+    where a class has fewer than 2 test objects."""
     out = {}
     for a in sorted({a for ev in evaluations for a in ev}):
         tests = [ev[a] for ev in evaluations if a in ev]
+        estimate = float(np.mean([t.value for t in tests]))
+        why = next((t.too_few for t in tests if t.too_few), "")
+        if why:
+            out[a] = no_interval(estimate, why)
+            continue
         boots = np.mean([bootstrap(t, a, n_boot, seed) for t in tests], axis=0)
-        out[a] = percentile(float(np.mean([t.value for t in tests])), boots)
+        out[a] = percentile(estimate, boots)
     return out
 
 
@@ -229,16 +341,23 @@ def compare(
     est_a, boot_a = bootstrap_mean(a, n_boot, seed)
     est_b, boot_b = bootstrap_mean(b, n_boot, seed)
     adjectives = sorted(a[0])
-    diffs = [
-        np.mean([ea[j].value - eb[j].value for ea, eb in zip(a, b, strict=True)])
-        for j in adjectives
-    ]
+    diffs = np.array(
+        [
+            np.mean([ea[j].value - eb[j].value for ea, eb in zip(a, b, strict=True)])
+            for j in adjectives
+        ]
+    )
     return Comparison(
         name_a,
         name_b,
         percentile(est_a - est_b, boot_a - boot_b),
-        wilcoxon_p(np.array(diffs)),
+        wilcoxon_p(diffs),
         len(adjectives),
+        p_bootstrap=bootstrap_p(boot_a - boot_b),
+        signed_rank=signed_rank(diffs),
+        a_better=tuple(j for j, d in zip(adjectives, diffs, strict=True) if d > 0),
+        b_better=tuple(j for j, d in zip(adjectives, diffs, strict=True) if d < 0),
+        equivalence=percentile(est_a - est_b, boot_a - boot_b, 1 - 2 * ALPHA),
     )
 
 
@@ -250,18 +369,37 @@ def adjective_difference(
     pairs = list(zip(a, b, strict=True)) if len(a) == len(b) else []
     if not pairs or any(x[adjective].key != y[adjective].key for x, y in pairs):
         raise ValueError(f"not on the same test objects ({adjective})")
+    estimate = float(np.mean([x[adjective].value - y[adjective].value for x, y in pairs]))
+    why = next((x[adjective].too_few for x, _ in pairs if x[adjective].too_few), "")
+    if why:
+        return no_interval(estimate, why)
     boots = [
         bootstrap(x[adjective], adjective) - bootstrap(y[adjective], adjective) for x, y in pairs
     ]
-    estimate = float(np.mean([x[adjective].value - y[adjective].value for x, y in pairs]))
     return percentile(estimate, np.mean(boots, axis=0), level)
 
 
 def wilcoxon_p(differences: np.ndarray) -> float:
-    """scipy's two-sided Wilcoxon signed-rank p-value; 1 when every difference is zero."""
-    if not np.any(differences != 0):
+    """scipy's two-sided Wilcoxon signed-rank p-value over the non-zero differences (Wilcoxon's
+    rule: a zero difference is dropped, so n counts the others); 1 when every one is zero."""
+    nonzero = differences[differences != 0]
+    if not len(nonzero):
         return 1.0
-    return float(sps.wilcoxon(differences).pvalue)
+    return float(sps.wilcoxon(nonzero).pvalue)
+
+
+def signed_rank(differences: np.ndarray) -> float:
+    """W+ - W-: the ranks of |d| (ties averaged, zeros dropped) summed with d's signs: which
+    way the signed-rank test points, whatever the mean says."""
+    nonzero = differences[differences != 0]
+    return float(np.sum(np.sign(nonzero) * sps.rankdata(np.abs(nonzero))))
+
+
+def bootstrap_p(replicates: np.ndarray) -> float:
+    """Two-sided p of "no difference" from paired-bootstrap replicates: twice the share on the
+    smaller side of 0 (a replicate at 0 counts on both), never 0 ((k + 1) / (n + 1))."""
+    side = min(np.sum(replicates <= 0), np.sum(replicates >= 0))
+    return float(min(1.0, 2 * (side + 1) / (len(replicates) + 1)))
 
 
 def holm(pvalues: list[float]) -> list[float]:
@@ -275,12 +413,10 @@ def holm(pvalues: list[float]) -> list[float]:
 
 
 def with_holm(comparisons: list[Comparison]) -> list[Comparison]:
-    """The family's comparisons with their Holm-corrected p-values filled in."""
-    adjusted = holm([c.p for c in comparisons])
-    return [
-        Comparison(c.a, c.b, c.difference, c.p, c.n_adjectives, q)
-        for c, q in zip(comparisons, adjusted, strict=True)
-    ]
+    """The family's comparisons with their Holm-corrected p-values filled in: Holm over each
+    comparison's larger p of Wilcoxon's and the bootstrap's."""
+    adjusted = holm([max(c.p, c.p_bootstrap) for c in comparisons])
+    return [replace(c, p_holm=q) for c, q in zip(comparisons, adjusted, strict=True)]
 
 
 @dataclass(frozen=True)
@@ -289,15 +425,26 @@ class Friedman:
 
     names: tuple[str, ...]
     mean_ranks: np.ndarray
-    statistic: float
+    statistic: float  # Friedman's chi-square
     p: float
     critical_difference: float
     n_adjectives: int
+    f_statistic: float  # Iman and Davenport's F, less conservative (Demsar 2006, eq. 4)
+    f_p: float
+
+
+def iman_davenport(chi2: float, k: int, n: int) -> tuple[float, float]:
+    """Iman-Davenport's F of Friedman's chi-square over k configurations and n adjectives, with
+    its p-value on (k-1, (k-1)(n-1)) degrees of freedom."""
+    if chi2 >= n * (k - 1):  # every adjective ranks the configurations alike
+        return float("inf"), 0.0
+    f = (n - 1) * chi2 / (n * (k - 1) - chi2)
+    return float(f), float(sps.f.sf(f, k - 1, (k - 1) * (n - 1)))
 
 
 def friedman(names: list[str], aucs: np.ndarray, alpha: float = ALPHA) -> Friedman:
     """Friedman's test over configurations (rows) x adjectives (columns), scipy's statistic,
-    and the Nemenyi critical difference of mean ranks (Demsar 2006, eq. 5)."""
+    Iman-Davenport's F, and the Nemenyi critical difference of mean ranks (Demsar 2006, eq. 5)."""
     k, n = aucs.shape
     if k < 3:
         raise ValueError(f"Friedman's test needs at least 3 configurations, got {k}")
@@ -305,6 +452,14 @@ def friedman(names: list[str], aucs: np.ndarray, alpha: float = ALPHA) -> Friedm
     result = sps.friedmanchisquare(*aucs)
     q = sps.studentized_range.ppf(1 - alpha, k, np.inf) / np.sqrt(2)
     cd = float(q * np.sqrt(k * (k + 1) / (6 * n)))
+    f, f_p = iman_davenport(float(result.statistic), k, n)
     return Friedman(
-        tuple(names), ranks.mean(axis=1), float(result.statistic), float(result.pvalue), cd, n
+        tuple(names),
+        ranks.mean(axis=1),
+        float(result.statistic),
+        float(result.pvalue),
+        cd,
+        n,
+        f,
+        f_p,
     )

@@ -246,8 +246,9 @@ def test_children_log_train_and_validation_auc_without_test_objects(tiny_config,
         assert np.isfinite([metrics["train_auc"], metrics["val_auc"]]).all()  # both logged
         assert metrics["n_val_objects"] >= 2 and metrics["n_val_positive_objects"] >= 1
         res = result.results[adjective]
-        assert [res.sides[side].metrics["auc"] for side in ("train", "val")] == [
-            metrics["train_auc"], metrics["val_auc"]]  # fmt: skip
+        validation = ("auc", "average_precision", "f1")  # each listed metric
+        assert res.sides["train"].metrics["auc"] == metrics["train_auc"]
+        assert res.sides["val"].metrics == {k: metrics[f"val_{k}"] for k in validation}
         split = splits[adjective]
         assert set(res.test.objects) <= split.objects("test")  # test AUC: test objects only
         n_train = metrics["n_train_objects"] + metrics["n_val_objects"]

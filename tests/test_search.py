@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import signal
+import socket
 import sys
 from pathlib import Path
 
@@ -65,9 +66,18 @@ def test_objective_is_a_validation_metric(tiny_config):
     with pytest.raises(ConfigError, match=r"^objective: mean_auc is scored on the test objects"):
         settings_from_config(tiny_config(["objective=mean_auc"]))
     settings = settings_from_config(tiny_config(["objective=min_val_auc"]))
-    assert value(settings.objective, {"a": 0.9, "b": 0.6}) == 0.6
-    assert value("mean_val_auc", {"a": 0.9, "b": 0.6}) == pytest.approx(0.75)
+    validation = {"a": {"auc": 0.9, "f1": 0.2}, "b": {"auc": 0.6, "f1": 0.4}, "c": {"f1": 0.9}}
+    assert value(settings.objective, validation) == 0.6
+    assert value("mean_val_auc", validation) == pytest.approx(0.75)  # c has no AUC
+    # Any registered metric, on the validation side: mean_val_<key> and min_val_<key>.
+    assert value("mean_val_f1", validation) == pytest.approx(0.5)
+    assert value("min_val_f1", validation) == pytest.approx(0.2)
+    assert settings_from_config(tiny_config(["objective=mean_val_f1"])).objective == "mean_val_f1"
     assert math.isnan(value("mean_val_auc", {}))  # validation.fraction=0: nothing to select on
+    assert math.isnan(value("min_val_average_precision", validation))
+    search.check_objective("mean_val_f1", ("roc_auc", "f1"))
+    with pytest.raises(ConfigError, match=r"^objective: min_val_f1 reads the validation f1, "):
+        search.check_objective("min_val_f1", ("roc_auc",))
 
 
 def test_search_trial_needs_validation_objects(tiny_config):
@@ -99,6 +109,22 @@ def test_search_space_from_hydra_expressions():
     assert not space["schedule.momentum"].log
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.params\.validation\.fraction: "):
         search.search_space({"validation.fraction": "interval(0.1, 0.3)"})
+    # Keys that change the data, the split or the labels change the question: one line each.
+    for key in ("split", "split.folds", "data", "data.path", "+data", "adjectives",
+                "modality.fit_on", "seed", "tracking.uri", "study.name", "objective"):  # fmt: skip
+        with pytest.raises(ConfigError) as refused:
+            search.search_space({key: "choice(1,2)"})
+        line = str(refused.value)
+        assert line.startswith(f"hydra.sweeper.params.{key}: {key} is fixed in a search, not ")
+        assert "\n" not in line and line.endswith(search.fixed_reason(key))
+    assert "the question, not the answer" in search.fixed_reason("split.fold")
+    assert (
+        search.fixed_reason("adjectives")
+        == "it changes the labels, so the question, not the answer"
+    )
+    for free in ("modality.window", "seeds", "database", "model.widths.0", "splitter"):
+        assert search.fixed_reason(free) == ""
+    assert set(search.search_space({"modality.window": "choice(1,2)"})) == {"modality.window"}
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.params\.schedule\.lr: expected"):
         search.search_space({"schedule.lr": "0.01"})
 
@@ -116,6 +142,11 @@ def test_resume_queues_interrupted_and_orphaned_trials_again(monkeypatch):
     search.claim(orphan)
     orphan.set_user_attr("pid", 2**22 + 1)  # above pid_max: no such process
     assert search.counted(study) == 2
+    assert broken.user_attrs == {"error": "ValueError: job failed"}
+    assert study.trials[stopped.number].user_attrs == {search.INTERRUPTED: True}
+    assert orphan.user_attrs["host"] == socket.gethostname()
+    assert study.trials[broken.number].state == optuna.trial.TrialState.FAIL
+    assert study.trials[stopped.number].state == optuna.trial.TrialState.FAIL
     assert search.resume(study) == 2
     assert search.resume(study) == 0  # queued once
     assert study.trials[orphan.number].state == optuna.trial.TrialState.FAIL
@@ -149,6 +180,12 @@ def test_best_prints_overrides_and_the_final_command(tmp_path):
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.study_name: study 's1' was run with"):
         search.check_same_search(study, fixed, "mean_val_auc")
     assert search.main(["best", "s1", "--storage", storage]) == 0
+    import logging
+
+    assert logging.getLogger("optuna").level == logging.WARNING
+    with pytest.raises(SystemExit) as no_command:
+        search.main([])
+    assert no_command.value.code == 2
     with pytest.raises(SystemExit) as exit_info:
         search.main(["best", "nope", "--storage", storage])
     assert exit_info.value.code == 2
@@ -174,7 +211,8 @@ def test_returned_objective_is_the_validation_mean_not_the_test_mean(
     monkeypatch, tmp_path, cache_dir, mlflow_uri
 ):
     """Test objects made easy (each replaced by a training instance of its label, which the
-    model has fitted), validation objects as they are: the study receives the validation mean."""
+    model has fitted), validation objects as they are: the study receives the validation mean,
+    and the trial shows and logs no test metric."""
     real_transform = Haptic.transform
     fitted: list[Instances] = []
 
@@ -196,7 +234,14 @@ def test_returned_objective_is_the_validation_mean_not_the_test_mean(
     assert set(val_aucs) == {"hard", "soft"}
     assert trial.value == pytest.approx(np.mean(list(val_aucs.values())), abs=1e-12)
     assert trial.value == pytest.approx(parent.data.metrics["mean_val_auc"], abs=1e-12)
-    assert parent.data.metrics["mean_auc"] > trial.value + 0.2  # the easy test objects
+    # A trial logs no test metric and no test score, in its job's run or its adjectives'.
+    assert not [k for k in parent.data.metrics if k.startswith(("mean_auc", "auc."))]
+    client = MlflowClient(mlflow_uri)
+    for child in client.search_runs(
+        [parent.info.experiment_id], f"tags.mlflow.parentRunId = '{parent.info.run_id}'"
+    ):
+        assert "auc" not in child.data.metrics and "val_auc" in child.data.metrics
+        assert "scores.csv" not in {a.path for a in client.list_artifacts(child.info.run_id)}
 
 
 @pytest.mark.slow
@@ -259,7 +304,7 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     """Sentinel: with every test object's score set to NaN the objective is unchanged."""
     overrides = ["validation.fraction=0.3", "tracking.skip_finished=false"]
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard,soft]"))
-    clean = value(settings.objective, experiment.run(settings).val_aucs)
+    clean = value(settings.objective, experiment.run(settings).validation)
 
     real_score, real_compute = AdjectivePipeline.score, metrics.compute
 
@@ -281,7 +326,7 @@ def test_test_scores_never_enter_the_objective(monkeypatch, tiny_config):
     monkeypatch.setattr(recording, "log_roc", lambda *args: None)  # ROC of NaN scores
     sentinel = experiment.run(settings)
     assert math.isnan(sentinel.means["mean_auc"])  # the test scores were NaN
-    assert math.isfinite(clean) and value(settings.objective, sentinel.val_aucs) == clean
+    assert math.isfinite(clean) and value(settings.objective, sentinel.validation) == clean
 
 
 SEARCHES = {  # each search file, and the Table I row it is meant for
@@ -310,3 +355,90 @@ def test_search_files_sample_keys_that_exist(name, compose_config):
         for part in key.split("."):
             node = node[int(part)] if part.isdigit() else node[part]
         assert str(node) == str(v)
+
+
+class _Views:
+    """A tracker that records the runs view a job's log links to."""
+
+    uri = "http://mlflow"
+
+    def runs_view(self, columns, *, order_by):
+        self.columns, self.order_by = list(columns), order_by
+        return "http://mlflow/#view"
+
+
+def test_a_trials_runs_link_sorts_and_shows_validation_not_test_metrics(tiny_config, caplog):
+    views = _Views()
+    trial = settings_from_config(tiny_config(["search=haptic_cnn"]))
+    with caplog.at_level("INFO", logger="tactile_exp.experiment"):
+        experiment._log_view(views, trial)
+    assert views.order_by == "metrics.`mean_val_auc`"
+    assert not [c for c in views.columns if "mean_auc" in c]
+    assert "runs table (jobs by mean validation AUC" in caplog.text
+    plain = settings_from_config(tiny_config([]))
+    experiment._log_view(views, plain)
+    assert views.order_by == "metrics.`mean_auc`"
+
+
+def test_summary_run_trials_csv_and_storage_beside_the_store(tmp_path, mlflow_uri, capsys):
+    from tactile_exp.tracking import Tracker
+
+    assert search.default_storage(mlflow_uri) == (
+        f"sqlite:///{Path(mlflow_uri.removeprefix('sqlite:///')).parent / 'optuna.db'}"
+    )
+    served = search.default_storage("http://mlflow:5000")  # a server: beside the default store
+    assert served.startswith("sqlite:///") and served.endswith("/optuna.db")
+    storage = f"sqlite:///{tmp_path}/optuna.db"
+    assert search.trials_made("s2", storage) == 0
+    study = search.open_study(
+        "s2", storage, direction="maximize", sampler=optuna.samplers.RandomSampler(seed=1)
+    )
+    search.check_same_search(study, ["experiment=x"], "mean_val_f1")
+    space = search.search_space(
+        {"schedule.lr": "interval(0.001, 0.1)", "model.kernel_sizes": "choice([3,3],[5,5])"}
+    )
+    for score in (0.6, 0.8, 0.7):
+        study.tell(study.ask(space), score)
+    search.failed(study, study.ask(space), "ValueError: job failed")
+    assert search.trials_made("s2", storage) == 4
+    csv_text = search.trials_csv(study)
+    lines = csv_text.splitlines()
+    assert lines[0] == "number,state,value,model.kernel_sizes,schedule.lr,error"
+    assert lines[2].startswith('1,COMPLETE,0.800000,"[') and lines[2].endswith(",")
+    assert lines[4].startswith("3,FAIL,,") and lines[4].endswith(",ValueError: job failed")
+    tracker = Tracker(mlflow_uri, "searches")
+    run_id = search.log_summary(study, tracker)
+    run = MlflowClient(mlflow_uri).get_run(run_id)
+    assert run.info.run_name == "study=s2" and run.info.status == "FINISHED"
+    tags = run.data.tags
+    assert (tags["run_level"], tags["search.study"], tags["search.objective"]) == (
+        "study", "s2", "mean_val_f1"
+    )  # fmt: skip
+    assert (tags["search.fixed_overrides"], tags["search.best_trial"]) == ("experiment=x", "1")
+    assert run.data.metrics == {
+        "n_trials": 4.0, "n_complete": 3.0, "best_value": 0.8, "best_trial": 1.0
+    }  # fmt: skip
+    best = study.best_trial.params
+    assert run.data.params == {k: search.as_override(v) for k, v in best.items()}
+    listed = {a.path for a in MlflowClient(mlflow_uri).list_artifacts(run_id)}
+    assert listed == {"trials.csv", "optimization_history.png", "param_importances.png"}
+    empty = search.open_study(
+        "s3", storage, direction="minimize", sampler=optuna.samplers.RandomSampler(seed=1)
+    )
+    run = MlflowClient(mlflow_uri).get_run(search.log_summary(empty, tracker))
+    assert run.data.metrics == {"n_trials": 0.0, "n_complete": 0.0} and not run.data.params
+    with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.direction: study 's3' in .* was made"):
+        search.open_study(
+            "s3", storage, direction="maximize", sampler=optuna.samplers.RandomSampler()
+        )
+    with pytest.raises(ConfigError, match=r"^study 's3': no finished trial yet"):
+        search.best_report(empty)
+    with pytest.raises(ConfigError, match=r"^study 'nope': not in .*; studies there: s2, s3"):
+        search.load_study("nope", storage)
+
+
+def test_a_jobs_return_value_becomes_a_finite_objective_or_nan():
+    assert search.objective_or_nan(0.75) == 0.75 and search.objective_or_nan("0.5") == 0.5
+    for bad in (None, "x", float("inf"), float("nan"), [1]):
+        assert math.isnan(search.objective_or_nan(bad))
+    assert search.as_override([[3, 3], 5]) == "[[3,3],5]" and search.as_override(0.1) == "0.1"

@@ -79,6 +79,7 @@ class StudySweeper(Sweeper):
             checked.study.name = self.study_name
             checked.study.role = "trial"
         settings = settings_from_config(checked)
+        search.check_objective(settings.objective, settings.metrics)
 
         parser = OverridesParser.create(config_loader=self.hydra_context.config_loader)
         parsed = parser.parse_overrides(arguments)
