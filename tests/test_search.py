@@ -371,12 +371,12 @@ def test_a_trials_runs_link_sorts_and_shows_validation_not_test_metrics(tiny_con
     views = _Views()
     trial = settings_from_config(tiny_config(["search=haptic_cnn"]))
     with caplog.at_level("INFO", logger="tactile_exp.experiment"):
-        experiment._log_view(views, trial)
+        recording.log_view(views, trial)
     assert views.order_by == "metrics.`mean_val_auc`"
     assert not [c for c in views.columns if "mean_auc" in c]
     assert "runs table (jobs by mean validation AUC" in caplog.text
     plain = settings_from_config(tiny_config([]))
-    experiment._log_view(views, plain)
+    recording.log_view(views, plain)
     assert views.order_by == "metrics.`mean_auc`"
 
 
