@@ -370,7 +370,7 @@ class _Views:
 def test_a_trials_runs_link_sorts_and_shows_validation_not_test_metrics(tiny_config, caplog):
     views = _Views()
     trial = settings_from_config(tiny_config(["search=haptic_cnn"]))
-    with caplog.at_level("INFO", logger="tactile_exp.experiment"):
+    with caplog.at_level("INFO", logger="tactile_exp"):
         recording.log_view(views, trial)
     assert views.order_by == "metrics.`mean_val_auc`"
     assert not [c for c in views.columns if "mean_auc" in c]

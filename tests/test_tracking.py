@@ -678,7 +678,7 @@ def test_a_tracking_server_is_checked_before_mlflow_is_asked(mlflow_uri, monkeyp
 def test_a_child_found_alone_names_its_job_choices_and_data(tiny_config, mlflow_uri, caplog):
     overrides = (*FAST, "seed=41")
     settings = settings_from_config(tiny_config(list(overrides), "[hard]"), overrides=overrides)
-    with caplog.at_level(logging.INFO, logger="tactile_exp.experiment"):
+    with caplog.at_level(logging.INFO, logger="tactile_exp"):
         run(settings)
     client = MlflowClient(mlflow_uri)
     experiment = client.get_experiment_by_name("tactile_exp")
