@@ -94,7 +94,7 @@ class ObjectInfo:
 
 @cache
 def objects() -> tuple[ObjectInfo, ...]:
-    """The 60 real PHAC-2 objects with their 24 labels (copied from shared/data)."""
+    """The 60 real PHAC-2 objects with their 24 labels (shipped in data/resources/objects.csv)."""
     text = resources.files("tactile_exp.data").joinpath("resources/objects.csv").read_text()
     rows = list(csv.DictReader(text.splitlines()))
     return tuple(
