@@ -121,10 +121,9 @@ class ConvFeatures(Modality):
 
 
 @pytest.fixture
-def registered(monkeypatch):
-    monkeypatch.setattr(MODALITIES, "_entries", dict(MODALITIES._load()))  # forgotten afterwards
-    MODALITIES.register("trial_stats")(TrialStats)
-    MODALITIES.register("conv_features")(ConvFeatures)
+def registered():
+    with MODALITIES.temporary(trial_stats=TrialStats, conv_features=ConvFeatures):
+        yield
 
 
 def test_a_modality_with_a_new_output_kind_fits_with_no_engine_change(row_i, registered):
