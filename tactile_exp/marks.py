@@ -27,6 +27,8 @@ KEYED_GROUPS = ("model", "modality")  # whose parameters `Mark.keyed` applies to
 
 @dataclass(frozen=True)
 class Mark:
+    """One setting's marks; unmarked means hashed, named, keyed and searchable."""
+
     hashed: bool = True  # part of the config hash (top-level keys)
     named: bool = True  # part of run names and axes (top-level keys)
     keyed: bool = True  # part of the training key (``model.<param>``, ``modality.<param>``)
@@ -57,7 +59,7 @@ MARKS: dict[str, Mark] = {
         fixed="it decides the split and the initialisation: a search over seeds selects on luck"
     ),
     "device": Mark(),
-    "cache_dir": Mark(named=False),  # hashed, as it always was: stored jobs keep their hash
+    "cache_dir": Mark(named=False),  # hashed: left out, every stored job's hash would change
     "validation": Mark(fixed="it decides the objects the search selects on"),
     "validation.fraction": Mark(search_only=True),  # a search's trials need > 0, its final run 0
     "adjectives": Mark(fixed="it changes the labels, so the question, not the answer"),

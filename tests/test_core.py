@@ -65,8 +65,8 @@ def test_validation_side_has_its_own_metrics(tiny_config):
     assert result.sizes["n_val_objects"] == len(set(val.objects))
 
 
-class TrialStats(Modality):
-    """A new output kind: per trial, each channel's mean and spread (a flat feature row)."""
+class OnHaptic(Modality):
+    """What both new modalities below share: the haptic modality's check, fit and state."""
 
     def __init__(self, *, cache_dir: Path | None = None, **haptic: Any) -> None:
         super().__init__(cache_dir=cache_dir)
@@ -79,19 +79,29 @@ class TrialStats(Modality):
         self.haptic.fit(trials)
         return self
 
+    def get_state(self) -> tuple[dict, dict]:
+        return self.haptic.get_state()
+
+    def set_state(self, settings: dict, arrays: dict) -> Self:
+        self.haptic.set_state(settings, arrays)
+        return self
+
+
+class TrialStats(OnHaptic):
+    """A new output kind: per trial, each channel's mean and spread (a flat feature row)."""
+
     def transform(self, trials: Trials) -> Instances:
         signals = self.haptic.transform(trials)
         X = np.concatenate([signals.X.mean(-1), signals.X.std(-1)], axis=1)
         return Instances(X, signals.y, signals.trial, signals.object_id)
 
 
-class ConvFeatures(Modality):
+class ConvFeatures(OnHaptic):
     """A new reusable part: row I's ConvNet (trained on the haptic modality) as a feature map."""
 
     def __init__(self, *, cache_dir: Path | None = None, haptic: dict, net: dict) -> None:
-        super().__init__(cache_dir=cache_dir)
+        super().__init__(cache_dir=cache_dir, **haptic)
         self.part = (Component("haptic", haptic), Component("haptic_cnn", net))
-        self.haptic = Haptic(cache_dir=cache_dir, **haptic)
 
     def parts(self) -> dict[str, tuple[Component, Component]]:
         return {"net": self.part}
@@ -99,25 +109,11 @@ class ConvFeatures(Modality):
     def set_parts(self, parts: dict) -> None:
         self.net_ = parts["net"]
 
-    def check(self, dataset: Any) -> None:
-        self.haptic.check(dataset)
-
-    def fit(self, trials: Trials) -> Self:
-        self.haptic.fit(trials)
-        return self
-
     def transform(self, trials: Trials) -> Instances:
         signals = self.haptic.transform(trials)
         return Instances(
             self.net_.transform(signals.X), signals.y, signals.trial, signals.object_id
         )
-
-    def get_state(self) -> tuple[dict, dict]:
-        return self.haptic.get_state()
-
-    def set_state(self, settings: dict, arrays: dict) -> Self:
-        self.haptic.set_state(settings, arrays)
-        return self
 
 
 @pytest.fixture
