@@ -17,34 +17,16 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from tactile_exp import docs_test
+from tactile_exp import docs_test, marks
 from tactile_exp.errors import ConfigError
 from tactile_exp.registry import Component
 
 DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
-# Keys that change where results go or what they are compared with, not what they are: left out
-# of the config hash. ``trunk`` only feeds the visual modalities' nodes, hashed there: a haptic
-# row is the same job whatever trunk weights the grid was given. ``workers`` changes how fast a
-# job runs, not its results (beyond float rounding): a finished job is not rerun for it.
-# ``objective`` is what the job returns to Hydra and ``study`` only tags it (issue 28): a search
-# trial is the same job as the plain run of its values, and is skipped once either finished.
-# ``sweep`` (sweep.on_invalid) says what a sweep does with its other jobs. ``metrics`` says
-# what is logged about a job's test scores, not what is trained: a finished job is not rerun.
-UNHASHED = (
-    "tracking",
-    "hydra",
-    "paper",
-    "trunk",
-    "workers",
-    "objective",
-    "study",
-    "sweep",
-    "metrics",
-)
+# Derived from the settings' marks (tactile_exp/marks.py), where each key says why.
+UNHASHED = marks.unhashed()  # left out of the config hash
+UNNAMED = marks.unnamed()  # left out of run names and axes
+ADDED_AT_DEFAULT = marks.added_at_default()  # left out of the hash at these values
 STUDY_ROLES = ("trial", "final")  # study.role: a search trial, or its best values' test run
-# Overrides that say where results go or how a search tags a job, not which job it is: left out
-# of run names and axes.
-UNNAMED = ("tracking", "hydra", "sweep", "cache_dir", "study", "objective", "metrics")
 ADJECTIVES_SPELLED_OUT = 3  # a run name lists at most this many adjectives, else counts them
 
 
@@ -104,12 +86,8 @@ class Settings:
         return f"{self.split}({params})" if params else self.split
 
 
-# Nodes added after jobs were stored: at these values they are left out of the hash, so a job
-# that did not set them keeps the hash (and its finished runs) it had before they existed.
-ADDED_AT_DEFAULT: dict[str, Any] = {"labels": {"min_objects": None}}
-
-
 def config_hash(resolved: dict[str, Any]) -> str:
+    """What makes two jobs the same job: the resolved config without its unhashed keys."""
     kept = {
         k: v
         for k, v in resolved.items()
@@ -121,7 +99,7 @@ def config_hash(resolved: dict[str, Any]) -> str:
 def axes(overrides: tuple[str, ...]) -> dict[str, str]:
     """What this job sets apart from the defaults: ``{"model": "haptic_lstm", "combine": "10",
     "schedule.lr": "0.01"}`` from its command-line overrides (a sweep's swept values are among
-    them), without those that only say where results go (``UNNAMED``)."""
+    them), without those marked unnamed (``UNNAMED``)."""
     out = {}
     for item in overrides:
         key, _, value = item.partition("=")
@@ -272,6 +250,7 @@ def settings_from_config(
     if "fold" in unseeded.split:  # split=folds: a seed's folds together are one repeat
         unseeded.split.fold = None
     row_config: dict[str, Any] = OmegaConf.to_container(unseeded, resolve=True)  # type: ignore[assignment]
+    check_marked(resolved)
     choices = dict(choices or {})
     for group in ("data", "modality", "model", "combine_instances", "split"):
         choices.setdefault(group, str(resolved[group]["name"]))
@@ -350,6 +329,17 @@ def settings_from_config(
     )
     check_components(settings)
     return settings
+
+
+def check_marked(resolved: dict[str, Any]) -> None:
+    """Every top-level key has a mark (``tactile_exp/marks.py``): an unmarked key would change
+    the config hash, run names and a search's space without anyone deciding whether it should."""
+    unmarked = [k for k in resolved if k not in marks.MARKS]
+    if unmarked:
+        raise ConfigError(
+            f"{unmarked[0]}: not a setting of tactile_exp; a new top-level key is declared in "
+            "conf/config.yaml and marked in tactile_exp/marks.py (docs/configuration.md)"
+        )
 
 
 def _check_adjectives(value: Any) -> tuple[str, ...] | None:

@@ -9,10 +9,13 @@ is silent or we differ). Comments are read from the YAML text itself: a YAML par
 
 from __future__ import annotations
 
+import json
 import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from tactile_exp import marks
 
 ROOT = Path(__file__).resolve().parent.parent
 CONF = ROOT / "conf"
@@ -143,6 +146,36 @@ def _fence(text: str) -> list[str]:
     return ["```yaml", text.rstrip("\n"), "```", ""]
 
 
+def marks_table() -> list[str]:
+    """Each setting's marks (``tactile_exp/marks.py``): what the config hash, run names, the
+    training key and a search make of it."""
+    out = [
+        "### What each setting is to a job",
+        "",
+        "Marked once in `tactile_exp/marks.py` ([adding a setting](extending.md#a-setting));",
+        "the config hash (a finished job is skipped), run names, the training key (a trained",
+        "model is reused) and a search's fixed keys all derive from these marks. A top-level",
+        "key without a mark is refused; a component parameter without one is hashed and keyed.",
+        "Training key `-`: not a model's or modality's parameter (what reaches a model, such as",
+        "`schedule` or `seed`, is keyed through the model's own node).",
+        "",
+        "| key | config hash | run name | training key | search |",
+        "|---|---|---|---|---|",
+    ]
+    for key, mark in marks.MARKS.items():
+        hashed = "yes" if mark.hashed else "no"
+        if mark.hashed_unless is not marks.UNSET:
+            hashed = f"unless {json.dumps(mark.hashed_unless)}"
+        keyed = (
+            "-" if key.split(".")[0] not in marks.KEYED_GROUPS else "yes" if mark.keyed else "no"
+        )
+        search = [f"fixed: {mark.fixed}"] if mark.fixed else []
+        search += ["set by the search, not its final run"] if mark.search_only else []
+        named = "yes" if mark.named else "no"
+        out.append(f"| `{key}` | {hashed} | {named} | {keyed} | {'; '.join(search)} |")
+    return [*out, ""]
+
+
 def generate(conf: Path = CONF, method: Path = METHOD) -> str:
     """The whole page, Markdown."""
     items = method_items(method)
@@ -168,6 +201,7 @@ def generate(conf: Path = CONF, method: Path = METHOD) -> str:
         "The defaults list picks one option per group; the plain values follow it.",
         "",
         *_fence(top),
+        *marks_table(),
         "## Groups",
         "",
         "| group | options (default in bold) |",

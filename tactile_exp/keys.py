@@ -13,15 +13,14 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
-from tactile_exp import dotted
+from tactile_exp import dotted, marks
 from tactile_exp.artifacts import FORMAT
 from tactile_exp.registry import Component
 
-# Model settings that change neither the representation nor the instance classifier; a dotted
-# key is a value inside a setting (the T4 head's schedule inside the model's ``schedule``).
-MODEL_UNKEYED = ("schedule.head", "impl", "device")
-# Modality settings that change only where or how fast features are computed.
-MODALITY_UNKEYED = ("device", "batch_size")
+# Parameters of every model and modality marked ``keyed=False`` (``tactile_exp/marks.py``); a
+# dotted key is a value inside a parameter (the T4 head's schedule inside the model's ``schedule``).
+MODEL_UNKEYED = marks.unkeyed("model")
+MODALITY_UNKEYED = marks.unkeyed("modality")
 
 
 def training_key(

@@ -20,8 +20,11 @@ from tactile_exp.registry import Registry
 
 Validation = Mapping[str, Mapping[str, float]]  # adjective -> metric key -> validation value
 OBJECTIVES: Registry[float] = Registry("objective")
-# Metrics of the test objects: named in the error when a config asks for one.
-TEST_METRICS = ("mean_auc", "auc")
+# The test objects' names of every registered metric (``mean_<key>``, ``<key>``): named in the
+# error when a config asks for one as its objective.
+TEST_METRICS = tuple(
+    n for k in (METRICS.build(m).key for m in METRICS.names()) for n in (f"mean_{k}", k)
+)
 # How an objective reduces the adjectives' values: the mean, or the worst adjective's (a
 # configuration good for every adjective).
 REDUCERS: dict[str, Callable[[list[float]], float]] = {"mean": np.mean, "min": min}

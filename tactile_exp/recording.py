@@ -11,6 +11,7 @@ import logging
 import sys
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,23 @@ from tactile_exp.tracking import MAX_PARAM_LENGTH, Tracker, canonical_column, fl
 from tactile_exp.train import device_name
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Records:
+    """What a job records and shows of its test objects: everything, or for a search trial
+    nothing (no test metric, no ``scores.csv``, the side means only, its runs sorted by the
+    validation AUC), so what a search selects on stays blind to them."""
+
+    test: bool
+    sort: str  # the job metric its runs view sorts by
+    what: str  # that metric, in words
+
+    @classmethod
+    def of(cls, settings: Settings) -> Records:
+        if settings.is_trial:
+            return cls(test=False, sort="mean_val_auc", what="validation AUC")
+        return cls(test=True, sort="mean_auc", what="AUC")
 
 
 def open_tracker(settings: Settings) -> Tracker:
@@ -149,12 +167,12 @@ def record_adjective(
         )
         result = core.fit_adjective(settings, dataset, split, cache, progress=epoch_logger)
         others = side_metrics(result)
-        # A search trial logs no test metric and no test score: what selects stays blind to them.
-        tested = {} if settings.is_trial else result.metrics
+        records = Records.of(settings)
+        tested = result.metrics if records.test else {}
         tracker.log_metrics(run_id, {**tested, **result.sizes, **others, **result.preprocess})
         log.info("  %s %s", adjective, " ".join(f"{k}={v:.3f}" for k, v in others.items()))
         tracker.log_curves(run_id, result.history)
-        if not settings.is_trial:
+        if records.test:
             tracker.log_text(run_id, scores_table(result.test), scores_file.NAME)
         # The run turns FINISHED only after the pipeline is written, and lookups take FINISHED
         # runs only, so a job killed while writing leaves nothing reusable.
@@ -193,7 +211,7 @@ def record_summary(
     """The job's metrics (``mean_<key>``, ``<key>.<adjective>``, the side means, the interval),
     its per-adjective table and ROC figure; returns the metrics logged. A search trial's job logs
     the side means alone: its test metrics wait for the study's final evaluation."""
-    if settings.is_trial:
+    if not Records.of(settings).test:
         logged = side_means(results)
         tracker.log_metrics(run_id, logged)
         return logged
@@ -247,7 +265,8 @@ def side_means(results: Mapping[str, core.AdjectiveResult]) -> dict[str, float]:
 def log_view(tracker: Tracker, settings: Settings) -> None:
     """The last lines of a job's log: where its sweep's runs table is, with its numbers (a
     search trial's: by validation AUC, no test metric shown)."""
-    sort, what = ("mean_val_auc", "validation AUC") if settings.is_trial else ("mean_auc", "AUC")
+    records = Records.of(settings)
+    sort, what = records.sort, records.what
     columns = [canonical_column("metrics", sort)]
     columns += [canonical_column("params", f"axis.{k}") for k in settings.axes]
     if not settings.axes:

@@ -12,7 +12,8 @@ and an import error in an implementation still surfaces, at the lookup, with its
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
@@ -54,6 +55,21 @@ class Registry(Generic[T]):
             return factory
 
         return add
+
+    @contextmanager
+    def temporary(self, **entries: Callable[..., T]) -> Iterator[Registry[T]]:
+        """The registry as it is now comes back when the block ends: what is registered inside
+        it is forgotten then, and ``entries`` (registered on entry, each replacing the entry of
+        its name) too. For a notebook or a test that tries a component out."""
+        kept = dict(self._load())
+        try:
+            for name, factory in entries.items():
+                self._entries.pop(name, None)
+                self.register(name)(factory)
+            yield self
+        finally:
+            self._entries.clear()
+            self._entries.update(kept)
 
     def _load(self) -> dict[str, Callable[..., T]]:
         if not self._loaded:

@@ -24,6 +24,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tactile_exp import marks
 from tactile_exp.errors import ConfigError
 from tactile_exp.runtime.processes import process_alive
 from tactile_exp.tracking import Tracker, resolve_uri, retried
@@ -35,20 +36,10 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 STORAGE_FILE = "optuna.db"  # the default study storage, beside the MLflow sqlite store
-# Keys (and config groups) a search may not sample, with why: a key and everything under it.
-FIXED_KEYS = {
-    "validation": "it decides the objects the search selects on",
-    "objective": "it decides what the search selects on",
-    "study": "it names the search and its trials",
-    "tracking": "it decides where trials are recorded",
-    "seed": "it decides the split and the initialisation: a search over seeds selects on luck",
-    "split": "it changes the split, so the question, not the answer",
-    "data": "it changes the data, so the question, not the answer",
-    "adjectives": "it changes the labels, so the question, not the answer",
-    "modality.fit_on": "it changes the objects the features are fitted on",
-}
-# Overrides that are the search itself, not the job: left out of the final evaluation's command.
-SEARCH_ONLY = ("validation.fraction=", "study.", "hydra.", "hydra/")
+# Keys (and config groups) a search may not sample, with why; the search's own override
+# prefixes, left out of the final evaluation's command: both marked in tactile_exp/marks.py.
+FIXED_KEYS = marks.fixed()
+SEARCH_ONLY = marks.search_only()
 INTERRUPTED = "interrupted"  # a trial's user attribute: stopped by a signal, to be run again
 
 

@@ -425,32 +425,36 @@ def _rows(table_seqs: np.ndarray, seqs: np.ndarray) -> list[int]:
 def test_hmm_settings_are_chosen_by_held_out_likelihood(small_grid, monkeypatch):
     """Each chain's (N, T, K) maximises the mean log-likelihood of held-out training positives:
     whole objects, never in the candidates' fit, never a test or negative trial."""
-    import threading
     from collections import defaultdict
 
     trials, split = _hmm_data()
     lengths = dyn.GRIDS[small_grid]["length"]
     table = dyn.SequenceTable.from_trials(trials, lengths)
-    # Chains are fitted on threads: each call is filed under the chain its thread is fitting.
-    current = threading.local()
     fitted: dict[int, list] = defaultdict(list)
     scored: dict[int, list] = defaultdict(list)
-    chain, fit, score = dyn.DynamicFeatures._chain, dyn.HMMChain.fit, dyn.HMMChain.score
+    fit, score = dyn.HMMChain.fit, dyn.HMMChain.score
 
-    def chain_spy(self, table, c, idx, cand):
-        current.c = c
-        return chain(self, table, c, idx, cand)
+    def chain_of(seqs) -> int:
+        """The chain whose sequences these are: the one table column holding every row."""
+        found = [
+            c
+            for c in range(len(dyn.CHAINS))
+            if table.seqs[seqs.shape[1]][c].shape[1:] == seqs.shape[1:]
+            and all((table.seqs[seqs.shape[1]][c] == s).all(axis=(1, 2)).any() for s in seqs)
+        ]
+        assert len(found) == 1
+        return found[0]
 
     def fit_spy(self, count, mean, scatter, seqs):
-        fitted[current.c].append(seqs)
+        fitted[chain_of(seqs)].append(seqs)
         return fit(self, count, mean, scatter, seqs)
 
     def score_spy(self, seqs):
         out = score(self, seqs)
-        scored[current.c].append(((self.n_states, seqs.shape[1], self.n_symbols), seqs, out.mean()))
+        key = (self.n_states, seqs.shape[1], self.n_symbols)
+        scored[chain_of(seqs)].append((key, seqs, out.mean()))
         return out
 
-    monkeypatch.setattr(dyn.DynamicFeatures, "_chain", chain_spy)
     monkeypatch.setattr(dyn.HMMChain, "fit", fit_spy)
     monkeypatch.setattr(dyn.HMMChain, "score", score_spy)
     model = dyn.DynamicFeatures(small_grid, seed=0).fit(table, split)

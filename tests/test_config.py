@@ -411,14 +411,14 @@ def test_metrics_are_listed_in_order_and_change_no_hash_name_or_axis(compose_con
     assert (chosen.run_name, chosen.axes) == (default.run_name, default.axes)
 
 
-def test_a_metric_registered_after_import_is_accepted(compose_config, monkeypatch):
+def test_a_metric_registered_after_import_is_accepted(compose_config):
     """The registry is read when the config is checked: a test module (or a component's
     ``_module_``) may add a metric."""
     from tactile_exp.metrics import METRICS, register
 
-    monkeypatch.setattr(METRICS, "_entries", dict(METRICS._entries))
-    register("hits", needs_both_classes=False)(lambda y, s: float((s > 0).sum()))
-    got = settings_from_config(compose_config(["metrics=[roc_auc,hits]"]))
+    with METRICS.temporary():
+        register("hits", needs_both_classes=False)(lambda y, s: float((s > 0).sum()))
+        got = settings_from_config(compose_config(["metrics=[roc_auc,hits]"]))
     assert got.metrics == ("roc_auc", "hits")
 
 

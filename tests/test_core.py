@@ -65,8 +65,8 @@ def test_validation_side_has_its_own_metrics(tiny_config):
     assert result.sizes["n_val_objects"] == len(set(val.objects))
 
 
-class TrialStats(Modality):
-    """A new output kind: per trial, each channel's mean and spread (a flat feature row)."""
+class OnHaptic(Modality):
+    """What both new modalities below share: the haptic modality's check, fit and state."""
 
     def __init__(self, *, cache_dir: Path | None = None, **haptic: Any) -> None:
         super().__init__(cache_dir=cache_dir)
@@ -79,39 +79,6 @@ class TrialStats(Modality):
         self.haptic.fit(trials)
         return self
 
-    def transform(self, trials: Trials) -> Instances:
-        signals = self.haptic.transform(trials)
-        X = np.concatenate([signals.X.mean(-1), signals.X.std(-1)], axis=1)
-        return Instances(X, signals.y, signals.trial, signals.object_id)
-
-
-class ConvFeatures(Modality):
-    """A new reusable part: row I's ConvNet (trained on the haptic modality) as a feature map."""
-
-    def __init__(self, *, cache_dir: Path | None = None, haptic: dict, net: dict) -> None:
-        super().__init__(cache_dir=cache_dir)
-        self.part = (Component("haptic", haptic), Component("haptic_cnn", net))
-        self.haptic = Haptic(cache_dir=cache_dir, **haptic)
-
-    def parts(self) -> dict[str, tuple[Component, Component]]:
-        return {"net": self.part}
-
-    def set_parts(self, parts: dict) -> None:
-        self.net_ = parts["net"]
-
-    def check(self, dataset: Any) -> None:
-        self.haptic.check(dataset)
-
-    def fit(self, trials: Trials) -> Self:
-        self.haptic.fit(trials)
-        return self
-
-    def transform(self, trials: Trials) -> Instances:
-        signals = self.haptic.transform(trials)
-        return Instances(
-            self.net_.transform(signals.X), signals.y, signals.trial, signals.object_id
-        )
-
     def get_state(self) -> tuple[dict, dict]:
         return self.haptic.get_state()
 
@@ -120,11 +87,39 @@ class ConvFeatures(Modality):
         return self
 
 
+class TrialStats(OnHaptic):
+    """A new output kind: per trial, each channel's mean and spread (a flat feature row)."""
+
+    def transform(self, trials: Trials) -> Instances:
+        signals = self.haptic.transform(trials)
+        X = np.concatenate([signals.X.mean(-1), signals.X.std(-1)], axis=1)
+        return Instances(X, signals.y, signals.trial, signals.object_id)
+
+
+class ConvFeatures(OnHaptic):
+    """A new reusable part: row I's ConvNet (trained on the haptic modality) as a feature map."""
+
+    def __init__(self, *, cache_dir: Path | None = None, haptic: dict, net: dict) -> None:
+        super().__init__(cache_dir=cache_dir, **haptic)
+        self.part = (Component("haptic", haptic), Component("haptic_cnn", net))
+
+    def parts(self) -> dict[str, tuple[Component, Component]]:
+        return {"net": self.part}
+
+    def set_parts(self, parts: dict) -> None:
+        self.net_ = parts["net"]
+
+    def transform(self, trials: Trials) -> Instances:
+        signals = self.haptic.transform(trials)
+        return Instances(
+            self.net_.transform(signals.X), signals.y, signals.trial, signals.object_id
+        )
+
+
 @pytest.fixture
-def registered(monkeypatch):
-    monkeypatch.setattr(MODALITIES, "_entries", dict(MODALITIES._load()))  # forgotten afterwards
-    MODALITIES.register("trial_stats")(TrialStats)
-    MODALITIES.register("conv_features")(ConvFeatures)
+def registered():
+    with MODALITIES.temporary(trial_stats=TrialStats, conv_features=ConvFeatures):
+        yield
 
 
 def test_a_modality_with_a_new_output_kind_fits_with_no_engine_change(row_i, registered):

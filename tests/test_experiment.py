@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import subprocess
@@ -81,8 +82,15 @@ def test_same_seed_same_aucs(tiny_config):
         assert a.results[adj].metrics["auc"] == b.results[adj].metrics["auc"]
 
 
+@pytest.fixture
+def replace_model():
+    """``replace_model(random=Cls)``: registered models replaced until the test ends."""
+    with contextlib.ExitStack() as stack:
+        yield lambda **models: stack.enter_context(MODELS.temporary(**models))
+
+
 def test_a_failing_job_is_marked_failed_and_nothing_stays_running(
-    tiny_config, mlflow_uri, monkeypatch
+    tiny_config, mlflow_uri, replace_model
 ):
     calls = {"n": 0}
     original = MODELS["random"]
@@ -94,7 +102,7 @@ def test_a_failing_job_is_marked_failed_and_nothing_stays_running(
                 raise RuntimeError("boom in the second adjective")
             return super().fit(train, on_epoch)
 
-    monkeypatch.setitem(MODELS._entries, "random", Exploding)
+    replace_model(random=Exploding)
     settings = settings_from_config(
         tiny_config(["model=random", "combine_instances=separate", "seed=99"])
     )
@@ -296,7 +304,7 @@ def test_job_fits_the_preprocessing_on_what_fit_on_says(tiny_config, monkeypatch
 
 
 @pytest.mark.job
-def test_a_crashed_job_runs_again_and_then_is_skipped(tiny_config, mlflow_uri, monkeypatch):
+def test_a_crashed_job_runs_again_and_then_is_skipped(tiny_config, mlflow_uri, replace_model):
     """FAILED (here after one adjective's child FINISHED) is rerun; FINISHED is then skipped."""
     original = MODELS["random"]
 
@@ -309,7 +317,7 @@ def test_a_crashed_job_runs_again_and_then_is_skipped(tiny_config, mlflow_uri, m
 
     fits: list[int] = []
     crash = {"soft"}
-    monkeypatch.setitem(MODELS._entries, "random", Exploding)
+    replace_model(random=Exploding)
     cfg = tiny_config([*FAST, "seed=43"], adjectives="[hard,soft]")
     with pytest.raises(RuntimeError, match="crash in soft"):
         run(settings_from_config(cfg))

@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 from conftest import CONF, TINY_DATA
 from hydra import compose, initialize_config_dir
@@ -57,13 +58,19 @@ def test_table1_sweep_is_every_table1_file_and_nothing_else():
     assert "quick_table1_i" not in rows
 
 
-def test_new_model_and_new_row_in_a_temporary_config_dir(tmp_path, monkeypatch, cache_dir):
+@pytest.fixture
+def models():
+    """MODELS as it is, restored after the test: a model registered in the test stays in it."""
+    with MODELS.temporary():
+        yield MODELS
+
+
+def test_new_model_and_new_row_in_a_temporary_config_dir(tmp_path, monkeypatch, cache_dir, models):
     conf = tmp_path / "conf"
     shutil.copytree(CONF, conf)
     (tmp_path / "my_models").mkdir()
     (tmp_path / "my_models" / "centroid.py").write_text(MODULE)
     monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(MODELS, "_entries", dict(MODELS._load()))  # forget the model afterwards
     (conf / "model" / "nearest_centroid.yaml").write_text(
         "name: nearest_centroid\n_module_: my_models.centroid\nshrink: 0.0\n"
     )

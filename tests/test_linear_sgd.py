@@ -102,14 +102,16 @@ def test_a_loss_the_loop_does_not_compute_takes_torchs_path_or_is_refused(monkey
     """A newly registered loss: ``impl=auto`` trains the layer through autograd with it,
     ``impl=compiled`` refuses it by name when the model is built instead of computing another
     loss."""
-    monkeypatch.setattr(LOSSES, "_entries", dict(LOSSES._load()))  # forget the loss afterwards
-    LOSSES.register("squared_hinge")(lambda s, y: LOSSES["hinge"](s, y) ** 2)
+    hinge = LOSSES["hinge"]
     settings = {**FAST, "loss": "squared_hinge", "pretrain_loss": None}
     calls = []
-    with monkeypatch.context() as patch:
+    with (
+        LOSSES.temporary(squared_hinge=lambda s, y: hinge(s, y) ** 2),
+        monkeypatch.context() as patch,
+    ):
         patch.setattr(linear_sgd, "linear_sgd_epochs", lambda *a, **k: calls.append(1))
         model = MODELS.build("linear", impl="auto", **settings)
         assert list(model.fit(easy_case(40, steps=10))) == ["train_loss"] and calls == []
-    for name in ("linear", "haptic_cnn"):  # refused when built, before any training
-        with pytest.raises(ValueError, match="not 'squared_hinge': use impl=torch"):
-            MODELS.build(name, impl="compiled", **settings)
+        for name in ("linear", "haptic_cnn"):  # refused when built, before any training
+            with pytest.raises(ValueError, match="not 'squared_hinge': use impl=torch"):
+                MODELS.build(name, impl="compiled", **settings)

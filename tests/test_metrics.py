@@ -103,10 +103,10 @@ def test_summary_is_the_mean_over_adjectives_and_each_adjectives_value():
 
 
 @pytest.fixture
-def registry(monkeypatch):
+def registry():
     """METRICS as it is, restored after the test: what a test registers stays in the test."""
-    monkeypatch.setattr(METRICS, "_entries", dict(METRICS._entries))
-    return METRICS
+    with METRICS.temporary():
+        yield METRICS
 
 
 def test_two_metrics_may_not_share_a_key(registry):

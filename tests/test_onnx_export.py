@@ -18,10 +18,13 @@ from tactile_exp.data.layout import Trials
 from tactile_exp.data.photos import PhotoFolder
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.deploy.__main__ import main
-from tactile_exp.deploy.onnx_export import channel_names, export_job
+from tactile_exp.deploy.onnx_export import export_job
 from tactile_exp.experiment import run
 from tactile_exp.jobs import StoredJob
+from tactile_exp.modalities import MODALITIES
 from tactile_exp.modalities.multimodal import visual_units
+from tactile_exp.modalities.networks import channel_names
+from tactile_exp.models import MODELS
 from tactile_exp.predict import PredictError, predict
 from tactile_exp.preprocess.haptic import trial_signals
 from tactile_exp.preprocess.trunk import network_input
@@ -158,3 +161,33 @@ def test_rows_without_a_network_are_refused(tiny_config, mlflow_uri, tmp_path, c
     (line,) = capsys.readouterr().err.splitlines()
     assert line.startswith(f"error: run {job} is a linear_svm job on modality haptic_features")
     assert not (tmp_path / "out").exists()
+
+
+def test_a_component_that_declares_it_cannot_export_is_refused_in_one_line(
+    tiny_config, mlflow_uri, tmp_path, capsys
+):
+    """A model registered outside the engine says why it has no network; export names it
+    before writing anything (the haptic modality itself exports)."""
+
+    class Lookup(MODELS["random"]):  # type: ignore[misc, valid-type]
+        onnx_refusal = "its scores come from a lookup table"
+
+    out = tmp_path / "out"
+    with MODELS.temporary(lookup=Lookup):
+        overrides = ["model=random", "model.name=lookup", "combine_instances=separate"]
+        job = run(settings_from_config(tiny_config(overrides, "[hard]"))).run_id
+        capsys.readouterr()
+        assert main(["--tracking-uri", mlflow_uri, "onnx", job, str(out)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line == (
+        f"error: run {job} is a lookup job on modality haptic: it keeps no network to export to "
+        "ONNX (model lookup: its scores come from a lookup table); `python -m tactile_exp.deploy "
+        "log` makes an MLflow model of it instead"
+    )
+    assert not out.exists()
+
+
+def test_a_modality_without_a_network_says_why():
+    assert MODALITIES["haptic"].onnx_refusal is None
+    with pytest.raises(NotImplementedError, match="^modality Signals: its features are computed"):
+        MODALITIES["signals"].onnx_network(lambda path: None, {}, True, 1)

@@ -35,3 +35,25 @@ def test_miss_names_registry_and_known_entries():
     reg.register("beta")(Base)
     with pytest.raises(KeyError, match="unknown widget 'gamma'; known widgets: alpha, beta"):
         reg["gamma"]
+
+
+def test_temporary_entries_are_forgotten_when_the_block_ends():
+    reg: Registry[Base] = Registry("widget", Base)
+    reg.register("a")(Base)
+
+    class Other(Base):
+        pass
+
+    with reg.temporary(a=Other) as inside:
+        inside.register("b")(Base)
+        assert reg.names() == ["a", "b"] and reg["a"] is Other
+        with pytest.raises(TypeError, match="not a Base"):
+            reg.register("int")(int)
+    assert reg.names() == ["a"] and reg["a"] is Base
+    with pytest.raises(RuntimeError, match="inside"), reg.temporary():
+        reg.register("c")(Base)
+        raise RuntimeError("inside")
+    assert reg.names() == ["a"]
+    with pytest.raises(TypeError, match="not a Base"), reg.temporary(x=int):  # type: ignore[arg-type]
+        pass
+    assert reg.names() == ["a"]

@@ -65,12 +65,20 @@ class CannotFit(Model):
 """
 
 
-def test_a_failing_worker_fails_the_job_and_its_run(tiny_config, mlflow_uri, tmp_path, monkeypatch):
+@pytest.fixture
+def models():
+    """MODELS as it is, restored after the test: a model registered in the test stays in it."""
+    with MODELS.temporary():
+        yield MODELS
+
+
+def test_a_failing_worker_fails_the_job_and_its_run(
+    tiny_config, mlflow_uri, tmp_path, monkeypatch, models
+):
     """A model registered by ``_module_`` (imported again in each worker) that raises: the job
     ends with that error, the runs FAILED, none left RUNNING."""
     (tmp_path / "failing_models.py").write_text(FAILING)
     monkeypatch.syspath_prepend(str(tmp_path))  # spawned workers get the job's sys.path
-    monkeypatch.setattr(MODELS, "_entries", dict(MODELS._load()))  # forget the model afterwards
     cfg = tiny_config(
         [
             "modality=haptic_features",

@@ -41,7 +41,6 @@ def test_a_plugin_source_is_found_for_its_path(tmp_path: Path) -> None:
     first when it is the job's own, and found among the others when it is not."""
     opened = []
 
-    @DATA_SOURCES.register("marked_folder")
     @opens("folder", "a folder with a MARK file")
     def marked(path: str | Path, scale: float = 1.0):
         if not (Path(path) / "MARK").exists():
@@ -49,7 +48,7 @@ def test_a_plugin_source_is_found_for_its_path(tmp_path: Path) -> None:
         opened.append(scale)
         return FolderDataSet(path)
 
-    try:
+    with DATA_SOURCES.temporary(marked_folder=marked):
         data = _folder(tmp_path / "d")
         assert isinstance(open_path(data, "folder"), FolderDataSet) and opened == []
         (data / "MARK").touch()
@@ -58,5 +57,3 @@ def test_a_plugin_source_is_found_for_its_path(tmp_path: Path) -> None:
         check_source_params("marked_folder", {"path": str(data)})
         with pytest.raises(ValueError, match="path: .*: no such folder; expected a folder with"):
             check_source_params("marked_folder", {"path": str(tmp_path / "nope")})
-    finally:
-        DATA_SOURCES._entries.pop("marked_folder")

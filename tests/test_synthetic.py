@@ -294,11 +294,16 @@ def test_photographs_never_touch_the_trials(tmp_path, monkeypatch):
     assert len(jpgs) == 6 and cv2.imread(str(b.parent / "photographs" / jpgs[0])).max() == 0
 
 
-def test_generation_failure_leaves_nothing(tmp_path, monkeypatch):
+@pytest.mark.parametrize(
+    "failing",
+    [(synthetic.render, "write_jpeg"), (synthetic.os, "replace")],
+    ids=["while objects are written", "while files move into place"],
+)
+def test_generation_failure_leaves_nothing(tmp_path, monkeypatch, failing):
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(synthetic, "_write_links", boom)
+    monkeypatch.setattr(*failing, boom)
     spec = SyntheticSpec(object_ids=(101,), trials=1, duration_scale=0.1, views=1,
                          image_width=96, image_height=64)  # fmt: skip
     with pytest.raises(RuntimeError, match="disk full"):
@@ -453,14 +458,13 @@ def test_bad_spec_is_rejected(kwargs, key):
         SyntheticSpec(**kwargs)
 
 
-def test_worker_processes_write_the_same_file(tmp_path, monkeypatch, caplog):
+def test_worker_processes_write_the_same_file(tmp_path, caplog):
     """Objects are handed to the workers one at a time; the parent logs the progress."""
     spec = SyntheticSpec(object_ids=(101, 508, 703), trials=1, duration_scale=0.1, views=1,
                          image_width=96, image_height=64)  # fmt: skip
     caplog.set_level(logging.INFO, logger=synthetic.__name__)
     serial = generate(tmp_path / "serial" / "x.h5", spec)
-    monkeypatch.setattr(synthetic, "_workers", lambda spec, n: 2)
-    parallel = generate(tmp_path / "parallel" / "x.h5", spec)
+    parallel = generate(tmp_path / "parallel" / "x.h5", spec, workers=2)
     progress = [
         r.getMessage().split(" (")[0] for r in caplog.records if "objects" in r.getMessage()
     ]

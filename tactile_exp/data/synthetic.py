@@ -718,6 +718,7 @@ def _write_part(part: Path, photos: Path, spec: SyntheticSpec, object_id: int) -
 
 
 def _workers(spec: SyntheticSpec, n_objects: int) -> int:
+    """Processes for ``n_objects``: one for small files (starting workers costs more)."""
     work = n_objects * spec.trials * spec.duration_scale + n_objects * spec.views / 20
     return 1 if work < 60 else max(1, min(os.cpu_count() or 1, 8, n_objects))
 
@@ -730,10 +731,12 @@ def _progress(done: int, total: int, start: float) -> None:
         )
 
 
-def _write_parts(parts: list[Path], photos: Path, spec: SyntheticSpec, ids: list[int]) -> None:
-    """Every object's part file, on ``_workers`` processes (objects handed out one at a time,
+def _write_parts(
+    parts: list[Path], photos: Path, spec: SyntheticSpec, ids: list[int], n_workers: int
+) -> None:
+    """Every object's part file, on ``n_workers`` processes (objects handed out one at a time,
     so a worker on a busier core takes fewer), with progress in this process's log."""
-    start, n_workers = time.perf_counter(), _workers(spec, len(ids))
+    start = time.perf_counter()
     if n_workers == 1:
         for done, (part, oid) in enumerate(zip(parts, ids, strict=True), 1):
             _write_part(part, photos, spec, oid)
@@ -750,14 +753,15 @@ def _write_parts(parts: list[Path], photos: Path, spec: SyntheticSpec, ids: list
             _progress(done, len(ids), start)
 
 
-def generate(path: Path, spec: SyntheticSpec = SyntheticSpec()) -> Path:
+def generate(path: Path, spec: SyntheticSpec = SyntheticSpec(), workers: int | None = None) -> Path:
     """Write the synthetic file at ``path`` and its JPEGs to ``path.parent / "photographs"``.
 
     Atomic: both are written under temporary names in the same folder and moved into place at
     the end, so a failure leaves neither a partial file nor a partial photo folder. Each object
     is a worker task writing a part file, copied in (in object order, without recompression);
     every object's signals come from its own seeded stream, so the data do not depend on the
-    number of workers.
+    number of workers: ``workers`` processes, or (None) one for a small file and up to 8 for a
+    large one.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -770,7 +774,8 @@ def generate(path: Path, spec: SyntheticSpec = SyntheticSpec()) -> Path:
     parts = [path.with_name(f".{path.name}{tag}.part{oid}") for oid in ids]
     try:
         tmp_photos.mkdir()
-        _write_parts(parts, tmp_photos, spec, ids)
+        n_workers = _workers(spec, len(ids)) if workers is None else workers
+        _write_parts(parts, tmp_photos, spec, ids, n_workers)
         with h5py.File(tmp_h5, "w") as f:
             f.attrs["TITLE"] = "Aggregated BOLT Data (synthetic)"
             f.attrs["GENERATOR_VERSION"] = GENERATOR_VERSION

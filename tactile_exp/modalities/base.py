@@ -11,13 +11,16 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from pathlib import Path
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 
 from tactile_exp.data.layout import Instances, InstanceSpec, TrialName, Trials
 from tactile_exp.models.base import Model
 from tactile_exp.registry import Component, Registry
+
+if TYPE_CHECKING:
+    from tactile_exp.modalities.networks import Load, Network
 
 
 class Modality(ABC):
@@ -34,9 +37,22 @@ class Modality(ABC):
     needs_signals: bool = False
     # The kind of instance rows it gives (`INSTANCE_KINDS`); `output` adds their shape.
     emits: str = ""
+    # Why its fitted pipelines cannot be exported to ONNX, or None where `onnx_network` builds
+    # the plain-torch network that computes them (``python -m tactile_exp.deploy onnx``).
+    onnx_refusal: str | None = "its features are computed by this package's code, not a network"
 
     def __init__(self, *, cache_dir: Path | None = None) -> None:
         self.cache_dir = cache_dir
+
+    @classmethod
+    def onnx_network(
+        cls, load: Load, settings: dict[str, Any], keeps: bool, combine: int
+    ) -> Network:
+        """One adjective's network, from its stored models (``load("model")``, ``load("head")``,
+        ``load("parts/<part>")``, loaded as plain torch) and the modality's ``settings`` as the job
+        set them; ``keeps``: the combiner scores instances one by one, else ``combine`` of them
+        make a unit (T4). Raises NotImplementedError unless the modality declares it exports."""
+        raise NotImplementedError(f"modality {cls.__name__}: {cls.onnx_refusal}")
 
     @classmethod
     def lacks(cls, dataset: Any) -> str | None:

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 
 from tactile_exp.data.dataset import PHAC2_LAYOUT
 from tactile_exp.data.layout import Instances, InstanceSpec, TrialData, TrialName, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
+
+if TYPE_CHECKING:
+    from tactile_exp.modalities.networks import Load, Network
 
 
 class _Chosen:
@@ -43,6 +46,7 @@ class Haptic(Modality):
 
     needs_layout = PHAC2_LAYOUT  # reads each trial's BioTac frames and EP states
     emits = "signals"
+    onnx_refusal = None  # the ConvNet or LSTM on its instances, then the layer or T4's head
 
     def __init__(
         self,
@@ -70,6 +74,25 @@ class Haptic(Modality):
         self.pca_components = pca_components
         self.per_finger = per_finger
         self.fit_on = fit_on
+
+    @classmethod
+    def onnx_network(
+        cls, load: Load, settings: dict[str, Any], keeps: bool, combine: int
+    ) -> Network:
+        """Row H (instances one by one); I and J (``combine`` trials' conv3, then the head)."""
+        from tactile_exp.modalities import networks as nets
+
+        model = load("model")
+        shape = list(model.input_shape_)
+        if keeps:
+            net = nets.DecisionNet(model.body_, *nets.layer(model))
+            return nets.Network(
+                net, {"instances": [None, *shape]}, {"haptic": nets.haptic_layout(settings, 1)}
+            )
+        count = combine * nets.FINGERS * int(settings["offsets"])
+        net = nets.DecisionNet(model.body_, *nets.layer(load("head")), per_unit=True)
+        layout = nets.haptic_layout(settings, combine)
+        return nets.Network(net, {"instances": [None, count, *shape]}, {"haptic": layout})
 
     def output(self, dataset: Any) -> InstanceSpec:
         from tactile_exp.preprocess.haptic import EP_NAMES, N_SCALAR

@@ -47,6 +47,7 @@ class HapticFeatures(Modality):
 
     needs_layout = PHAC2_LAYOUT  # the gripper, hand transforms and EP states of each trial
     emits = "features"
+    onnx_refusal = "its hand-designed features are computed by this package's code, not a network"
 
     def __init__(
         self,

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from tactile_exp.modalities.haptic import Haptic
 from tactile_exp.modalities.visual import Visual, view_name
 from tactile_exp.models.base import Model
 from tactile_exp.registry import Component
+
+if TYPE_CHECKING:
+    from tactile_exp.modalities.networks import Load, Network
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +78,7 @@ class Multimodal(Modality):
     takes_photographs = True
     needs_layout = Haptic.needs_layout
     emits = "features"  # conv3 activations of a unit's trials, then the views' trunk features
+    onnx_refusal = None  # the ConvNet part on the trials, the trunk's features, one layer
 
     def __init__(
         self,
@@ -107,6 +111,28 @@ class Multimodal(Modality):
 
     def parts(self) -> dict[str, tuple[Component, Component]]:
         return {"haptic": (self.haptic_part, self.model_part)}
+
+    @classmethod
+    def onnx_network(
+        cls, load: Load, settings: dict[str, Any], keeps: bool, combine: int
+    ) -> Network:
+        """Rows M and N: the ConvNet part on ``trials`` trials, the object's views, one layer."""
+        from tactile_exp.modalities import networks as nets
+
+        part, model = load("parts/haptic"), load("model")
+        trials, views = int(settings["trials"]), int(settings["views"])
+        haptic, visual = settings["haptic"], settings["visual"]
+        count = trials * nets.FINGERS * int(haptic["offsets"])
+        inputs = {
+            "instances": [None, count, *part.input_shape_],
+            "views": [None, views, nets.FEATURES],
+        }
+        layouts = {
+            "haptic": nets.haptic_layout(haptic, trials),
+            "visual": nets.visual_layout(visual, views),
+        }
+        net = nets.DecisionNet(part.body_, *nets.layer(model), per_unit=True)
+        return nets.Network(net, inputs, layouts, nets.trunk_of(visual))
 
     def max_combine(self, dataset: Any) -> tuple[int, str]:
         return 1, "multimodal units (set modality.trials for trials per unit)"

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 
 from tactile_exp.data.layout import Instances, InstanceSpec, Trials
 from tactile_exp.data.splits import divide_views
 from tactile_exp.modalities.base import MODALITIES, Modality
+
+if TYPE_CHECKING:
+    from tactile_exp.modalities.networks import Load, Network
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +50,7 @@ class Visual(Modality):
     takes_trials = False
     takes_photographs = True
     emits = "features"
+    onnx_refusal = None  # the layer (or T4's head) on the exported trunk's features
 
     def __init__(
         self,
@@ -86,6 +90,27 @@ class Visual(Modality):
         self.seed = seed
         self.batch_size = batch_size
         self.device = device
+
+    @classmethod
+    def onnx_network(
+        cls, load: Load, settings: dict[str, Any], keeps: bool, combine: int
+    ) -> Network:
+        """Rows K (one view per row) and L (``combine`` views' features, then the head)."""
+        from torch import nn
+
+        from tactile_exp.modalities import networks as nets
+
+        if keeps:
+            net = nets.DecisionNet(nn.Identity(), *nets.layer(load("model")))
+            layout = {"visual": nets.visual_layout(settings, 1)}
+            return nets.Network(
+                net, {"features": [None, nets.FEATURES]}, layout, nets.trunk_of(settings)
+            )
+        net = nets.DecisionNet(nn.Identity(), *nets.layer(load("head")), per_unit=True)
+        layout = {"visual": nets.visual_layout(settings, combine)}
+        return nets.Network(
+            net, {"views": [None, combine, nets.FEATURES]}, layout, nets.trunk_of(settings)
+        )
 
     def output(self, dataset: Any) -> InstanceSpec:
         from tactile_exp.preprocess.trunk import INCEPTION5A_CHANNELS

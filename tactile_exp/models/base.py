@@ -39,6 +39,9 @@ class Model(ABC):
     # applies: its scores depend on the input, so a finished job's model is worth applying to
     # new trials (predict, deploy); False for a chance floor whose scores ignore the input.
     applies: bool = True
+    # Why a fitted model of this kind cannot be exported to ONNX, or None where the modality's
+    # network (`Modality.onnx_network`) takes its torch body and classification layer.
+    onnx_refusal: str | None = "it is not a torch network with a classification layer"
     # Fitted (storable models): the shape of one training row, what ``restore`` rebuilds for.
     input_shape_: tuple[int, ...] | None = None
 

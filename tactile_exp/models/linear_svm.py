@@ -270,6 +270,7 @@ class LinearSVMModel(Model):
 
     learns_representation = False
     storable = True  # state()/restore(): the scaler's and the SVM's fitted arrays (artifacts.py)
+    onnx_refusal = "a linear SVM on scikit-learn arrays, not a torch network"
 
     def __init__(
         self,

@@ -15,6 +15,7 @@ class RandomGuess(Model):
 
     learns_representation = False
     applies = False  # seeded random numbers: nothing to apply to new trials
+    onnx_refusal = "its scores are seeded random numbers, not a network"
 
     def __init__(self, *, seed: int = 0) -> None:
         self.seed = seed

@@ -69,6 +69,7 @@ class SGDModel(Model):
     """A body plus a linear classification layer, trained by the two-stage SGD schedule."""
 
     storable = True
+    onnx_refusal = None  # its body and classification layer are plain torch modules
     # Capability, declared: whether head() standardises the combined features (LinearModel)
     head_standardize: bool = True
 
