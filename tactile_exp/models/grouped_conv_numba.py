@@ -372,6 +372,8 @@ def stack_forward(
 
     One task per group runs all layers, so a layer's output is read by the next while still in
     cache (a group's activations are ~3 MB at batch 1000), not fetched back from memory.
+    conv1's output, the largest, is kept for the backward: recomputing it there from ``x``
+    instead, in a per-thread buffer, saved no time in forward + backward (measured).
     """
     for g in numba.prange(x.shape[0]):
         _conv_relu(x[g], w1[g], b1[g], strides[0], a1[g])
