@@ -10,9 +10,10 @@ of them alike; best of ``--repeats``):
   batched over the 32 groups; the LSTM's input projection over a chunk's time steps; its
   recurrence per step): the rate BLAS itself reaches at those shapes, per core;
 - the haptic ConvNet at the paper's size (32 signals x 150 steps, kernels 5, widths 4, strides
-  2, batch 1000 of a 5,300-instance training set, rows read in place as in training): forward
-  (conv stack + classification layer), backward (all gradients) and the two together, and each
-  layer's weight-gradient kernel alone over all groups;
+  2, batches of 1000 of a 5,300-instance training set, rows read in place; each call takes the
+  next batch of one shuffled epoch, as training does, so no call finds its batch in cache):
+  forward (conv stack + classification layer), backward (all gradients) and the two together,
+  and each layer's weight-gradient kernel alone over all groups;
 - the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): forward and backward through
   ``lstm_last_hidden``.
 
@@ -44,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import itertools
 import json
 import os
 import subprocess
@@ -242,14 +244,18 @@ def kernel_timers() -> dict[str, Timer]:
 
     torch.manual_seed(0)
     X = torch.randn(N_TRAIN, CHANNELS, STEPS)
-    rows = torch.randperm(N_TRAIN)[:BATCH]
+    epoch = itertools.cycle(torch.randperm(N_TRAIN).split(BATCH)[: N_TRAIN // BATCH])
+
+    def batch() -> torch.Tensor:
+        return next(epoch)
+
     net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
     head = torch.nn.Linear(net.n_features, 1)
     lstm = torch.nn.LSTM(CHANNELS, HIDDEN, batch_first=True)
     g_scores, g_hidden = torch.randn(BATCH), torch.randn(BATCH, HIDDEN)
 
     def conv_forward() -> torch.Tensor:
-        return net.scores(X, head, rows=rows)
+        return net.scores(X, head, rows=batch())
 
     def conv_backward() -> tuple[float, float]:
         scores = conv_forward()
@@ -259,17 +265,17 @@ def kernel_timers() -> dict[str, Timer]:
         conv_forward().backward(g_scores)
 
     def lstm_backward() -> tuple[float, float]:
-        hidden = lstm_last_hidden(X, lstm, rows)
+        hidden = lstm_last_hidden(X, lstm, batch())
         return _timed(lambda: hidden.backward(g_hidden))()
 
     def lstm_both() -> None:
-        lstm_last_hidden(X, lstm, rows).backward(g_hidden)
+        lstm_last_hidden(X, lstm, batch()).backward(g_hidden)
 
     timers: dict[str, Timer] = {
         "convnet forward": _timed(conv_forward),
         "convnet backward": conv_backward,
         "convnet forward+backward": _timed(conv_both),
-        "lstm forward": _timed(lambda: lstm_last_hidden(X, lstm, rows)),
+        "lstm forward": _timed(lambda: lstm_last_hidden(X, lstm, batch())),
         "lstm backward": lstm_backward,
         "lstm forward+backward": _timed(lstm_both),
     }
