@@ -328,6 +328,7 @@ class Before:
         sha = subprocess.run(
             ["git", "-C", str(ROOT), "rev-parse", rev], check=True, capture_output=True, text=True
         ).stdout.strip()
+        self.sha = sha
         cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
         folder = cache / "bench-before" / sha  # kept: its kernels compile once per revision
         if not (folder / "tactile_exp").exists():
@@ -462,7 +463,12 @@ def main() -> None:
             "FLOP per byte (the script's docstring); the issue's targets stay against sgemm"
         )
         if args.before:
-            notes += f"; before = git revision {args.before}, timed in a child process"
+            revision = (
+                f"{args.before} ({before.sha[:7]})"
+                if before.sha[:7] != args.before
+                else args.before
+            )
+            notes += f"; before = git revision {revision}, timed in a child process"
         write(args.json, "bench_roofline", figures, notes)
 
 
