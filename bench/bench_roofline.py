@@ -10,11 +10,21 @@ of them alike; best of ``--repeats``):
   batched over the 32 groups; the LSTM's input projection over a chunk's time steps; its
   recurrence per step): the rate BLAS itself reaches at those shapes, per core;
 - the haptic ConvNet at the paper's size (32 signals x 150 steps, kernels 5, widths 4, strides
-  2, batch 1000 of a 5,300-instance training set, rows read in place as in training): forward
-  (conv stack + classification layer), backward (all gradients) and the two together, and each
-  layer's weight-gradient kernel alone over all groups;
+  2, batches of 1000 of a 5,300-instance training set, rows read in place; each call takes the
+  next batch of one shuffled epoch, as training does, so no call finds its batch in cache):
+  forward (conv stack + classification layer), backward (all gradients) and the two together,
+  and each layer's weight-gradient kernel alone over all groups;
 - the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): forward and backward through
   ``lstm_last_hidden``.
+
+- what the ConvNet's shapes permit (``attainable``): with 4 output channels per group no pass is
+  a large matrix product, so beside sgemm the bench measures two ceilings of its own and holds
+  each ConvNet pass against the lowest: the conv kernels' inner loop (``_weighted_sum4``: 4 rows
+  x 20 taps, conv2's) on rows that stay in L1 (256 lanes) and at the batch's 1008 lanes (rows in
+  L2), one thread; and memory: a 64 MB copy's bytes per second times the pass's FLOPs per byte
+  of the traffic it cannot avoid when every layer's output is kept for the backward (forward:
+  read the batch, write the layout's input and the three activations; backward: read those
+  four, write and read conv3's gradient);
 
 FLOPs are counted from the shapes, 2 per multiply-add, only the arithmetic a pass needs: forward
 convolutions and the head; backward the weight gradients of every layer, the input gradients of
@@ -35,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import itertools
 import json
 import os
 import subprocess
@@ -116,6 +127,67 @@ def lstm_gflop() -> dict[str, float]:
     }
 
 
+def conv_gbytes() -> dict[str, float]:
+    """GB a pass must move to and from memory (see the module docstring), float32."""
+    sizes = [GROUPS * CHANNELS // GROUPS * STEPS * BATCH * 4 / 1e9]  # the layout's input
+    sizes += [GROUPS * WIDTH * t_out * BATCH * 4 / 1e9 for _, _, t_out in conv_layers()]
+    forward = sizes[0] + sum(sizes)  # the batch read, the four layout arrays written
+    backward = sum(sizes) + 2 * sizes[-1]
+    return {
+        "convnet forward": forward,
+        "convnet backward": backward,
+        "convnet forward+backward": forward + backward,
+    }
+
+
+LOOP_TAPS, LOOP_LANES = WIDTH * KERNEL, (256, 1008)  # conv2's taps per output row; lanes
+LOOP_CALLS = 400
+COPY_MB = 64
+
+
+def loop_name(lanes: int) -> str:
+    where = "L1" if lanes * 4 * (LOOP_TAPS + 4) < 48 * 2**10 else "L2"
+    return f"conv inner loop, 4 rows x {LOOP_TAPS} taps x {lanes} lanes (in {where}), 1 thread"
+
+
+COPY = f"copy {COPY_MB} MB (numpy), 1 thread"
+
+
+def bound_gflop() -> dict[str, float]:
+    """GFLOP of the inner-loop timers; GB (read + written) of the copy."""
+    loops = {loop_name(n): 2 * 4 * LOOP_TAPS * n * LOOP_CALLS / 1e9 for n in LOOP_LANES}
+    return {**loops, COPY: 2 * COPY_MB * 2**20 / 1e9}
+
+
+def bound_timers() -> dict[str, Timer]:
+    """The inner loop of the conv kernels on resident rows, and a memory copy."""
+    from tactile_exp.models import grouped_conv_numba as conv
+
+    numba = conv.numba
+
+    @numba.njit
+    def loop(rows, src, chans, times, wts, bias, calls):
+        for _ in range(calls):
+            conv._weighted_sum4(
+                rows[0], rows[1], rows[2], rows[3], src, chans, times, wts, 0, LOOP_TAPS, bias
+            )
+
+    rng = np.random.default_rng(0)
+    timers = {}
+    for lanes in LOOP_LANES:
+        src = rng.standard_normal((WIDTH, KERNEL, lanes), dtype=np.float32)
+        rows = np.zeros((4, lanes), np.float32)
+        chans = np.repeat(np.arange(WIDTH), KERNEL)
+        times = np.tile(np.arange(KERNEL), WIDTH)
+        wts = rng.standard_normal((LOOP_TAPS, 4), dtype=np.float32)
+        args = (rows, src, chans, times, wts, np.zeros(4, np.float32), LOOP_CALLS)
+        timers[loop_name(lanes)] = _timed(lambda args=args: loop(*args))
+    a = np.ones(COPY_MB * 2**20 // 4, np.float32)
+    b = np.empty_like(a)
+    timers[COPY] = _timed(lambda: np.copyto(b, a))
+    return timers
+
+
 def blas_gflop() -> dict[str, float]:
     conv2 = conv_layers()[1]
     return {
@@ -172,14 +244,18 @@ def kernel_timers() -> dict[str, Timer]:
 
     torch.manual_seed(0)
     X = torch.randn(N_TRAIN, CHANNELS, STEPS)
-    rows = torch.randperm(N_TRAIN)[:BATCH]
+    epoch = itertools.cycle(torch.randperm(N_TRAIN).split(BATCH)[: N_TRAIN // BATCH])
+
+    def batch() -> torch.Tensor:
+        return next(epoch)
+
     net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
     head = torch.nn.Linear(net.n_features, 1)
     lstm = torch.nn.LSTM(CHANNELS, HIDDEN, batch_first=True)
     g_scores, g_hidden = torch.randn(BATCH), torch.randn(BATCH, HIDDEN)
 
     def conv_forward() -> torch.Tensor:
-        return net.scores(X, head, rows=rows)
+        return net.scores(X, head, rows=batch())
 
     def conv_backward() -> tuple[float, float]:
         scores = conv_forward()
@@ -189,17 +265,17 @@ def kernel_timers() -> dict[str, Timer]:
         conv_forward().backward(g_scores)
 
     def lstm_backward() -> tuple[float, float]:
-        hidden = lstm_last_hidden(X, lstm, rows)
+        hidden = lstm_last_hidden(X, lstm, batch())
         return _timed(lambda: hidden.backward(g_hidden))()
 
     def lstm_both() -> None:
-        lstm_last_hidden(X, lstm, rows).backward(g_hidden)
+        lstm_last_hidden(X, lstm, batch()).backward(g_hidden)
 
     timers: dict[str, Timer] = {
         "convnet forward": _timed(conv_forward),
         "convnet backward": conv_backward,
         "convnet forward+backward": _timed(conv_both),
-        "lstm forward": _timed(lambda: lstm_last_hidden(X, lstm, rows)),
+        "lstm forward": _timed(lambda: lstm_last_hidden(X, lstm, batch())),
         "lstm backward": lstm_backward,
         "lstm forward+backward": _timed(lstm_both),
     }
@@ -252,6 +328,7 @@ class Before:
         sha = subprocess.run(
             ["git", "-C", str(ROOT), "rev-parse", rev], check=True, capture_output=True, text=True
         ).stdout.strip()
+        self.sha = sha
         cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
         folder = cache / "bench-before" / sha  # kept: its kernels compile once per revision
         if not (folder / "tactile_exp").exists():
@@ -311,8 +388,8 @@ def main() -> None:
         serve(args.threads)
         return
     _set_threads(args.threads)
-    gflop = {**blas_gflop(), **conv_gflop(), **lstm_gflop()}
-    timers = blas_timers()
+    gflop = {**blas_gflop(), **bound_gflop(), **conv_gflop(), **lstm_gflop()}
+    timers = {**blas_timers(), **bound_timers()}
     kernels = kernel_timers()
     before = Before(args.before, args.threads) if args.before else None
     for name, timer in kernels.items():
@@ -336,6 +413,9 @@ def main() -> None:
         "sgemm, GFLOP/s (the ceiling: the faster BLAS)": round(ceiling, 1),
         "sgemm, GFLOP per CPU s": round(ceiling_cpu, 1),
     }
+    loop_cpu = max(gflop[loop_name(n)] / best[loop_name(n)][1] for n in LOOP_LANES)
+    copy_cpu = gflop[COPY] / best[COPY][1]
+    figures[f"{COPY}, GB per CPU s"] = round(copy_cpu, 1)
     for name, (wall, cpu) in best.items():
         work = gflop[name.removesuffix(" (before)")]
         rate, rate_cpu = work / wall, work / cpu
@@ -346,9 +426,26 @@ def main() -> None:
         )
         if name in sgemm:
             continue
+        if name == COPY:
+            print(f"{'':48s} {work / wall:8.1f} GB/s, {work / cpu:.1f} GB per CPU s")
+            continue
         figures[f"{name}, GFLOP/s"] = round(rate, 1)
         figures[f"{name}, % of sgemm"] = round(share, 1)
         figures[f"{name}, % of sgemm per CPU s"] = round(share_cpu, 1)
+    print(
+        f"attainable per CPU s (the lowest of sgemm {ceiling_cpu:.1f}, the inner loop "
+        f"{loop_cpu:.1f}, memory {copy_cpu:.1f} GB/s x FLOP per byte):"
+    )
+    for name, gbytes in conv_gbytes().items():
+        intensity = conv_gflop()[name] / gbytes
+        bound = min(ceiling_cpu, loop_cpu, copy_cpu * intensity)
+        figures[f"{name}, FLOP per byte of memory traffic"] = round(intensity, 2)
+        figures[f"{name}, attainable GFLOP per CPU s"] = round(bound, 1)
+        for key in (name, f"{name} (before)"):
+            if key in best:
+                share = 100 * conv_gflop()[name] / best[key][1] / bound
+                figures[f"{key}, % of attainable per CPU s"] = round(share, 1)
+                print(f"  {key:46s} {intensity:5.2f} FLOP/B, bound {bound:6.1f}: {share:5.1f}%")
     for name in ("convnet forward+backward", "lstm forward+backward"):
         if f"{name} (before)" in best:
             speedup = best[f"{name} (before)"][0] / best[name][0]
@@ -361,10 +458,17 @@ def main() -> None:
         notes = (
             f"best of {args.repeats} interleaved, {args.threads} threads, batch {BATCH}; % of "
             "sgemm per CPU s compares FLOPs per CPU second of all threads, steadier than wall "
-            "time when other work shares the cores"
+            "time when other work shares the cores; attainable per CPU s: the lowest of sgemm, "
+            "the conv kernels' inner loop on resident rows and memory bandwidth x the pass's "
+            "FLOP per byte (the script's docstring); the issue's targets stay against sgemm"
         )
         if args.before:
-            notes += f"; before = git revision {args.before}, timed in a child process"
+            revision = (
+                f"{args.before} ({before.sha[:7]})"
+                if before.sha[:7] != args.before
+                else args.before
+            )
+            notes += f"; before = git revision {revision}, timed in a child process"
         write(args.json, "bench_roofline", figures, notes)
 
 
