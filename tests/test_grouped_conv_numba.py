@@ -183,6 +183,22 @@ def test_scratch_reuses_only_arrays_nothing_holds_and_drops_free_ones_beyond_its
     assert len(scratch_module._POOL) == 3 and kept
 
 
+def test_huge_page_arrays_are_aligned_and_never_handed_out_while_a_view_holds_them(monkeypatch):
+    """Arrays from ``HUGE_PAGE`` bytes live in their own mapping: a view of one must still keep
+    it from the pool, as with a plain numpy array."""
+    monkeypatch.setattr(scratch_module, "_POOL", [])
+    held = scratch(1024, 1024)  # 4 MiB
+    assert held.ctypes.data % scratch_module.HUGE_PAGE == 0
+    held[:] = 1.0
+    view = held[3:5]
+    address = held.ctypes.data
+    del held
+    again = scratch(1024, 1024)
+    assert again.ctypes.data != address  # the view holds it
+    del again, view
+    assert scratch(1024, 1024).ctypes.data == address
+
+
 def test_training_scores_read_the_batch_rows_in_place_like_a_copied_batch():
     """SGD steps pass the whole input and the batch's row index (no ``X[index]`` copy): scores
     and every gradient equal torch's on the copied rows, in the index's order."""

@@ -33,7 +33,9 @@ def _allocate(shape: tuple[int, ...]) -> np.ndarray:
     buffer = mmap.mmap(-1, 4 * count + HUGE_PAGE)  # anonymous, freed with the last view
     buffer.madvise(mmap.MADV_HUGEPAGE)
     offset = -np.frombuffer(buffer, np.uint8).ctypes.data % HUGE_PAGE
-    return np.frombuffer(buffer, np.float32, count, offset).reshape(shape)
+    # Built on the buffer directly: a view's ``base`` is then this array (numpy stops at the
+    # first base that is not an array), so the pool's reference count sees every view.
+    return np.ndarray(shape, np.float32, buffer=buffer, offset=offset)
 
 
 def _free(i: int) -> bool:
