@@ -120,7 +120,9 @@ def test_the_gram_path_is_taken_where_it_pays(n, d, epochs, gram, monkeypatch):
     assert set(calls) == {"_gram_epoch" if gram else "_epoch"} and len(calls) == epochs
 
 
-def test_the_gram_path_does_not_depend_on_the_blas_thread_count():
+def test_the_gram_path_does_not_depend_on_torchs_thread_count():
+    """G's product sums in an order that depends on MKL's thread count: computed on one thread,
+    the results are the same bits whatever torch's setting."""
     X, y = _separable(200, 3000, seed=1)
     schedule = dict(loss="logistic", gram=True, epochs=20, batch_size=32, lr=0.01, momentum=0.9)
     threads = torch.get_num_threads()
