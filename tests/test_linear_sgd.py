@@ -12,7 +12,7 @@ from tactile_exp.models.losses import LOSSES
 from tactile_exp.train import caffe_xavier_, sgd_epochs
 
 
-def _train(impl: str, X, y, *, loss: str, **schedule):
+def _train(impl: str, X, y, *, loss: str, gram: bool | None = None, **schedule):
     torch.manual_seed(0)
     layer = nn.Linear(X.shape[1], 1)
     caffe_xavier_(layer.weight, X.shape[1])
@@ -29,11 +29,14 @@ def _train(impl: str, X, y, *, loss: str, **schedule):
             **schedule,
         )
     else:
-        curve = linear_sgd_epochs(layer, X, y, loss=loss, generator=generator, **schedule)
+        curve = linear_sgd_epochs(
+            layer, X, y, loss=loss, generator=generator, gram=gram, **schedule
+        )
     after = torch.randperm(50, generator=generator)  # where the shuffles left the generator
     return layer.weight.detach().clone(), layer.bias.detach().clone(), curve, after
 
 
+@pytest.mark.parametrize("gram", [False, True])
 @pytest.mark.parametrize("loss", ["logistic", "hinge"])
 @pytest.mark.parametrize(
     ("n", "d", "batch_size", "momentum", "scale", "lr"),
@@ -44,20 +47,94 @@ def _train(impl: str, X, y, *, loss: str, **schedule):
         (80, 20, 16, 0.5, 30.0, 1e-4),  # large margins: softplus's linear branch, hinge's flat part
     ],
 )
-def test_compiled_layer_sgd_equals_torchs(loss, n, d, batch_size, momentum, scale, lr):
+def test_compiled_layer_sgd_equals_torchs(gram, loss, n, d, batch_size, momentum, scale, lr):
+    """Either path, on the rows or on their Gram matrix, whatever the shape."""
     rng = np.random.default_rng(n + d)
     X = torch.from_numpy(scale * rng.standard_normal((n, d), dtype=np.float32))
     y = torch.from_numpy((rng.random(n) > 0.6).astype(np.float32))
     X[y == 1, :3] += 0.5 * scale
     schedule = dict(epochs=12, batch_size=batch_size, lr=lr, momentum=momentum)
     w, b, curve, after = _train("torch", X, y, loss=loss, **schedule)
-    w2, b2, curve2, after2 = _train("compiled", X, y, loss=loss, **schedule)
+    w2, b2, curve2, after2 = _train("compiled", X, y, loss=loss, gram=gram, **schedule)
     assert not torch.equal(w, _train("torch", X, y, loss=loss, **{**schedule, "epochs": 0})[0])
     torch.testing.assert_close(w2, w, rtol=1e-4, atol=1e-6)
     torch.testing.assert_close(b2, b, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(curve2, curve, rtol=1e-4, atol=1e-7)
     assert torch.equal(after2, after)  # the same shuffles, so later stages see the same orders
     assert curve[-1] < curve[0]  # a run that learns (a diverging one amplifies any rounding)
+
+
+def _separable(n: int, d: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    rng = np.random.default_rng(seed)
+    X = torch.from_numpy(rng.standard_normal((n, d), dtype=np.float32))
+    y = torch.from_numpy((rng.random(n) > 0.6).astype(np.float32))
+    X[y == 1, :5] += 0.5
+    return X, y
+
+
+@pytest.mark.parametrize("loss", ["logistic", "hinge"])
+@pytest.mark.parametrize("momentum", [0.0, 0.5, 0.9, 0.99])
+@pytest.mark.parametrize(("n", "d", "batch_size"), [(70, 600, 16), (45, 2000, 7)])
+def test_gram_path_equals_the_row_path(loss, momentum, n, d, batch_size):
+    """Fewer rows than features, batches that do not divide them, 60 epochs: the Gram path's
+    float32 G and float64 coefficients against the row path's float32 weights agree to float
+    rounding (weights and bias to 1e-4 relative, the loss curve to 1e-5), on the same
+    shuffles."""
+    X, y = _separable(n, d, seed=n)
+    schedule = dict(epochs=60, batch_size=batch_size, lr=0.002, momentum=momentum)
+    w, b, curve, after = _train("compiled", X, y, loss=loss, gram=False, **schedule)
+    w2, b2, curve2, after2 = _train("compiled", X, y, loss=loss, gram=True, **schedule)
+    w0 = _train("compiled", X, y, loss=loss, **{**schedule, "epochs": 0})[0]
+    assert (w - w0).abs().max() > 100 * (w2 - w).abs().max()  # the weights moved far more
+    torch.testing.assert_close(w2, w, rtol=1e-4, atol=1e-6)
+    torch.testing.assert_close(b2, b, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(curve2, curve, rtol=1e-5, atol=1e-7)
+    assert torch.equal(after2, after)
+    assert curve[-1] < 0.5 * curve[0]
+
+
+@pytest.mark.parametrize(
+    ("n", "d", "epochs", "gram"),
+    [
+        (530, 24_320, 300, True),  # the T4 head on combined units
+        (530, 2_000, 300, False),  # an epoch on G (n^2) not well below one on the rows (n d)
+        (530, 24_320, 20, False),  # too few epochs to repay G's product
+        (5_000, 100_000, 10_000, False),  # G too large
+        (100, 400, 13, True),
+        (101, 400, 13, False),
+        (100, 400, 12, False),
+    ],
+)
+def test_the_gram_path_is_taken_where_it_pays(n, d, epochs, gram, monkeypatch):
+    assert linear_sgd.uses_gram(n, d, epochs) is gram
+    if n * d > 1_000_000:
+        return
+    X, y = _separable(n, d, seed=0)
+    calls = []
+    for kernel in ("_epoch", "_gram_epoch"):
+        compiled = getattr(linear_sgd, kernel)
+        monkeypatch.setattr(
+            linear_sgd, kernel, lambda *a, k=kernel, c=compiled: calls.append(k) or c(*a)
+        )
+    _train("compiled", X, y, loss="hinge", epochs=epochs, batch_size=32, lr=0.01, momentum=0.9)
+    assert set(calls) == {"_gram_epoch" if gram else "_epoch"} and len(calls) == epochs
+
+
+def test_the_gram_path_does_not_depend_on_torchs_thread_count():
+    """G's product sums in an order that depends on MKL's thread count: computed on one thread,
+    the results are the same bits whatever torch's setting."""
+    X, y = _separable(200, 3000, seed=1)
+    schedule = dict(loss="logistic", gram=True, epochs=20, batch_size=32, lr=0.01, momentum=0.9)
+    threads = torch.get_num_threads()
+    results = []
+    for count in (1, 2):
+        torch.set_num_threads(count)
+        try:
+            results.append(_train("compiled", X, y, **schedule))
+        finally:
+            torch.set_num_threads(threads)
+    (w, b, curve, _), (w2, b2, curve2, _) = results
+    assert torch.equal(w2, w) and torch.equal(b2, b) and curve2 == curve
 
 
 def test_compiled_layer_sgd_trains_only_a_one_output_cpu_layer():

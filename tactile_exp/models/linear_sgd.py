@@ -10,11 +10,19 @@ after the batch), so an epoch is one pass over the features.
 Same algorithm as ``train.sgd_epochs`` with ``torch.optim.SGD`` (momentum, no dampening) and
 the losses of ``models/losses.py``, on the same ``torch.randperm`` orders: the results agree with
 the torch path to float rounding (tests).
+
+With momentum and no weight decay the weights stay in span{w0, rows of X}: w = w0 + X^T a and
+the momentum buffer X^T v for n-vectors a and v. A head with few rows of many features (T4: 530
+rows x 24,320 features) therefore trains on the Gram matrix G = X X^T instead (``uses_gram``): a
+row's score is b + (X w0)_i + G_i . a, a batch's gradient is its rows' coefficients in v, and w
+is formed once at the end. An epoch then costs n^2 (in cache) instead of n x d read from memory;
+G costs one matrix product. Both paths compute the same trajectory up to float rounding (tests).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import torch
@@ -24,9 +32,29 @@ from tactile_exp.models.numba_setup import numba
 
 LOSSES = ("logistic", "hinge")  # the registered losses this loop computes (others: impl=torch)
 SOFTPLUS_THRESHOLD = 20.0  # torch's F.softplus: the identity above it
+GRAM_MAX_ROWS = 4096  # G as float32 in at most 64 MB
+# The Gram path from n / 8 epochs on: G's product costs about n / 25 row-path epochs (21 at the
+# T4 head's 530 rows, bench_linear_sgd), so it is then under a third of the row path's time.
+GRAM_ROWS_PER_EPOCH = 8
 
 
-@numba.njit(nogil=True, cache=True, fastmath={"reassoc", "contract", "nsz"}, error_model="numpy")
+FASTMATH = {"reassoc", "contract", "nsz"}
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FASTMATH, error_model="numpy")
+def _loss_slope(m, hinge, one):
+    """The loss at margin ``m`` (label x score) and its derivative in ``m``, in ``one``'s type."""
+    if hinge:
+        slack = one - m
+        return (slack, -one) if slack > 0 else (one - one, one - one)
+    x = -m
+    if x > SOFTPLUS_THRESHOLD:
+        return x, -one
+    z = np.exp(x)
+    return np.log1p(z), -(z / (z + one))
+
+
+@numba.njit(nogil=True, cache=True, fastmath=FASTMATH, error_model="numpy")
 def _epoch(X, sign, order, w, b, vel_w, vel_b, lr, momentum, batch, hinge, grad):
     """One epoch over ``order``; updates w, b and their momentum buffers in place, returns the
     summed loss."""
@@ -43,20 +71,9 @@ def _epoch(X, sign, order, w, b, vel_w, vel_b, lr, momentum, batch, hinge, grad)
             s = b[0]
             for j in range(d):
                 s += row[j] * w[j]
-            m = sign[i] * s
-            if hinge:
-                slack = np.float32(1.0) - m
-                total += max(slack, np.float32(0.0))
-                g = -sign[i] * scale if slack > 0 else np.float32(0.0)
-            else:
-                x = -m
-                if x > SOFTPLUS_THRESHOLD:
-                    total += x
-                    g = -sign[i] * scale
-                else:
-                    z = np.exp(x)
-                    total += np.log1p(z)
-                    g = -sign[i] * scale * (z / (z + np.float32(1.0)))
+            loss, slope = _loss_slope(sign[i] * s, hinge, np.float32(1.0))
+            total += loss
+            g = sign[i] * scale * slope
             if g == 0:
                 continue
             grad_b += g
@@ -78,6 +95,36 @@ def _epoch(X, sign, order, w, b, vel_w, vel_b, lr, momentum, batch, hinge, grad)
     return total
 
 
+@numba.njit(nogil=True, cache=True, fastmath=FASTMATH, error_model="numpy")
+def _gram_epoch(G, p, sign, order, a, b, vel_a, vel_b, lr, momentum, batch, hinge, coef):
+    """``_epoch`` on the Gram matrix ``G`` = X X^T and ``p`` = X w0, in float64: the weights are
+    w0 + X^T a and their momentum buffer X^T vel_a; updates a, b, vel_a and vel_b in place."""
+    n = len(order)
+    total = 0.0
+    for start in range(0, n, batch):
+        size = min(batch, n - start)
+        scale = 1.0 / size
+        grad_b = 0.0
+        for r in range(size):  # every score of the batch before the weights move
+            i = order[start + r]
+            s = b[0] + p[i]
+            for k in range(n):
+                s += G[i, k] * a[k]
+            loss, slope = _loss_slope(sign[i] * s, hinge, 1.0)
+            total += loss
+            coef[r] = sign[i] * scale * slope  # the gradient's coefficient on row i
+            grad_b += coef[r]
+        for k in range(n):  # from zero buffers: torch's first step (buffer = gradient)
+            vel_a[k] *= momentum
+        for r in range(size):
+            vel_a[order[start + r]] += coef[r]
+        vel_b[0] = momentum * vel_b[0] + grad_b
+        for k in range(n):
+            a[k] -= lr * vel_a[k]
+        b[0] -= lr * vel_b[0]
+    return total
+
+
 def check_loss(loss: str) -> None:
     """Raise ValueError unless this loop computes ``loss``."""
     if loss not in LOSSES:
@@ -85,6 +132,25 @@ def check_loss(loss: str) -> None:
             f"the compiled linear SGD computes the losses {', '.join(LOSSES)}, not {loss!r}: "
             "use impl=torch"
         )
+
+
+@contextmanager
+def _one_torch_thread() -> Iterator[None]:
+    """torch's matrix products on one thread: MKL sums in an order that depends on the thread
+    count (a model's fit already runs its compiled stages so)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+def uses_gram(n: int, d: int, epochs: int) -> bool:
+    """Whether ``linear_sgd_epochs`` trains on the Gram matrix ``n`` rows of ``d`` features for
+    ``epochs`` epochs: when an epoch on it (n^2 in cache) is well below one on the rows (n x d
+    from memory), it fits memory, and the epochs repay its matrix product."""
+    return 4 * n <= d and n <= GRAM_MAX_ROWS and n <= GRAM_ROWS_PER_EPOCH * epochs
 
 
 def linear_sgd_epochs(
@@ -99,36 +165,65 @@ def linear_sgd_epochs(
     momentum: float,
     generator: torch.Generator,
     report: Callable[[float], None] | None = None,
+    gram: bool | None = None,
 ) -> list[float]:
     """``train.sgd_epochs`` for ``layer`` (one output, on CPU) applied to the rows of ``X``:
-    the same shuffles from ``generator``, updates and per-epoch mean losses."""
+    the same shuffles from ``generator``, updates and per-epoch mean losses. ``gram``: train on
+    the Gram matrix (True) or the rows (False); None: as ``uses_gram`` says.
+
+    G is float32 (one BLAS product, on one thread): each entry carries the rounding of one
+    float32 dot product over the features, as every score of the row path does every epoch; the
+    coefficients, their momentum, the scores and the bias are float64, so the n-term sums and the
+    many updates add no rounding of their own."""
     if layer.out_features != 1 or layer.weight.device.type != "cpu":
         raise ValueError("the compiled linear SGD trains a one-output layer on CPU")
     check_loss(loss)
     features = np.ascontiguousarray(X.detach().numpy().reshape(len(X), -1), dtype=np.float32)
     sign = (2.0 * y.detach().numpy() - 1.0).astype(np.float32)
-    with torch.no_grad():  # updated in place through numpy views of the parameters
+    n, hinge = len(features), loss == "hinge"
+    if gram is None:
+        gram = uses_gram(*features.shape, epochs)
+    # updated in place through numpy views of the parameters
+    with torch.no_grad(), _one_torch_thread():
         w, b = layer.weight.detach().numpy().reshape(-1), layer.bias.detach().numpy()
-        vel_w, vel_b = np.zeros_like(w), np.zeros_like(b)
-        grad = np.empty_like(w)
+        if gram:
+            rows = torch.from_numpy(features)
+            G = (rows @ rows.T).numpy()
+            p = (rows @ torch.from_numpy(w)).numpy().astype(np.float64)
+            a, vel_a = np.zeros(n), np.zeros(n)
+            b64, vel_b, coef = b.astype(np.float64), np.zeros(1), np.empty(min(batch_size, n))
+
+            def epoch(order: np.ndarray) -> float:
+                return _gram_epoch(
+                    G, p, sign, order, a, b64, vel_a, vel_b, lr, momentum, batch_size, hinge, coef
+                )
+        else:
+            vel_w, vel_b, grad = np.zeros_like(w), np.zeros_like(b), np.empty_like(w)
+            lr32, momentum32 = np.float32(lr), np.float32(momentum)
+
+            def epoch(order: np.ndarray) -> float:
+                return _epoch(
+                    features,
+                    sign,
+                    order,
+                    w,
+                    b,
+                    vel_w,
+                    vel_b,
+                    lr32,
+                    momentum32,
+                    batch_size,
+                    hinge,
+                    grad,
+                )
+
         curve = []
         for _ in range(epochs):
-            order = torch.randperm(len(features), generator=generator).numpy()
-            total = _epoch(
-                features,
-                sign,
-                order,
-                w,
-                b,
-                vel_w,
-                vel_b,
-                np.float32(lr),
-                np.float32(momentum),
-                batch_size,
-                loss == "hinge",
-                grad,
-            )
-            curve.append(total / len(features))
+            order = torch.randperm(n, generator=generator).numpy()
+            curve.append(epoch(order) / n)
             if report is not None:
                 report(curve[-1])
+        if gram:  # w = w0 + X^T a
+            w += (torch.from_numpy(a.astype(np.float32)) @ rows).numpy()
+            b[:] = b64
     return curve
