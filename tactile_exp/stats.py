@@ -199,7 +199,7 @@ def _counts(uniforms: np.ndarray) -> np.ndarray:
         count = np.zeros(n_boot)
         pmf = (1 - p) ** left
         cdf = pmf.copy()
-        active = np.flatnonzero((u > cdf) & (left > 0))
+        active = np.flatnonzero(u > cdf)  # none where no draws are left: there cdf is 1
         while active.size:  # the inverse CDF, stepping only the replicates not yet placed
             c = count[active]
             pmf[active] *= (left[active] - c) / (c + 1) * p / (1 - p)
@@ -315,8 +315,7 @@ def unpaired_reason(a: list[Evaluation], b: list[Evaluation]) -> str | None:
     adjectives, and per adjective the same test objects in the same number of evaluations."""
     if len(a) != len(b):
         return f"{len(a)} vs {len(b)} seeds/splits"
-    adjectives = [set(ev) for ev in (*a, *b)]
-    if any(s != adjectives[0] for s in adjectives):
+    if len({frozenset(ev) for ev in (*a, *b)}) > 1:
         return "different adjectives"
     for ea, eb in zip(a, b, strict=True):
         for adj, test in ea.items():

@@ -258,6 +258,7 @@ def test_friedman_ranks_the_largest_set_on_the_same_objects() -> None:
     assert result.mean_ranks == pytest.approx(want.mean_ranks)
     assert comparisons.friedman(groups[:2] + groups[3:], evidence) is None
     assert comparisons.friedman_set(groups[:2], evidence) == []
+    assert comparisons.friedman_set([], {}) == [] and comparisons.friedman([], {}) is None
 
 
 def test_labels_name_rows_variants_and_methods() -> None:
