@@ -34,7 +34,7 @@ def reduced(reduce: str, key: str, validation: Validation) -> float:
     """The adjectives' validation values of one metric, reduced; NaN when none has one
     (validation.fraction=0, or no held-out object of a class)."""
     values = [v[key] for v in validation.values() if key in v]
-    return float(REDUCERS[reduce](values)) if values else float("nan")
+    return float(REDUCERS[reduce](values)) if values else np.nan
 
 
 for _name in METRICS.names():
@@ -45,7 +45,7 @@ for _name in METRICS.names():
 
 def metric_key(name: str) -> str:
     """The metric key objective ``name`` reads (``mean_val_f1`` -> ``f1``)."""
-    return name.split("_val_", 1)[1]
+    return name.partition("_val_")[2]
 
 
 def value(name: str, validation: Validation) -> float:

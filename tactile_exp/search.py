@@ -213,12 +213,12 @@ def resume(study: optuna.Study) -> int:
 
     State = optuna.trial.TrialState
     host = socket.gethostname()
-    trials = study.get_trials(deepcopy=False)
+    trials = study.trials
     requeued = {t.user_attrs.get("requeue_of") for t in trials}
     queued = 0
     for t in trials:
-        owner = t.user_attrs.get("host"), int(t.user_attrs.get("pid", 0))
-        orphan = t.state == State.RUNNING and owner[0] == host and not process_alive(owner[1])
+        mine = t.user_attrs.get("host") == host  # claimed on this host: its pid is recorded
+        orphan = t.state == State.RUNNING and mine and not process_alive(t.user_attrs["pid"])
         if orphan:
             study.tell(t.number, state=State.FAIL)
         stopped = orphan or (t.state == State.FAIL and "error" not in t.user_attrs)
@@ -236,7 +236,7 @@ def counted(study: optuna.Study) -> int:
     State = optuna.trial.TrialState
     return sum(
         1
-        for t in study.get_trials(deepcopy=False)
+        for t in study.trials
         if t.state in (State.COMPLETE, State.PRUNED)
         or (t.state == State.FAIL and "error" in t.user_attrs)
     )
@@ -253,7 +253,7 @@ def trials_csv(study: optuna.Study) -> str:
     for t in study.trials:
         value = "" if t.value is None else f"{t.value:.6f}"
         params = [as_override(t.params[k]) if k in t.params else "" for k in keys]
-        writer.writerow([t.number, t.state.name, value, *params, t.user_attrs.get("error", "")])
+        writer.writerow([t.number, t.state.name, value, *params, t.user_attrs.get("error")])
     return out.getvalue()
 
 
@@ -267,12 +267,12 @@ def log_summary(study: optuna.Study, tracker: Tracker) -> str:
     import optuna
     from optuna.visualization import matplotlib as plots
 
-    complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
-    tags = {
+    complete = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    tags = {  # the sweeper records the objective and fixed overrides (check_same_search) first
         "run_level": "study",
         "search.study": study.study_name,
-        "search.objective": str(study.user_attrs.get("objective", "")),
-        "search.fixed_overrides": " ".join(study.user_attrs.get("fixed_overrides", []))[:5000],
+        "search.objective": study.user_attrs["objective"],
+        "search.fixed_overrides": " ".join(study.user_attrs["fixed_overrides"])[:5000],
     }
     params: dict[str, str] = {}
     metrics = {"n_trials": float(len(study.trials)), "n_complete": float(len(complete))}
@@ -295,10 +295,11 @@ def log_summary(study: optuna.Study, tracker: Tracker) -> str:
             except (ValueError, RuntimeError) as err:  # e.g. every trial had the same values
                 log.warning("study %s: no %s (%s)", study.study_name, path, err)
                 continue
-            if axes.get_legend() is not None:  # Optuna puts it outside the axes, cut off
-                axes.legend(loc="lower right", fontsize=8)
+            legend = axes.get_legend()
+            if legend is not None:  # Optuna anchors it outside the axes, where it is cut off
+                legend.set_bbox_to_anchor(None)
+                legend.set_loc("best")  # inside, where it covers the fewest points
             figure = axes.figure
-            figure.set_size_inches(7, 4.5)
             figure.tight_layout()
             tracker.log_figure(run_id, figure, path)
             plt.close(figure)
@@ -326,7 +327,7 @@ def best_report(study: optuna.Study) -> str:
     """What ``best`` prints: the best trial, its values as overrides, the final command."""
     import optuna
 
-    complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    complete = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
     if not complete:
         raise ConfigError(f"study {study.study_name!r}: no finished trial yet")
     best = study.best_trial
@@ -357,7 +358,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from tactile_exp.errors import reported
 
     parser = argparse.ArgumentParser(prog="python -m tactile_exp.search", description=__doc__)
-    commands = parser.add_subparsers(dest="command", required=True)
+    commands = parser.add_subparsers(required=True)
     best = commands.add_parser("best", help="print a study's best values and its final command")
     best.add_argument("study")
     best.add_argument("--storage", help="study storage URL (default: beside the MLflow store)")

@@ -129,7 +129,7 @@ class Interval:
 
 
 def no_interval(estimate: float, why: str) -> Interval:
-    return Interval(estimate, float("nan"), float("nan"), why)
+    return Interval(estimate, np.nan, np.nan, why)
 
 
 @dataclass(frozen=True)
@@ -196,10 +196,10 @@ def _counts(uniforms: np.ndarray) -> np.ndarray:
     for i in range(n - 1):
         p = 1.0 / (n - i)
         u = uniforms[:, i]
-        count = np.zeros(n_boot, dtype=int)
+        count = np.zeros(n_boot)
         pmf = (1 - p) ** left
         cdf = pmf.copy()
-        active = np.flatnonzero((u > cdf) & (left > 0))
+        active = np.flatnonzero(u > cdf)  # none where no draws are left: there cdf is 1
         while active.size:  # the inverse CDF, stepping only the replicates not yet placed
             c = count[active]
             pmf[active] *= (left[active] - c) / (c + 1) * p / (1 - p)
@@ -249,7 +249,7 @@ def bootstrap(test: HeldOut, adjective: str, n_boot: int = N_BOOT, seed: int = S
         cn = _draws(f"{adjective}-", neg_ids, n_boot, seed, RESAMPLING)
         if test.metric == "roc_auc":
             wins, u, v = test.pairs
-            kept = np.einsum("bi,bi->b", cp @ wins, cn) / ((cp @ u) * (cn @ v))
+            kept = np.sum((cp @ wins) * cn, axis=1) / ((cp @ u) * (cn @ v))
         else:
             kept = _resampled(test, cp, cn)
         test.replicates[(adjective, n_boot, seed, RESAMPLING)] = kept
@@ -301,9 +301,9 @@ def adjective_intervals(
     for a in sorted({a for ev in evaluations for a in ev}):
         tests = [ev[a] for ev in evaluations if a in ev]
         estimate = float(np.mean([t.value for t in tests]))
-        why = next((t.too_few for t in tests if t.too_few), "")
+        why = [t.too_few for t in tests if t.too_few]
         if why:
-            out[a] = no_interval(estimate, why)
+            out[a] = no_interval(estimate, why[0])
             continue
         boots = np.mean([bootstrap(t, a, n_boot, seed) for t in tests], axis=0)
         out[a] = percentile(estimate, boots)
@@ -315,8 +315,7 @@ def unpaired_reason(a: list[Evaluation], b: list[Evaluation]) -> str | None:
     adjectives, and per adjective the same test objects in the same number of evaluations."""
     if len(a) != len(b):
         return f"{len(a)} vs {len(b)} seeds/splits"
-    adjectives = [set(ev) for ev in (*a, *b)]
-    if any(s != adjectives[0] for s in adjectives):
+    if len({frozenset(ev) for ev in (*a, *b)}) > 1:
         return "different adjectives"
     for ea, eb in zip(a, b, strict=True):
         for adj, test in ea.items():
@@ -340,23 +339,18 @@ def compare(
         raise ValueError(f"{name_a} vs {name_b}: not on the same test objects ({reason})")
     est_a, boot_a = bootstrap_mean(a, n_boot, seed)
     est_b, boot_b = bootstrap_mean(b, n_boot, seed)
-    adjectives = sorted(a[0])
-    diffs = np.array(
-        [
-            np.mean([ea[j].value - eb[j].value for ea, eb in zip(a, b, strict=True)])
-            for j in adjectives
-        ]
-    )
+    by_adjective = {j: _difference(a, b, j) for j in sorted(a[0])}
+    diffs = np.array(list(by_adjective.values()))
     return Comparison(
         name_a,
         name_b,
         percentile(est_a - est_b, boot_a - boot_b),
         wilcoxon_p(diffs),
-        len(adjectives),
+        len(diffs),
         p_bootstrap=bootstrap_p(boot_a - boot_b),
         signed_rank=signed_rank(diffs),
-        a_better=tuple(j for j, d in zip(adjectives, diffs, strict=True) if d > 0),
-        b_better=tuple(j for j, d in zip(adjectives, diffs, strict=True) if d < 0),
+        a_better=tuple(j for j, d in by_adjective.items() if d > 0),
+        b_better=tuple(j for j, d in by_adjective.items() if d < 0),
         equivalence=percentile(est_a - est_b, boot_a - boot_b, 1 - 2 * ALPHA),
     )
 
@@ -369,14 +363,21 @@ def adjective_difference(
     pairs = list(zip(a, b, strict=True)) if len(a) == len(b) else []
     if not pairs or any(x[adjective].key != y[adjective].key for x, y in pairs):
         raise ValueError(f"not on the same test objects ({adjective})")
-    estimate = float(np.mean([x[adjective].value - y[adjective].value for x, y in pairs]))
-    why = next((x[adjective].too_few for x, _ in pairs if x[adjective].too_few), "")
+    estimate = _difference(a, b, adjective)
+    why = [x[adjective].too_few for x in a if x[adjective].too_few]
     if why:
-        return no_interval(estimate, why)
+        return no_interval(estimate, why[0])
     boots = [
         bootstrap(x[adjective], adjective) - bootstrap(y[adjective], adjective) for x, y in pairs
     ]
     return percentile(estimate, np.mean(boots, axis=0), level)
+
+
+def _difference(a: list[Evaluation], b: list[Evaluation], adjective: str) -> float:
+    """The adjective's ``a - b``, averaged over the paired evaluations."""
+    return float(
+        np.mean([x[adjective].value - y[adjective].value for x, y in zip(a, b, strict=True)])
+    )
 
 
 def wilcoxon_p(differences: np.ndarray) -> float:
@@ -404,7 +405,7 @@ def bootstrap_p(replicates: np.ndarray) -> float:
 
 def holm(pvalues: list[float]) -> list[float]:
     """Holm's step-down adjusted p-values (family-wise error), in the input's order."""
-    p = np.asarray(pvalues, dtype=float)
+    p = np.asarray(pvalues)
     order = np.argsort(p)
     scaled = np.maximum.accumulate((len(p) - np.arange(len(p))) * p[order])
     out = np.empty_like(p)
@@ -437,7 +438,7 @@ def iman_davenport(chi2: float, k: int, n: int) -> tuple[float, float]:
     """Iman-Davenport's F of Friedman's chi-square over k configurations and n adjectives, with
     its p-value on (k-1, (k-1)(n-1)) degrees of freedom."""
     if chi2 >= n * (k - 1):  # every adjective ranks the configurations alike
-        return float("inf"), 0.0
+        return np.inf, 0.0
     f = (n - 1) * chi2 / (n * (k - 1) - chi2)
     return float(f), float(sps.f.sf(f, k - 1, (k - 1) * (n - 1)))
 

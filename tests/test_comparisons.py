@@ -71,6 +71,7 @@ def test_claims_are_paired_holm_corrected_over_those_compared_and_judged() -> No
         f"{c.better} {c.relation} {c.worse}" for c in comparisons.CLAIMS
     ]
     assert lines["I > A"].result == "supported"
+    assert [line.says for line in lines.values()] == [c.says for c in comparisons.CLAIMS]
     assert lines["I > G"].result == "not distinguishable"
     assert lines["I > H"] == comparisons.ClaimLine(
         "I > H", "combining instances beats scoring each alone", "not run", "row H not run"
@@ -96,6 +97,7 @@ def test_claims_are_paired_holm_corrected_over_those_compared_and_judged() -> No
     lines = {c.claim: c for c in comparisons.claims(groups, evidence | {"A": Evidence([moved])})}
     assert lines["I > A"].result == "not compared"
     assert lines["I > A"].detail.startswith("not paired: different test objects")
+    assert lines["I > A"].says == "deep (ConvNet) beats hand-designed features"
     lines = {c.claim: c for c in comparisons.claims(groups, evidence | {"A": Evidence([], "x")})}
     assert lines["I > A"] == comparisons.ClaimLine(
         "I > A", "deep (ConvNet) beats hand-designed features", "not compared", "x"
@@ -109,6 +111,8 @@ def test_selection_family_counts_the_candidate_row_pairs() -> None:
     paper = [_group("I", "I"), *haptic, *visual]  # the paper's settings are preferred
     assert comparisons.selection_family(paper) == 2
     assert comparisons.selection_family([]) == 1
+    # Multimodal rows are neither: not candidates for either side.
+    assert comparisons.selection_family([*haptic, *visual, _group("M", "M", "multimodal")]) == 6
 
 
 @pytest.mark.simulation
@@ -209,6 +213,35 @@ def test_ablation_names_configurations_by_what_differs_and_pairs_each_axis() -> 
     assert comparisons._level_key("10") < comparisons._level_key("9x")
 
 
+def test_ablation_edges_missing_partners_defaults_and_runs_without_scores() -> None:
+    assert comparisons.ablation([], {}) is None
+    rng = np.random.default_rng(15)
+    evidence = _evidence(rng, dict.fromkeys(("p1", "p2", "p3", "p4"), 0.0))
+    evidence["broken"] = Evidence([], "no scores")
+    groups = [
+        _swept("p1", lr="0.1", loss="a"),
+        _swept("p2", lr="0.2", loss="b"),
+        _swept("p3", lr="0.2", loss="a"),
+        _swept("p4", lr="0.3", loss="b"),
+        _swept("broken", lr="0.5", loss="a"),  # no scores: not a configuration of the sweep
+    ]
+    view = comparisons.ablation(groups, evidence)
+    assert view.axes == {"loss": ["a", "b"], "lr": ["0.1", "0.2", "0.3"]}
+    # Each pair of levels pairs the configurations alike on the other axes, where there are any.
+    assert [(axis, c.a, c.b, n) for axis, c, n in view.effects] == [
+        ("loss", "loss=b", "loss=a", 1),
+        ("lr", "lr=0.2", "lr=0.1", 1),
+        ("lr", "lr=0.3", "lr=0.2", 1),
+    ]
+    none = "no combination of the other axes has both"
+    assert view.unpaired == [("lr", "lr=0.3 vs lr=0.1", none)]
+    # A sweep of two, one without the override: its level is the default, named empty.
+    two = [_swept("d1", sweep="t", lr="0.1"), _swept("d2", sweep="t")]
+    view = comparisons.ablation(two, _evidence(rng, {"d1": 0.0, "d2": 0.0}))
+    assert view.axes == {"lr": ["0.1", ""]} and view.configs[("",)].key == "d2"
+    assert [(c.a, c.b, n) for _, c, n in view.effects] == [("lr=", "lr=0.1", 1)]
+
+
 def test_friedman_ranks_the_largest_set_on_the_same_objects() -> None:
     rng = np.random.default_rng(14)
     evidence = _evidence(rng, {"A": 0.0, "I": 0.1, "G": 0.05})
@@ -225,6 +258,7 @@ def test_friedman_ranks_the_largest_set_on_the_same_objects() -> None:
     assert result.mean_ranks == pytest.approx(want.mean_ranks)
     assert comparisons.friedman(groups[:2] + groups[3:], evidence) is None
     assert comparisons.friedman_set(groups[:2], evidence) == []
+    assert comparisons.friedman_set([], {}) == [] and comparisons.friedman([], {}) is None
 
 
 def test_labels_name_rows_variants_and_methods() -> None:
@@ -245,6 +279,7 @@ def _clear(perfect: bool, first: int) -> stats.HeldOut:
 def test_fig5_lines_for_every_case_at_the_family_level() -> None:
     haptic = _group("h")
     visual = _group("L", "L", modality="visual")
+    visual.method = "visual_cnn"  # a row is named by its letter, a configuration by its method
     hv = {"thick": (False, True), "thin": (True, False), "squishy": (True, True)}
     ev_h = {a: _clear(h, 100 * i) for i, (a, (h, _)) in enumerate(hv.items())}
     ev_v = {a: _clear(v, 100 * i) for i, (a, (_, v)) in enumerate(hv.items())}
@@ -281,7 +316,12 @@ def test_fig5_lines_for_every_case_at_the_family_level() -> None:
     assert line[2].result == "supported" and "(98.75% interval" in line[2].detail
     none = comparisons.ClaimLine("thick: better by sight", "Fig. 5", "not run",
                                  "needs a haptic and a visual row")  # fmt: skip
-    assert comparisons.by_modality(haptic, None, evidence)[0] == none
+    assert comparisons.by_modality(haptic, None, evidence) == [
+        comparisons.ClaimLine(f"{a}: better by {'sight' if s == 'visual' else 'touch'}", "Fig. 5",
+                              "not run", "needs a haptic and a visual row")
+        for a, s in comparisons.BY_MODALITY
+    ]  # fmt: skip
+    assert none in comparisons.by_modality(haptic, None, evidence)
     missing = {"h": Evidence([], "no scores.csv"), "L": evidence["L"]}
     assert comparisons.by_modality(haptic, visual, missing)[0] == comparisons.ClaimLine(
         "thick: better by sight", "Fig. 5", "not run", "no scores.csv"
@@ -293,3 +333,4 @@ def test_fig5_lines_for_every_case_at_the_family_level() -> None:
     assert other[0] == comparisons.ClaimLine(
         "thick: better by sight", "Fig. 5", "not compared", "not on the same test objects (thick)"
     )
+    assert [line.result for line in other] == ["not compared"] * 3 + ["not run"]

@@ -582,3 +582,33 @@ def test_table1_summary_has_the_four_columns_a_reader_compares(tracker):
     assert len(summary) == len(rows) + 2
     assert all(line.count(" | ") == 3 for line in summary[2:])
     assert any(line.startswith("| A | `table1_a_haptic_static_1trial` | ") for line in summary)
+
+
+def test_the_margin_option_decides_an_as_good_as_claim(mlflow_uri, tmp_path, capsys):
+    """Row J a shade better than row I on every fold: ``I >= J`` is supported only when the
+    margin (``--margin``, default ``stats.MARGIN``) covers the loss the interval allows."""
+    tracker = Tracker(mlflow_uri, "margin_test")
+    row_j = {**ROW_I, "paper.row": "J", "choice.experiment": "table1_j_haptic_cnn_10trials"}
+    for fold in (0, 1):
+        _fold_job(tracker, "I", fold, "experiment=table1_i_haptic_cnn_1trial", 0.6)
+        _fold_job(tracker, "J", fold, "experiment=table1_j_haptic_cnn_10trials", 0.7, row=row_j)
+    verdicts = {}
+    for margin in ([], ["--margin", "0.3"]):
+        out = tmp_path / f"r{len(margin)}"
+        args = ["--tracking-uri", mlflow_uri, "--experiment", "margin_test", "--out", str(out)]
+        cli.main([*args, *margin])
+        claims = {r["claim"]: r for r in csv.DictReader((out / "claims.csv").open())}
+        verdicts[len(margin)] = claims["I >= J"]["result"]
+        shown = margin[1] if margin else str(stats.MARGIN)
+        assert f"rules out a loss of {shown} or" in (out / "claims.md").read_text()
+    assert verdicts == {
+        0: "not distinguishable (the interval allows a loss beyond 0.020)",
+        2: "supported (not worse by 0.300 or more)",
+    }
+    runs = MlflowClient(mlflow_uri).search_runs(
+        [tracker.experiment_id], "tags.run_level = 'report'", order_by=["start_time ASC"]
+    )
+    assert [r.data.params["margin"] for r in runs] == [str(stats.MARGIN), "0.3"]
+    with pytest.raises(SystemExit):
+        cli.main([*args, "--margin", "0"])
+    assert "--margin: an AUC difference in (0, 1), got 0.0" in capsys.readouterr().err

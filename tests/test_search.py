@@ -5,6 +5,8 @@ interrupted study continues to its number of trials; trials are tagged in MLflow
 from __future__ import annotations
 
 import math
+import os
+import shlex
 import signal
 import socket
 import sys
@@ -76,8 +78,12 @@ def test_objective_is_a_validation_metric(tiny_config):
     assert math.isnan(value("mean_val_auc", {}))  # validation.fraction=0: nothing to select on
     assert math.isnan(value("min_val_average_precision", validation))
     search.check_objective("mean_val_f1", ("roc_auc", "f1"))
-    with pytest.raises(ConfigError, match=r"^objective: min_val_f1 reads the validation f1, "):
+    with pytest.raises(ConfigError) as missing:
         search.check_objective("min_val_f1", ("roc_auc",))
+    assert str(missing.value) == (
+        "objective: min_val_f1 reads the validation f1, which metrics=['roc_auc'] does not "
+        "compute; list its metric in metrics"
+    )
 
 
 def test_search_trial_needs_validation_objects(tiny_config):
@@ -118,6 +124,14 @@ def test_search_space_from_hydra_expressions():
         assert line.startswith(f"hydra.sweeper.params.{key}: {key} is fixed in a search, not ")
         assert "\n" not in line and line.endswith(search.fixed_reason(key))
     assert "the question, not the answer" in search.fixed_reason("split.fold")
+    # A group chosen into another package (``group@package``) is still that group.
+    assert search.fixed_reason("+data@sensors") == search.FIXED_KEYS["data"]
+    assert search.fixed_reason("~split@outer") == search.FIXED_KEYS["split"]
+    with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.params\.schedule\.lr: cannot parse"):
+        search.search_space({"schedule.lr": "interval(0.1"})
+    for bad in ("range(0.5,3)", "range(5,2)"):  # whole numbers, lo < hi: each alone refused
+        with pytest.raises(ConfigError, match=r"takes whole numbers, lo < hi$"):
+            search.search_space({"model.widths.0": bad})
     assert (
         search.fixed_reason("adjectives")
         == "it changes the labels, so the question, not the answer"
@@ -147,14 +161,19 @@ def test_resume_queues_interrupted_and_orphaned_trials_again(monkeypatch):
     assert orphan.user_attrs["host"] == socket.gethostname()
     assert study.trials[broken.number].state == optuna.trial.TrialState.FAIL
     assert study.trials[stopped.number].state == optuna.trial.TrialState.FAIL
+    alive = study.ask(space)  # RUNNING in this live process: not an orphan
+    search.claim(alive)
+    assert alive.user_attrs == {"host": socket.gethostname(), "pid": os.getpid()}
     assert search.resume(study) == 2
     assert search.resume(study) == 0  # queued once
+    assert study.trials[alive.number].state == optuna.trial.TrialState.RUNNING
+    assert search.counted(study) == 2  # the orphan, now failed without an error, is not counted
     assert study.trials[orphan.number].state == optuna.trial.TrialState.FAIL
     again = [study.ask(space).params["schedule.lr"] for _ in range(2)]  # queued values first
     assert sorted(again) == sorted([stopped.params["schedule.lr"], orphan.params["schedule.lr"]])
 
 
-def test_best_prints_overrides_and_the_final_command(tmp_path):
+def test_best_prints_overrides_and_the_final_command(tmp_path, capsys):
     storage = f"sqlite:///{tmp_path}/optuna.db"
     study = search.open_study(
         "s1", storage, direction="maximize", sampler=optuna.samplers.RandomSampler(seed=0)
@@ -164,6 +183,7 @@ def test_best_prints_overrides_and_the_final_command(tmp_path):
     space = search.search_space({"model.kernel_sizes": "choice([3,3,3],[5,5,5])"})
     for score in (0.6, 0.8):
         study.tell(study.ask(space), score)
+    search.failed(study, study.ask(space), "ValueError: job failed")
     best = study.best_trial
     command = search.final_command(search.load_study("s1", storage))
     assert command == [
@@ -179,7 +199,23 @@ def test_best_prints_overrides_and_the_final_command(tmp_path):
     ]
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.study_name: study 's1' was run with"):
         search.check_same_search(study, fixed, "mean_val_auc")
+    with pytest.raises(ConfigError) as other_objective:  # same overrides, another objective
+        search.check_same_search(study, [*fixed, "validation.fraction=0.2"], "min_val_auc")
+    recorded = " ".join([*fixed, "validation.fraction=0.2"])
+    assert str(other_objective.value) == (
+        f"hydra.sweeper.study_name: study 's1' was run with {recorded} (objective mean_val_auc); "
+        f"this command has {recorded} (objective min_val_auc): name another study"
+    )
+    capsys.readouterr()
     assert search.main(["best", "s1", "--storage", storage]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        f"study s1: 2 of 3 trials finished; best trial {best.number}: mean_val_auc 0.8000 "
+        "(validation objects)",
+        "best values:",
+        f"  model.kernel_sizes={best.params['model.kernel_sizes']}",
+        "the one test evaluation (retrained on every training object, tagged search.role=final):",
+        "  " + shlex.join(command),  # quoted: it pastes into a shell as it is
+    ]
     import logging
 
     assert logging.getLogger("optuna").level == logging.WARNING
@@ -189,6 +225,29 @@ def test_best_prints_overrides_and_the_final_command(tmp_path):
     with pytest.raises(SystemExit) as exit_info:
         search.main(["best", "nope", "--storage", storage])
     assert exit_info.value.code == 2
+
+
+def test_best_finds_a_study_beside_the_mlflow_store_and_says_how_in_its_help(mlflow_uri, capsys):
+    storage = search.default_storage(mlflow_uri)
+    study = search.open_study(
+        "s4", storage, direction="minimize", sampler=optuna.samplers.RandomSampler(seed=0)
+    )  # made by Optuna alone: no objective or fixed overrides recorded
+    study.tell(study.ask(search.search_space({"schedule.lr": "choice(0.1)"})), 0.25)
+    assert search.main(["best", "s4", "--tracking-uri", mlflow_uri]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "study s4: 1 of 1 trials finished; best trial 0: objective 0.2500 " + (
+        "(validation objects)"
+    )
+    assert out[-1] == "  python -m tactile_exp schedule.lr=0.1 validation.fraction=0 " + (
+        "study.name=s4 study.role=final study.trial=0"
+    )
+    # docs/search.md names both options and where each looks by default.
+    with pytest.raises(SystemExit):
+        search.main(["best", "--help"])
+    usage = " ".join(capsys.readouterr().out.split())
+    assert usage.startswith("usage: python -m tactile_exp.search best [-h] [--storage STORAGE]")
+    assert "--storage STORAGE study storage URL (default: beside the MLflow store)" in usage
+    assert "--tracking-uri TRACKING_URI MLflow store whose folder holds optuna.db" in usage
 
 
 @pytest.mark.job
@@ -380,16 +439,21 @@ def test_a_trials_runs_link_sorts_and_shows_validation_not_test_metrics(tiny_con
     assert views.order_by == "metrics.`mean_auc`"
 
 
-def test_summary_run_trials_csv_and_storage_beside_the_store(tmp_path, mlflow_uri, capsys):
+def test_summary_run_trials_csv_and_storage_beside_the_store(
+    tmp_path, mlflow_uri, monkeypatch, caplog
+):
     from tactile_exp.tracking import Tracker
 
     assert search.default_storage(mlflow_uri) == (
         f"sqlite:///{Path(mlflow_uri.removeprefix('sqlite:///')).parent / 'optuna.db'}"
     )
     served = search.default_storage("http://mlflow:5000")  # a server: beside the default store
-    assert served.startswith("sqlite:///") and served.endswith("/optuna.db")
+    assert served == search.default_storage(None)
+    assert served.startswith("sqlite:////") and served.endswith("/optuna.db")
     storage = f"sqlite:///{tmp_path}/optuna.db"
     assert search.trials_made("s2", storage) == 0
+    with pytest.raises(ConfigError, match=r"^study 'nope': not in .*; studies there: none$"):
+        search.load_study("nope", storage)
     study = search.open_study(
         "s2", storage, direction="maximize", sampler=optuna.samplers.RandomSampler(seed=1)
     )
@@ -400,13 +464,28 @@ def test_summary_run_trials_csv_and_storage_beside_the_store(tmp_path, mlflow_ur
     for score in (0.6, 0.8, 0.7):
         study.tell(study.ask(space), score)
     search.failed(study, study.ask(space), "ValueError: job failed")
-    assert search.trials_made("s2", storage) == 4
+    # The same sampler seed draws the same values: a study is reproducible from its command.
+    twin = search.open_study(
+        "twin", storage, direction="maximize", sampler=optuna.samplers.RandomSampler(seed=1)
+    )
+    assert twin.ask(space).params == study.trials[0].params
+    # A search continued with one more parameter: earlier trials leave its column empty.
+    study.tell(study.ask({**space, **search.search_space({"model.widths.0": "range(2,5)"})}), 0.5)
+    assert search.trials_made("s2", storage) == 5
     csv_text = search.trials_csv(study)
+    assert "\r" not in csv_text
     lines = csv_text.splitlines()
-    assert lines[0] == "number,state,value,model.kernel_sizes,schedule.lr,error"
+    assert lines[0] == "number,state,value,model.kernel_sizes,model.widths.0,schedule.lr,error"
     assert lines[2].startswith('1,COMPLETE,0.800000,"[') and lines[2].endswith(",")
+    assert lines[2].split(",")[-3] == ""  # no model.widths.0 in trial 1
     assert lines[4].startswith("3,FAIL,,") and lines[4].endswith(",ValueError: job failed")
+    assert lines[5].startswith("4,COMPLETE,0.500000,")
     tracker = Tracker(mlflow_uri, "searches")
+    figures = {}
+    log_figure = tracker.log_figure
+    monkeypatch.setattr(
+        tracker, "log_figure", lambda r, f, p: (figures.setdefault(p, f), log_figure(r, f, p))
+    )
     run_id = search.log_summary(study, tracker)
     run = MlflowClient(mlflow_uri).get_run(run_id)
     assert run.info.run_name == "study=s2" and run.info.status == "FINISHED"
@@ -416,24 +495,57 @@ def test_summary_run_trials_csv_and_storage_beside_the_store(tmp_path, mlflow_ur
     )  # fmt: skip
     assert (tags["search.fixed_overrides"], tags["search.best_trial"]) == ("experiment=x", "1")
     assert run.data.metrics == {
-        "n_trials": 4.0, "n_complete": 3.0, "best_value": 0.8, "best_trial": 1.0
+        "n_trials": 5.0, "n_complete": 4.0, "best_value": 0.8, "best_trial": 1.0
     }  # fmt: skip
     best = study.best_trial.params
     assert run.data.params == {k: search.as_override(v) for k, v in best.items()}
     listed = {a.path for a in MlflowClient(mlflow_uri).list_artifacts(run_id)}
     assert listed == {"trials.csv", "optimization_history.png", "param_importances.png"}
+    # The history's legend (objective value, best value) is drawn inside its axes, not cut off.
+    history = figures["optimization_history.png"].axes[0]
+    history.figure.canvas.draw()
+    inside = history.get_window_extent()
+    legend = history.get_legend().get_window_extent()
+    assert inside.x0 <= legend.x0 and legend.x1 <= inside.x1 and legend.y1 <= inside.y1
+    # Importances from the fewest trials and values that have them: two, one parameter.
+    few = search.open_study(
+        "s5", storage, direction="maximize", sampler=optuna.samplers.RandomSampler(seed=1)
+    )
+    search.check_same_search(few, ["experiment=x"], "mean_val_auc")
+    for score in (0.6, 0.8):
+        few.tell(few.ask({"schedule.lr": space["schedule.lr"]}), score)
+    figures.clear()
+    search.log_summary(few, tracker)
+    assert set(figures) == {"optimization_history.png", "param_importances.png"}
+    # A plot Optuna cannot draw is left out with one line saying which and why.
+    from optuna.visualization import matplotlib as plots
+
+    def refused(_study):
+        raise RuntimeError("no importances here")
+
+    monkeypatch.setattr(plots, "plot_param_importances", refused)
+    figures.clear()
+    with caplog.at_level("WARNING", logger="tactile_exp.search"):
+        search.log_summary(few, tracker)
+    assert set(figures) == {"optimization_history.png"}
+    assert caplog.messages == ["study s5: no param_importances.png (no importances here)"]
     empty = search.open_study(
         "s3", storage, direction="minimize", sampler=optuna.samplers.RandomSampler(seed=1)
     )
+    search.check_same_search(empty, ["experiment=x"], "mean_val_auc")
     run = MlflowClient(mlflow_uri).get_run(search.log_summary(empty, tracker))
     assert run.data.metrics == {"n_trials": 0.0, "n_complete": 0.0} and not run.data.params
     with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.direction: study 's3' in .* was made"):
         search.open_study(
             "s3", storage, direction="maximize", sampler=optuna.samplers.RandomSampler()
         )
+    with pytest.raises(ConfigError, match=r"was made to minimize, got maximize$"):
+        search.open_study("s3", storage, direction="maximize", sampler=None)
+    with pytest.raises(ConfigError, match=r"^hydra\.sweeper\.direction: "):
+        search.open_study("s7", storage, direction="sideways", sampler=None)
     with pytest.raises(ConfigError, match=r"^study 's3': no finished trial yet"):
         search.best_report(empty)
-    with pytest.raises(ConfigError, match=r"^study 'nope': not in .*; studies there: s2, s3"):
+    with pytest.raises(ConfigError, match=r"^study 'nope': not in .*; studies there: s2, twin, "):
         search.load_study("nope", storage)
 
 

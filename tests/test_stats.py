@@ -152,7 +152,7 @@ def test_wilcoxon_equals_scipy_and_holm_equals_the_step_down_rule() -> None:
     assert stats.wilcoxon_p(six) == pytest.approx(sps.wilcoxon(six[4:]).pvalue, rel=1e-12)
     # Holm by hand: sorted 0.01, 0.03, 0.04 -> 3*0.01, max(2*0.03, .03), max(1*0.04, .06)
     assert stats.holm([0.04, 0.01, 0.03]) == pytest.approx([0.06, 0.03, 0.06])
-    assert stats.holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])
+    assert stats.holm([0.6, 0.9]) == [1.0, 1.0]  # 2 * 0.6 capped: a p-value is at most 1
 
 
 def _cmp(low: float, high: float, p: float, rank: float = 1.0) -> stats.Comparison:
@@ -233,10 +233,13 @@ def test_non_inferiority_and_tost_equivalence_against_the_margin() -> None:
     assert stats.MARGIN == 0.02
     assert cmp(-0.019, 0.03, -0.01, 0.01).non_inferior()
     assert not cmp(-0.021, 0.03, -0.01, 0.01).non_inferior()  # a wide interval: no support
+    assert not cmp(-0.02, 0.03, -0.01, 0.01).non_inferior()  # a loss of the margin itself
     assert cmp(-0.05, 0.03, 0, 0).non_inferior(margin=0.06)
     assert cmp(-0.03, 0.03, -0.019, 0.019).equivalent()
     assert not cmp(-0.03, 0.03, -0.019, 0.021).equivalent()
     assert not cmp(-0.03, 0.03, -0.021, 0.01).equivalent()
+    assert not cmp(-0.03, 0.03, -0.02, 0.01).equivalent()  # the margin is outside (-m, m)
+    assert not cmp(-0.03, 0.03, -0.01, 0.02).equivalent()
     assert not stats.Comparison("I", "J", stats.Interval(0, -0.01, 0.01), 0.5, 24).equivalent()
     # compare() fills the 90% interval TOST reads: narrower than the 95% one, same estimate
     rng = np.random.default_rng(5)
@@ -281,6 +284,8 @@ def test_iman_davenport_equals_demsars_worked_example() -> None:
     assert f == pytest.approx(3.69, abs=5e-3)
     assert p < 0.05 and sps.f.ppf(0.95, 3, 39) == pytest.approx(2.85, abs=5e-3)
     assert stats.iman_davenport(3 * 14, 4, 14) == (float("inf"), 0.0)  # unanimous ranks
+    # Near-unanimous (chi2 = 15 of at most 20 for k = 3, N = 10): F is finite, 9 * 15 / 5.
+    assert stats.iman_davenport(15, 3, 10) == pytest.approx((27, sps.f.sf(27, 2, 18)))
 
 
 def test_one_adjective_difference_is_paired_and_refuses_other_objects() -> None:
@@ -291,6 +296,8 @@ def test_one_adjective_difference_is_paired_and_refuses_other_objects() -> None:
     iv = stats.adjective_difference([a], [b], "hard", level=0.99)
     assert iv.estimate == pytest.approx(a["hard"].auc - b["hard"].auc)
     assert iv.low <= iv.estimate <= iv.high
+    half = stats.adjective_difference([a], [b], "hard", level=0.5)  # the level is the caller's
+    assert iv.low < half.low <= half.high < iv.high
     moved = {"hard": stats.HeldOut(a["hard"].object_id + 1, a["hard"].label, a["hard"].score)}
     with pytest.raises(ValueError, match="not on the same test objects"):
         stats.adjective_difference([a], [moved], "hard")
@@ -418,3 +425,27 @@ def test_adjective_intervals_average_evaluations_and_refuse_when_any_has_one_obj
     narrow = stats.adjective_difference([{"a": fine}], [{"a": fine}], "a", level=0.5)
     assert (narrow.low, narrow.high, narrow.missing) == (0.0, 0.0, "")
     assert str(stats.no_interval(0.5, "why")) == "0.500 (no interval: why)"
+
+
+def test_friedman_ranks_the_best_configuration_first() -> None:
+    f = stats.friedman(["low", "high", "mid"], np.array([[0.5, 0.4], [0.9, 0.8], [0.7, 0.6]]))
+    assert f.mean_ranks.tolist() == [3.0, 1.0, 2.0] and f.n_adjectives == 2
+
+
+def test_a_comparison_draws_the_same_objects_for_both_sides_at_any_seed() -> None:
+    (a,) = simulate(np.random.default_rng(6), "folds", (0.0,), 0.0, 4)
+    same = stats.compare("a", [a], "b", [a], 500, seed=3)
+    assert (same.difference.low, same.difference.high) == (0.0, 0.0)
+
+
+def test_independent_resampling_draws_each_adjective_on_its_own() -> None:
+    label = np.repeat([1, 0], 4)  # four objects a class, one unit each
+    score = label + np.random.default_rng(2).normal(0, 1, 8)
+    test = stats.HeldOut(np.arange(8), label, score)
+    fresh = [stats.HeldOut(np.arange(8), label, score) for _ in range(2)]
+    with _resampling("independent"):
+        x, y = (stats.bootstrap(t, name, 2000) for t, name in zip(fresh, "xy", strict=True))
+    # ~0 (sharing either class's draws alone would give ~0.4 on these scores)
+    assert abs(np.corrcoef(x, y)[0, 1]) < 0.15
+    with _resampling("joint"):
+        assert np.array_equal(stats.bootstrap(test, "x", 2000), stats.bootstrap(test, "y", 2000))

@@ -85,10 +85,12 @@ def write(
     choices: Choices,
     skipped: tuple[str, ...] = (),
     metric: str = "roc_auc",
+    margin: float = stats.MARGIN,
 ) -> list[Path]:
     """Every report file into ``out``; returns their paths, ``index.md`` last. ``skipped``: the
     sweep's cells that did not run (invalid config), listed at the end of ``index.md``.
-    ``metric``: what the numbers are (``groups`` must be collected for it)."""
+    ``metric``: what the numbers are (``groups`` must be collected for it). ``margin``: the
+    loss (in AUC) an "as good as" claim may rule out (``stats.MARGIN`` unless given)."""
     out.mkdir(parents=True, exist_ok=True)
     evidence = {g.key: heldout.load(tracker, g, metric) for g in groups}
     rows = table1(groups, evidence, metric)
@@ -121,7 +123,7 @@ def write(
         title = _fig5_title(haptic, visual, metric)
         fig5(shown, title, out / "fig5_per_adjective.png", metric)
         paths.append(out / "fig5_per_adjective.png")
-    claim_text, claim_paths = _claims(groups, evidence, haptic, visual, out)
+    claim_text, claim_paths = _claims(groups, evidence, haptic, visual, out, margin)
     friedman_text, friedman_paths = _friedman(groups, evidence, out)
     ablation_text, ablation_paths = _ablation(groups, evidence, out, metric)
     paths += claim_paths + friedman_paths + ablation_paths
@@ -202,9 +204,10 @@ def _claims(
     haptic: Group | None,
     visual: Group | None,
     out: Path,
+    margin: float,
 ) -> tuple[str, list[Path]]:
     candidates = comparisons.selection_family(groups)
-    lines = comparisons.claims(groups, evidence)
+    lines = comparisons.claims(groups, evidence, margin)
     lines += comparisons.by_modality(haptic, visual, evidence, candidates)
     rows = [vars(c) for c in lines]
     _write_csv(out / "claims.csv", rows)
@@ -218,7 +221,7 @@ def _claims(
         "corrected test, the interval and the direction of the signed ranks agree on the winner,",
         "`contradicted` when they agree on the other, `mixed` when the interval and the ranks",
         "point opposite ways, else `not distinguishable`; never from the point estimates alone.",
-        f"`I >= J` is `supported` only when the interval rules out a loss of {stats.MARGIN} or",
+        f"`I >= J` is `supported` only when the interval rules out a loss of {margin} or",
         "more (non-inferiority). The by-adjective lines (Fig. 5) compare the best visual and the",
         "best haptic configuration, picked by test mean AUC, on one adjective (interval only, at",
         "the Bonferroni level over the adjectives and every candidate pair of rows).",
@@ -576,6 +579,13 @@ def main(argv: list[str] | None = None) -> None:
         "(conf/config.yaml metrics; default: roc_auc, logged as auc)",
     )
     parser.add_argument(
+        "--margin",
+        type=float,
+        default=stats.MARGIN,
+        help="stats.margin: the AUC loss an 'as good as' claim (I >= J) must rule out, and the "
+        f"equivalence bound (ours, not the paper's; default: {stats.MARGIN})",
+    )
+    parser.add_argument(
         "--runs-table",
         metavar="RUN_ID",
         help="print this job's runs as mlflow ui lists them (Markdown) and exit",
@@ -583,6 +593,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.fig6_trials < 1:
         parser.error("--fig6-trials must be >= 1")
+    if not 0 < args.margin < 1:
+        parser.error(f"--margin: an AUC difference in (0, 1), got {args.margin}")
     if args.metric not in METRICS:
         parser.error(f"--metric: unknown {args.metric!r}; known: {', '.join(METRICS.names())}")
     try:
@@ -620,6 +632,7 @@ def main(argv: list[str] | None = None) -> None:
             choices=choices,
             skipped=skipped,
             metric=args.metric,
+            margin=args.margin,
         )
     except (ReportError, ArtifactError) as err:
         sys.exit(f"error: {err}")
@@ -628,6 +641,7 @@ def main(argv: list[str] | None = None) -> None:
         "sweep_id": args.sweep_id or "",
         "out": str(args.out),
         "metric": args.metric,
+        "margin": str(args.margin),
     }
     with tracker.run("report", params, {"run_level": "report"}) as run_id:
         tracker.log_metrics(run_id, {"n_groups": len(groups), "n_runs": _n_runs(groups)})
