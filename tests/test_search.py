@@ -143,6 +143,26 @@ def test_search_space_from_hydra_expressions():
         search.search_space({"schedule.lr": "0.01"})
 
 
+def test_search_space_edges_a_researcher_meets():
+    """A range's last value is the last one its step reaches below hi (Optuna's high is
+    inclusive); an empty range, a log interval from 0 and a search with nothing to sample are
+    each one line naming what to change."""
+    space = search.search_space({"model.widths.0": "range(2,10,step=3)"})
+    assert (space["model.widths.0"].low, space["model.widths.0"].high) == (2, 8)  # 2, 5, 8
+    with pytest.raises(ConfigError, match=r"takes whole numbers, lo < hi$"):
+        search.search_space({"model.widths.0": "range(3,3)"})
+    with pytest.raises(
+        ConfigError,
+        match=r"^hydra\.sweeper\.params\.schedule\.lr: a log interval needs a positive lower end$",
+    ):
+        search.search_space({"schedule.lr": "tag(log, interval(0, 0.1))"})
+    with pytest.raises(ConfigError) as empty:
+        search.search_space({})
+    assert str(empty.value) == (
+        "hydra.sweeper.params: a search needs at least one parameter to sample"
+    )
+
+
 def test_resume_queues_interrupted_and_orphaned_trials_again(monkeypatch):
     study = optuna.create_study(direction="maximize")
     space = search.search_space({"schedule.lr": "interval(0.001, 0.1)"})
