@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from tactile_exp.errors import TrackingError
 from tactile_exp.runtime.processes import process_alive, process_tags
-from tactile_exp.runtime.termination import shielded
+from tactile_exp.runtime.termination import reason, shielded
 
 if TYPE_CHECKING:
     from mlflow.entities import Run
@@ -469,7 +469,13 @@ class Tracker:
                 items = [Param(k, v) for k, v in params.items()]
                 for i in range(0, len(items), 100):  # MLflow takes at most 100 params per batch
                     self.client.log_batch(run_id, params=items[i : i + 100])
-            yield run_id
+            try:
+                yield run_id
+            except BaseException as caught:  # a SIGTERM wrapped in another error is the signal
+                signalled = reason(caught)
+                if signalled is caught:
+                    raise
+                raise signalled from caught
         except BaseException as err:
             if run_id is None:
                 raise

@@ -98,3 +98,16 @@ def tiny_config(compose_config, cache_dir: Path, mlflow_uri: str):
         return compose_config(base)
 
     return _tiny
+
+
+@pytest.fixture
+def sigterm_raises(monkeypatch):
+    """SIGTERM raises ``termination.Terminated`` for the test, as in a job."""
+    import signal
+
+    from tactile_exp.runtime import termination
+
+    monkeypatch.setitem(termination._state, "received", 0)  # forgotten again after the test
+    before = signal.signal(signal.SIGTERM, termination.handle)
+    yield
+    signal.signal(signal.SIGTERM, before)

@@ -320,6 +320,20 @@ def test_a_listed_job_is_skipped_and_a_failed_one_is_kept_from_hydra(tmp_path, c
     assert not (folder / "outcomes" / "4.yaml").exists()
 
 
+def test_a_signal_wrapped_in_another_error_stops_the_sweep_job(tmp_path, sigterm_raises):
+    """A SIGTERM that Python re-raised inside another error (a class built during an import)
+    is the signal: the job exits instead of being recorded FAILED and taking the next job."""
+
+    class Descriptor:
+        def __set_name__(self, owner: type, name: str) -> None:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    folder = tmp_path / "m"
+    with pytest.raises(Terminated), sweep.SweepJob(folder, 0, ("seed=1",)).recorded():
+        type("Owner", (), {"field": Descriptor()})
+    assert not (folder / "outcomes" / "0.yaml").exists()
+
+
 def test_the_summary_line_counts_every_job(tmp_path, caplog):
     config = OmegaConf.create({"hydra": {"runtime": {"cwd": str(tmp_path)}, "sweep": {"dir": "m"}}})
     callback = sweep.PrepareSweep()

@@ -11,14 +11,6 @@ from tactile_exp.runtime import termination
 from tactile_exp.tracking import Tracker
 
 
-@pytest.fixture
-def sigterm_raises(monkeypatch):
-    monkeypatch.setitem(termination._state, "received", 0)  # forgotten again after the test
-    before = signal.signal(signal.SIGTERM, termination.handle)
-    yield
-    signal.signal(signal.SIGTERM, before)
-
-
 def test_sigterm_inside_a_shielded_block_is_raised_when_it_ends(sigterm_raises):
     done = []
     with pytest.raises(termination.Terminated, match="signal 15"), termination.shielded():
@@ -104,3 +96,19 @@ def test_a_job_that_received_sigterm_stops_at_its_next_epoch(
     client = MlflowClient(mlflow_uri)
     runs = client.search_runs([client.get_experiment_by_name("tactile_exp").experiment_id])
     assert sorted(r.info.status for r in runs) == ["FAILED", "FAILED"]
+
+
+def test_a_signal_python_wraps_is_still_the_signal(sigterm_raises):
+    """A SIGTERM landing in ``__set_name__`` (a class body being built, e.g. during an import)
+    reaches the caller as Python's RuntimeError on 3.11: ``reason`` gives back the signal."""
+
+    class Descriptor:
+        def __set_name__(self, owner: type, name: str) -> None:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    other = ValueError("before any signal")
+    assert termination.reason(other) is other
+    with pytest.raises(BaseException) as caught:
+        type("Owner", (), {"field": Descriptor()})
+    stop = termination.reason(caught.value)
+    assert isinstance(stop, termination.Terminated) and str(stop) == "terminated by signal 15"

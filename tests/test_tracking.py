@@ -122,6 +122,25 @@ def test_run_ends_finished_failed_or_killed_with_the_error_and_every_param(mlflo
     assert runs["stop"].data.tags["error"].startswith("KeyboardInterrupt")
 
 
+def test_a_sigterm_wrapped_in_another_error_ends_the_run_as_the_signal(mlflow_uri, sigterm_raises):
+    """A signal Python re-raises inside another error (here a class built during the run, as an
+    import does) still stops the job: the run records the signal and raises it."""
+    import pytest
+
+    from tactile_exp.runtime.termination import Terminated
+
+    class Descriptor:
+        def __set_name__(self, owner: type, name: str) -> None:
+            os.kill(os.getpid(), 15)
+
+    tracker = Tracker(mlflow_uri, "wrapped")
+    with pytest.raises(Terminated), tracker.run("job", {}, {}) as run_id:
+        type("Owner", (), {"field": Descriptor()})
+    run = MlflowClient(mlflow_uri).get_run(run_id)
+    assert run.info.status == "FAILED"
+    assert run.data.tags["error"] == "Terminated: terminated by signal 15"
+
+
 def test_curves_longer_than_a_batch_are_logged_whole(mlflow_uri, monkeypatch):
     from tactile_exp import tracking
 

@@ -33,7 +33,7 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from tactile_exp.runtime import processes
+from tactile_exp.runtime import processes, termination
 
 if TYPE_CHECKING:
     from tactile_exp.config import Settings
@@ -192,6 +192,9 @@ class SweepJob:
         try:
             yield
         except Exception as err:
+            signalled = termination.reason(err)
+            if signalled is not err:  # a SIGTERM wrapped on its way here: stop, do not go on
+                raise signalled from err
             if isinstance(err, USER_ERRORS):
                 print(f"error: {err}", file=sys.stderr, flush=True)
             else:

@@ -51,6 +51,16 @@ def check() -> None:
         raise Terminated(f"terminated by signal {_state['received']}")
 
 
+def reason(err: BaseException) -> BaseException:
+    """What ended the work: ``err``, or the SIGTERM this process received when ``err`` is another
+    error. A signal that lands inside an import or a class body reaches the caller wrapped
+    (Python re-raises it as ``RuntimeError: Error calling __set_name__ ...``); the job must stop
+    and record the signal, not the wrapper."""
+    if _state["received"] and not isinstance(err, Terminated):
+        return Terminated(f"terminated by signal {_state['received']}")
+    return err
+
+
 def received() -> int:
     """The SIGTERM this process received, 0 if none."""
     return _state["received"]
