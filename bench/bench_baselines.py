@@ -12,7 +12,7 @@ shares a fresh chain cache across the six rows (row C fits, D, E, F reuse) with 
 shortcuts and the Newton SVM (``SquaredHingeSVM``, the optimum of liblinear's objective). Prints
 the seconds of each row, both sweep totals and their ratio, the rows where the chosen C differs
 (liblinear stops short of the optimum at large C) and the largest test-AUC difference. Target
-(issue 14): the sweep at least 3x faster after than before.
+the sweep at least 3x faster after the change than before.
 
 Targets (full default synthetic file, 600 trials): static features < 2 min (first run, reading
 the file included); dynamic chains for 24 adjectives < 10 min. ``--adjectives N`` times N

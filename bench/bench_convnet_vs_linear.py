@@ -1,4 +1,4 @@
-"""The haptic ConvNet against linear models on the same inputs, splits and validation (issue 13).
+"""The haptic ConvNet against linear models on the same inputs, splits and validation.
 
 For each split (published, and seeded random ones) and adjective, the training objects lose the
 job's validation objects (``tactile_exp.validation``, the same draw as the experiment), and every
@@ -7,7 +7,7 @@ units:
 
 - ``cnn``: the ConvNet's own classifier on each instance (2 fingers x 5 offsets per trial);
 - ``I-old``/``I-new``, ``J-old``/``J-new``: the classification layer retrained on conv3 of 1 trial
-  or 10 trials (T4), with the network's schedule (``old``: main before issue 13) or the
+  or 10 trials (T4), with the network's schedule (``old``: the earlier schedule) or the
   ``--head-*`` schedule (``new``: ``conf/schedule/paper.yaml``'s ``head``); one ConvNet serves
   all four;
 - ``flat``: logistic regression on the flattened preprocessed trial (10 instances x 32 x 150);

@@ -1,4 +1,4 @@
-"""Where is the haptic information: in signal levels or in their dynamics? (issue 13)
+"""Where is the haptic information: in signal levels or in their dynamics?
 
 All feature sets come from the same ConvNet inputs: ``HapticPreprocessor`` (P1-P6) fitted on each
 adjective's published training trials, both fingers, offset 0 of the 5 (the others are shifted

@@ -1,5 +1,5 @@
 """Haptic LSTM (Table I row G): one adjective's training at the paper's settings, the compiled
-kernels before issue 31 (``bench/lstm_before.py``) and now, side by side in one run.
+earlier kernels (``bench/lstm_before.py``) and now, side by side in one run.
 
 Both train ``haptic_lstm`` (``impl=compiled``, seed 0) at the paper's settings (hidden 10,
 FC(10), 200 logistic + 100 hinge epochs, batch 1000, lr 0.01, momentum 0.9) on the same data of
@@ -75,7 +75,7 @@ def instances(n: int, channels: int, rng: np.random.Generator) -> Instances:
 
 @contextmanager
 def kernels(which: str) -> Iterator[None]:
-    """Train with the kernels before issue 31 (the batch copied out of the training set and
+    """Train with the earlier kernels (the batch copied out of the training set and
     torch's ops on all its threads, as the engine did then: those kernels' matrix products are
     torch's) or with the package's own."""
     if which == "now":

@@ -460,15 +460,10 @@ def main() -> None:
             "sgemm per CPU s compares FLOPs per CPU second of all threads, steadier than wall "
             "time when other work shares the cores; attainable per CPU s: the lowest of sgemm, "
             "the conv kernels' inner loop on resident rows and memory bandwidth x the pass's "
-            "FLOP per byte (the script's docstring); the issue's targets stay against sgemm"
+            "FLOP per byte (the script's docstring); the targets are against sgemm"
         )
         if args.before:
-            revision = (
-                f"{args.before} ({before.sha[:7]})"
-                if before.sha[:7] != args.before
-                else args.before
-            )
-            notes += f"; before = git revision {revision}, timed in a child process"
+            notes += "; before = the package at the --before revision, timed in a child process"
         write(args.json, "bench_roofline", figures, notes)
 
 

@@ -1,4 +1,4 @@
-"""Bench: what checking every job's config costs a sweep before its first job (issue 33).
+"""Bench: what checking every job's config costs a sweep before its first job.
 
 Composes the multirun config of ``python -m tactile_exp -m <overrides>`` (default: the Table I
 grid over three seeds, 45 jobs) and times ``tactile_exp.app.sweep.check_jobs`` on it, then the

@@ -6,7 +6,7 @@ The job is row I (``experiment=table1_i_haptic_cnn_1trial``) on the embedded dat
 the paper's schedule), each into a fresh MLflow store. A first one-adjective, one-epoch job
 compiles the kernels, so neither side pays for it; then ``--rounds`` rounds run both settings,
 in alternating order. Prints each job's seconds, the median per setting, their ratio (target
-of issue 14's worker processes: workers=2 at least 15% faster on 2 cores), and each setting's
+of the worker processes: workers=2 at least 15% faster on 2 cores), and each setting's
 mean AUC (equal up to float rounding: per-thread gradient partials add up in another order).
 Each worker pays ~9 s to start (spawn, imports, data, kernels from the cache): a job of a few
 short adjectives gains nothing (4 adjectives x 40 epochs: 0.98x), a long one does.

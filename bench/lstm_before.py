@@ -1,4 +1,4 @@
-"""The haptic LSTM's compiled kernels before issue 31, kept here as ``bench_lstm.py``'s reference.
+"""The haptic LSTM's earlier compiled kernels, kept here as ``bench_lstm.py``'s reference.
 
 Not part of the package: the package has one compiled path (``tactile_exp.models.lstm_kernels``).
 These kernels (commit 3e6f3cd) ran the whole batch at once in a (feature, time, batch) layout:
