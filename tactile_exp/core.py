@@ -107,6 +107,12 @@ def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
     return dataset, modality, splits
 
 
+def kernels(settings: Settings, modality: Modality) -> tuple[str, ...]:
+    """The compiled kernel modules a job runs: its model's and its modality's parts' models'."""
+    models = [settings.model, *(model for _, model in modality.parts().values())]
+    return tuple(k for m in models for k in MODELS.build(m.name, **m.params).kernels())
+
+
 def adjective_key(
     settings: Settings, dataset: Any, modality: Component, model: Component, label: str
 ) -> str:

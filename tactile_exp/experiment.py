@@ -16,7 +16,7 @@ from typing import Any
 
 from tactile_exp import metrics, recording
 from tactile_exp.config import Settings
-from tactile_exp.core import AdjectiveResult, load, open_data
+from tactile_exp.core import AdjectiveResult, kernels, load, open_data
 from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.sources import DATA_SOURCES
@@ -88,6 +88,11 @@ def run(settings: Settings) -> JobResult:
             return JobResult(done, {}, skipped=True, validation=validation)
     tracker.end_stale_runs(settings.config_hash)
     dataset, modality, splits = open_data(settings)
+    compiled = kernels(settings, modality)
+    if compiled:  # their first compile (an empty cache) overlaps the data's preprocessing
+        from tactile_exp.models.numba_setup import compile_ahead
+
+        compile_ahead(compiled)
     with recording.job_run(tracker, settings) as parent_id:
         modality.check(dataset)
         recording.record_data(tracker, parent_id, dataset, label_notes(settings, dataset, splits))

@@ -189,3 +189,23 @@ def test_a_new_cache_back_end_keeps_models_across_instances(row_i, tmp_path):
     asked = json.loads((tmp_path / "log.json").read_text())
     assert [a["found"] for a in asked] == [False, True] and asked[0]["key"] == asked[1]["key"]
     np.testing.assert_array_equal(again.test.scores, first.test.scores)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "expected"),
+    [
+        (ROW_I, {"linear_sgd", "grouped_conv_numba"}),
+        ([*ROW_I, "model.impl=torch"], set()),
+        (["experiment=table1_g_haptic_lstm"], {"linear_sgd", "lstm_kernels"}),
+        (["experiment=table1_a_haptic_static_1trial"], set()),
+        (["experiment=table1_m_multimodal_i_l"], {"linear_sgd", "grouped_conv_numba"}),
+    ],
+    ids=["convnet", "convnet in torch", "lstm", "svm", "multimodal (its part's ConvNet)"],
+)
+def test_a_jobs_compiled_kernels_are_its_models_and_its_parts_models(
+    tiny_config, overrides, expected
+):
+    """What a job compiles ahead (``numba_setup.compile_ahead``) while its data load."""
+    settings = settings_from_config(tiny_config(overrides, adjectives="[hard]"))
+    _, modality, _ = core.open_data(settings)
+    assert {k.rsplit(".", 1)[-1] for k in core.kernels(settings, modality)} == expected

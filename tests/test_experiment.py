@@ -59,6 +59,27 @@ def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri):
     assert {"config.yaml", "auc_per_adjective.csv", "roc.png"} <= listed
 
 
+def test_a_job_compiles_its_kernels_ahead_before_it_preprocesses(tiny_config, monkeypatch):
+    """The job hands its models' kernels to ``compile_ahead`` once its data are open, before
+    the preprocessing (the modality's check) that the compile overlaps; a job without compiled
+    kernels starts nothing."""
+    from tactile_exp.modalities.haptic import Haptic
+    from tactile_exp.models import numba_setup
+
+    calls = []
+    monkeypatch.setattr(numba_setup, "compile_ahead", lambda modules: calls.append(modules))
+    check = Haptic.check
+    monkeypatch.setattr(
+        Haptic, "check", lambda self, data: calls.append("check") or check(self, data)
+    )
+    run(settings_from_config(tiny_config(["seed=12"], adjectives="[hard]")))
+    names = [m.rsplit(".", 1)[-1] for m in calls[0]]
+    assert sorted(names) == ["grouped_conv_numba", "linear_sgd"] and calls[1] == "check"
+    calls.clear()
+    run(settings_from_config(tiny_config(["model=random", "seed=12"], adjectives="[hard]")))
+    assert calls == ["check"]
+
+
 def _artifact(client: MlflowClient, run, path: str) -> str:
     local = client.download_artifacts(run.info.run_id, path)
     with open(local) as f:

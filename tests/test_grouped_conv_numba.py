@@ -1,18 +1,17 @@
-"""The compiled (numba) grouped conv stack equals ``F.conv1d(groups=...)``; its cache location.
+"""The compiled (numba) grouped conv stack equals ``F.conv1d(groups=...)``; its array pool.
 
 The first compiled call in a run compiles the kernels (~35 s on 2 idle cores) into the session's
 ``NUMBA_CACHE_DIR`` (conftest); every later test reuses them.
 """
 
-import logging
-import os
 import subprocess
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
-from tactile_exp.models import numba_setup
 from tactile_exp.models import scratch as scratch_module
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
 from tactile_exp.models.scratch import scratch
@@ -97,53 +96,6 @@ def test_compiled_scores_and_gradients_equal_torch(
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4, msg=name)
 
 
-def test_numba_cache_goes_to_the_user_cache_folder(tmp_path):
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env["TACTILE_EXP_CACHE"] = str(tmp_path)
-    code = "import tactile_exp.models.grouped_conv_numba, numba; print(numba.config.CACHE_DIR)"
-    lines = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    ).stdout.splitlines()
-    assert lines[0] == str(tmp_path / "numba")
-
-
-def test_threading_layer_is_workqueue_even_with_a_given_numba_cache_dir(tmp_path):
-    """numba imported before ``numba_setup`` (any ``from numba import ...``) once kept its
-    default threading layer whenever $NUMBA_CACHE_DIR was set, as in this test suite."""
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_THREADING_LAYER"}
-    env["NUMBA_CACHE_DIR"] = str(tmp_path)
-    code = (
-        "import numba; import tactile_exp.models.grouped_conv_numba; "
-        "print(numba.config.THREADING_LAYER, numba.config.CACHE_DIR)"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    ).stdout.split()
-    assert out == ["workqueue", str(tmp_path)]
-
-
-def test_first_compile_is_announced_once_and_only_without_cached_code(
-    tmp_path, monkeypatch, caplog
-):
-    """The kernels' first compile is a silent minute: one line says so, when the cache holds
-    no compiled code of the module, once per process."""
-    monkeypatch.setattr(numba_setup.numba.config, "CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(numba_setup, "_CHECKED", set())
-    caplog.set_level(logging.INFO, logger=numba_setup.__name__)
-    module = "tactile_exp.models.grouped_conv_numba"
-    numba_setup.announce_compile(module)
-    numba_setup.announce_compile(module)
-    assert [r.getMessage().split(" (")[0] for r in caplog.records] == [
-        "compiling the grouped_conv_numba kernels"
-    ]
-    caplog.clear()
-    (tmp_path / "models_abc").mkdir()
-    (tmp_path / "models_abc" / "grouped_conv_numba.stack_forward-1.py311.nbi").touch()
-    monkeypatch.setattr(numba_setup, "_CHECKED", set())
-    numba_setup.announce_compile(module)
-    assert caplog.records == []
-
-
 def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
     """Layout arrays are reused across steps (``scratch``): two forwards in flight, each
     backward run afterwards in reverse order, still give each batch torch's gradients."""
@@ -165,33 +117,47 @@ def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
             torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
 
 
-def test_scratch_reuses_only_arrays_nothing_holds_and_drops_free_ones_beyond_its_size(
-    monkeypatch,
-):
+def test_scratch_reuses_only_buffers_nothing_holds_for_any_shape_that_fits(monkeypatch):
     monkeypatch.setattr(scratch_module, "_POOL", [])
-    monkeypatch.setattr(scratch_module, "POOL_BYTES", 3 * 400)
-    held = scratch(10, 10)
-    assert scratch(10, 10) is not held  # held by this test: never handed out twice
+    monkeypatch.setattr(scratch_module, "POOL_BYTES", 2 * 448 + 540)
+    held = scratch(10, 10)  # a buffer of 100 + 100 // 8 = 112 floats (448 bytes)
+    assert held.shape == (10, 10) and held.flags.c_contiguous
+    assert not np.shares_memory(scratch(10, 10), held)  # held by this test: never twice
     view = held.reshape(-1)
     address = held.ctypes.data
     del held
     assert scratch(10, 10).ctypes.data != address  # a view still holds it
     del view
     assert scratch(10, 10).ctypes.data == address  # nothing holds it: reused
+    assert scratch(7, 16).ctypes.data == address  # another shape that fits: the same buffer
     assert len(scratch_module._POOL) == 2
-    kept = [scratch(2, 50), scratch(2, 50)]  # 4 x 400 bytes > 1,200: a free (10, 10) dropped
-    assert len(scratch_module._POOL) == 3 and kept
+    big = scratch(12, 10)  # 120 floats fit in neither: a new buffer of 135 (540 bytes)
+    assert len(scratch_module._POOL) == 3 and scratch_module._POOL[2].size == 135
+    assert scratch(2, 50).ctypes.data == address  # the smallest free buffer that fits
+    big_address = big.ctypes.data
+    del big
+    kept = [scratch(13, 10), scratch(13, 10)]  # 130 floats: the free 135, then a new 146
+    assert kept[0].ctypes.data == big_address and not np.shares_memory(*kept)
+    # the new buffer took the pool past its 1,436 bytes: both free 112s dropped, oldest first
+    assert [a.size for a in scratch_module._POOL] == [135, 146]
 
 
-def test_huge_page_arrays_are_aligned_and_never_handed_out_while_a_view_holds_them(monkeypatch):
-    """Arrays from ``HUGE_PAGE`` bytes live in their own mapping: a view of one must still keep
-    it from the pool, as with a plain numpy array."""
+def test_huge_page_buffers_are_private_aligned_and_never_handed_out_while_a_view_holds_them(
+    monkeypatch,
+):
+    """Buffers from ``HUGE_PAGE`` bytes live in a private mapping of their own (a shared one
+    would be shmem, never on huge pages): a view of one must still keep it from the pool."""
     monkeypatch.setattr(scratch_module, "_POOL", [])
     held = scratch(1024, 1024)  # 4 MiB
     assert held.ctypes.data % scratch_module.HUGE_PAGE == 0
     held[:] = 1.0
-    view = held[3:5]
     address = held.ctypes.data
+    maps = Path("/proc/self/maps").read_text().splitlines()
+    mapping = [
+        m for m in maps if int(m.split("-")[0], 16) <= address < int(m.split()[0].split("-")[1], 16)
+    ]
+    assert len(mapping) == 1 and mapping[0].split()[1] == "rw-p", mapping
+    view = held[3:5]
     del held
     again = scratch(1024, 1024)
     assert again.ctypes.data != address  # the view holds it
@@ -217,3 +183,37 @@ def test_training_scores_read_the_batch_rows_in_place_like_a_copied_batch():
     got = [p.grad for p in [*net.parameters(), *head.parameters()]]
     for g_c, g_t in zip(got, want, strict=True):
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
+
+
+def test_warm_up_compiles_every_signature_a_training_step_and_scoring_use():
+    """``warm_up`` (the job's compile ahead) must leave nothing for the job to compile: in a
+    fresh process, after it, a HapticCNN's fit, features and scores add no signature."""
+    code = """
+import numpy as np
+from tactile_exp.data.layout import Instances
+from tactile_exp.models import MODELS, grouped_conv_numba as kernels, linear_sgd
+from tactile_exp.models.schedule import Schedule
+
+def signatures():
+    return {name: len(f.signatures) for module in (kernels, linear_sgd)
+            for name, f in vars(module).items() if hasattr(f, "signatures")}
+
+kernels.warm_up()
+linear_sgd.warm_up()
+before = signatures()
+rng = np.random.default_rng(0)
+X = rng.normal(size=(40, 32, 150)).astype(np.float32)
+y = np.arange(40) % 2
+model = MODELS.build("haptic_cnn", schedule=Schedule(epochs=1, finetune_epochs=1, batch_size=16))
+model.fit(Instances(X, y, np.arange(40), np.arange(40)))
+head = model.head()
+head.fit(Instances(model.transform(X), y, np.arange(40), np.arange(40)))
+head.decision_function(model.transform(X[:5]))
+entry = ("stack_forward", "stack_backward", "to_layout", "from_layout", "into_layout",
+         "_epoch", "_gram_epoch")  # called from Python; the others compile inside them
+print(before == signatures(), *(before[name] for name in entry))
+"""
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == ["True"] + ["1"] * 7  # the entry points compiled by warm_up, nothing after it

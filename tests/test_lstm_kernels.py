@@ -1,5 +1,8 @@
 """The compiled LSTM kernels against nn.LSTM: outputs, every gradient, a short training run."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import torch
@@ -117,3 +120,32 @@ def test_impl_choice():
         lstm_last_hidden(torch.zeros(2, 4, 3), nn.LSTM(4, 2, batch_first=True), torch.tensor([2]))
     with pytest.raises(ValueError, match="float32 CPU"):
         lstm_last_hidden(torch.zeros(2, 4, 3, dtype=torch.float64), nn.LSTM(4, 2, batch_first=True))
+
+
+def test_warm_up_compiles_every_signature_training_and_scoring_use():
+    """``warm_up`` (the job's compile ahead) must leave nothing for the job to compile: in a
+    fresh process, after it, a HapticLSTM's fit and scores add no signature."""
+    code = """
+import numpy as np
+from tactile_exp.data.layout import Instances
+from tactile_exp.models import MODELS, lstm_kernels as kernels
+
+def signatures():
+    return {name: len(f.signatures) for name, f in vars(kernels).items()
+            if hasattr(f, "signatures")}
+
+kernels.warm_up()
+before = signatures()
+rng = np.random.default_rng(0)
+X = rng.normal(size=(70, 32, 150)).astype(np.float32)
+y = np.arange(70) % 2
+schedule = dict(epochs=1, finetune_epochs=1, batch_size=16)
+model = MODELS.build("haptic_lstm", schedule=schedule)
+model.fit(Instances(X, y, np.arange(70), np.arange(70)))
+model.decision_function(X[:5])
+print(before == signatures(), before["_forward"], before["_backward"])
+"""
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == ["True", "1", "1"]  # the entry points compiled by warm_up, nothing after it

@@ -163,6 +163,25 @@ def test_linear_standardises_so_feature_scale_does_not_matter():
     assert aucs[0] == pytest.approx(aucs[1], abs=0.02)
 
 
+@pytest.mark.parametrize("n", [1, 63, 64, 65, 200])
+def test_linear_standardisation_is_numpys_float64_mean_and_std_bit_for_bit(n):
+    """The statistics are summed in blocks of rows (no float64 copy of the features), in the
+    order numpy sums them: the same bits as ``astype(float64).mean/std(axis=0)``, also for
+    columns far from zero (catastrophic cancellation in a one-pass formula) and constant ones."""
+    rng = np.random.default_rng(n)
+    X = rng.normal(size=(n, 300)) * rng.uniform(0, 50, 300) + 1e4 * rng.normal(size=300)
+    X = X.astype(np.float32)
+    X[:, 7] = 3.0  # constant: std 0, kept as scale 1
+    model = LinearModel(device="cpu")
+    model._fit_preprocessing(X.reshape(n, 3, 100))
+    f64 = X.astype(np.float64)
+    std = f64.std(axis=0)
+    np.testing.assert_array_equal(model.mean_, f64.mean(axis=0).astype(np.float32))
+    np.testing.assert_array_equal(model.scale_, np.where(std > 0, std, 1.0).astype(np.float32))
+    assert model.scale_[7] == 1.0
+    np.testing.assert_array_equal(model._preprocess(X), (X - model.mean_) / model.scale_)
+
+
 def test_head_is_a_linear_model_with_the_same_settings():
     model = MODELS.build("haptic_cnn", seed=4, loss="logistic", **fast(lr=0.05))
     head = model.head()

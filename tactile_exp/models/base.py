@@ -58,6 +58,12 @@ class Model(ABC):
     def decision_function(self, X: np.ndarray) -> np.ndarray:
         """One real score per row of ``X``; larger means more likely positive."""
 
+    def kernels(self) -> tuple[str, ...]:
+        """The modules of compiled (numba) kernels ``fit`` runs, each with a ``warm_up()`` that
+        compiles them: a job compiles them ahead, beside its data loading, while their cache is
+        empty (``numba_setup.compile_ahead``). None by default."""
+        return ()
+
     def transform(self, X: np.ndarray) -> np.ndarray:
         """Features (n, D) to combine over instances; the identity unless overridden."""
         return X.reshape(len(X), -1)

@@ -634,3 +634,18 @@ def grouped_conv_head(
     return GroupedConvHead.apply(
         x.contiguous(), rows, groups, tuple(strides), head.weight, head.bias, *params
     )
+
+
+def warm_up() -> None:
+    """Compile every kernel of this module (into numba's cache) on a toy batch, with the types a
+    job's calls have: the fused training step, the stack's forward and its backward."""
+    torch.manual_seed(0)
+    groups, strides = 2, (2, 2, 2)
+    x = torch.randn(3, 2 * groups, 40)
+    weights = [torch.randn(4 * groups, c_in, 5, requires_grad=True) for c_in in (2, 4, 4)]
+    biases = [torch.zeros(4 * groups, requires_grad=True) for _ in weights]
+    out = grouped_conv_stack(x, weights, biases, groups=groups, strides=strides)
+    head = torch.nn.Linear(out.shape[1], 1)
+    out.sum().backward()
+    scores = grouped_conv_head(x, weights, biases, head, groups=groups, strides=strides)
+    scores.sum().backward()

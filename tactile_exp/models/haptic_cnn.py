@@ -204,6 +204,10 @@ class HapticCNN(SGDModel):
                 f"of groups={groups} (one group per signal), got {X.shape}"
             )
 
+    def kernels(self) -> tuple[str, ...]:
+        compiled = self.runs_compiled
+        return super().kernels() + (("tactile_exp.models.grouped_conv_numba",) if compiled else ())
+
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         net = GroupedTemporalConvNet(*input_shape, **self.net_args)
         self.conv3_shape_ = net.out_shape

@@ -100,6 +100,10 @@ class HapticLSTM(SGDModel):
     ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
         return lambda X, index: classifier(body(X, index)).squeeze(1)
 
+    def kernels(self) -> tuple[str, ...]:
+        compiled = self.runs_compiled
+        return super().kernels() + (("tactile_exp.models.lstm_kernels",) if compiled else ())
+
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         impl = self.impl
         if impl == "auto":

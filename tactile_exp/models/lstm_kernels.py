@@ -407,3 +407,13 @@ def lstm_last_hidden(
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
     announce_compile(__name__)
     return LSTMLastHidden.apply(x, rows, *params)
+
+
+def warm_up() -> None:
+    """Compile every kernel of this module (into numba's cache) on a toy batch, with the types a
+    job's calls have: forward and backward, with and without the input's gradient."""
+    torch.manual_seed(0)
+    lstm = torch.nn.LSTM(3, 2, batch_first=True)
+    x = torch.randn(5, 3, 4)
+    lstm_last_hidden(x, lstm, torch.tensor([0, 2, 4])).sum().backward()
+    lstm_last_hidden(x.requires_grad_(), lstm).sum().backward()

@@ -4,12 +4,20 @@ Compiled code is cached in the user cache folder (``$NUMBA_CACHE_DIR`` when set,
 ``numba/`` under ``$TACTILE_EXP_CACHE`` or ``~/.cache/tactile_exp``), never inside the package
 or the checkout, so kernels compile once per machine. numba reads these settings when it is
 imported, hence this module: kernel modules import ``numba`` from here.
+
+The first compile takes about half a minute (the ConvNet's kernels), on one core. A job asks for
+it ahead (``compile_ahead``): a background process compiles the kernels its model runs into the
+cache while the job reads and preprocesses its data (one core), and the first kernel call waits
+for that process, then loads the compiled code from the cache.
 """
 
 from __future__ import annotations
 
+import importlib
 import logging
+import multiprocessing
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from tactile_exp.data.phac2 import default_cache_dir
@@ -28,23 +36,60 @@ numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
 log = logging.getLogger(__name__)
 _CHECKED: set[str] = set()
+_AHEAD: dict[str, multiprocessing.process.BaseProcess] = {}  # module -> its compiling process
+
+
+def _cached(module: str) -> bool:
+    """Whether the cache holds compiled code of ``module`` (its index files name the module)."""
+    stem = module.rsplit(".", 1)[-1]
+    return any(Path(numba.config.CACHE_DIR).glob(f"*/{stem}.*.nbi"))
+
+
+def _warm_up(modules: Sequence[str]) -> None:
+    """The background process: each module's ``warm_up()`` compiles its kernels into the cache."""
+    for module in modules:
+        importlib.import_module(module).warm_up()
+
+
+def compile_ahead(modules: Sequence[str]) -> None:
+    """Start compiling the kernels of ``modules`` not yet in the cache in one background process
+    (spawned: it inherits this process's cache settings, and none of its threads or state)."""
+    cold = [m for m in dict.fromkeys(modules) if m not in _AHEAD and not _cached(m)]
+    if not cold:
+        return
+    process = multiprocessing.get_context("spawn").Process(
+        target=_warm_up, args=(cold,), name="tactile_exp-compile", daemon=True
+    )
+    process.start()
+    log.info(
+        "compiling the %s kernels ahead (numba, first use with this cache), beside the data "
+        "loading; cached in %s",
+        ", ".join(m.rsplit(".", 1)[-1] for m in cold),
+        numba.config.CACHE_DIR,
+    )
+    _AHEAD.update(dict.fromkeys(cold, process))
 
 
 def announce_compile(module: str) -> None:
-    """Log one line when ``module``'s kernels have no compiled code in the cache yet: their
-    first compile takes about a minute, during which nothing else is printed. Checked once per
-    process (the cache's index files, one per compiled function, name their module)."""
+    """Before the first call of ``module``'s kernels in this process: wait for their compile
+    ahead, if one runs, or log one line when the cache has no compiled code of them yet (their
+    first compile takes about half a minute, during which nothing else is printed)."""
     if module in _CHECKED:
         return
     _CHECKED.add(module)
     stem = module.rsplit(".", 1)[-1]
-    if not any(Path(numba.config.CACHE_DIR).glob(f"*/{stem}.*.nbi")):
+    process = _AHEAD.pop(module, None)
+    if process is not None:
+        if process.is_alive():
+            log.info("waiting for the %s kernels' compile ahead to finish", stem)
+        process.join()
+    if not _cached(module):  # none ahead, or it failed: compiled here, on first call
         log.info(
-            "compiling the %s kernels (numba, first use with this cache: about a minute, "
+            "compiling the %s kernels (numba, first use with this cache: about half a minute, "
             "cached in %s after)",
             stem,
             numba.config.CACHE_DIR,
         )
 
 
-__all__ = ["announce_compile", "numba"]
+__all__ = ["announce_compile", "compile_ahead", "numba"]

@@ -106,6 +106,15 @@ class SGDModel(Model):
         self.body_: nn.Module | None = None
         self.classifier_: nn.Linear | None = None
 
+    @property
+    def runs_compiled(self) -> bool:
+        """Whether training runs the compiled CPU kernels: ``impl`` compiled, or auto on CPU."""
+        return self.impl == "compiled" or (self.impl == "auto" and self.device_.type == "cpu")
+
+    def kernels(self) -> tuple[str, ...]:
+        """The classification layer's compiled SGD (``linear_sgd``) where it runs."""
+        return ("tactile_exp.models.linear_sgd",) if self.runs_compiled else ()
+
     @abstractmethod
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         """A fresh body for rows of ``input_shape`` and the width of its features."""
@@ -148,9 +157,8 @@ class SGDModel(Model):
         different AUCs (row G: 0.900 or 0.842 for one adjective). Jobs under Hydra's joblib
         launcher get one thread each (loky sets OMP_NUM_THREADS), a plain job every core: one
         thread here makes them equal. Those ops are small beside the kernels'."""
-        compiled = self.impl == "compiled" or (self.impl == "auto" and self.device_.type == "cpu")
         threads = torch.get_num_threads()
-        if not compiled or threads == 1:
+        if not self.runs_compiled or threads == 1:
             yield
             return
         torch.set_num_threads(1)
@@ -222,7 +230,7 @@ class SGDModel(Model):
         if finetune:
             before = [p.detach().clone() for p in classifier_.parameters()]
             history["finetune_loss"] = self._layer_epochs(
-                self._features(Xt),
+                Xt if isinstance(body_, nn.Identity) else self._features(Xt),
                 yt,
                 loss=self.loss,
                 epochs=schedule.finetune_epochs,
@@ -250,7 +258,7 @@ class SGDModel(Model):
         """SGD epochs of the classification layer alone on fixed features ``F``: compiled
         (``linear_sgd``) unless ``impl`` or the device says torch; ``auto`` also takes torch's
         path for a registered loss the compiled loop does not compute."""
-        if self.impl == "compiled" or (self.impl == "auto" and self.device_.type == "cpu"):
+        if self.runs_compiled:
             from tactile_exp.models import linear_sgd  # numba: lazy
 
             if self.impl == "compiled" or loss in linear_sgd.LOSSES:
@@ -270,7 +278,7 @@ class SGDModel(Model):
         parts = [self.body_(X[i : i + INFERENCE_BATCH]) for i in range(0, len(X), INFERENCE_BATCH)]
         if not parts:
             return X.new_zeros((0, self.classifier_.in_features))
-        return torch.cat(parts)
+        return parts[0] if len(parts) == 1 else torch.cat(parts)
 
     def transform(self, X: np.ndarray) -> np.ndarray:
         """The body's features for each row of ``X``: (n, D) float32."""
