@@ -83,8 +83,8 @@ class Concat(Combiner):
         widths = {len(m) for m in members}
         if len(widths) != 1:
             raise ValueError(f"units have different numbers of instances {sorted(widths)}")
-        X = np.stack([features[m].reshape(-1) for m in members])
-        return _units(instances, members, X)
+        index = np.asarray(members, dtype=np.intp).reshape(len(members), -1)
+        return _units(instances, members, features[index].reshape(len(members), -1))
 
 
 @COMBINERS.register("mean")

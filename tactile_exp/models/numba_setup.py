@@ -13,10 +13,12 @@ for that process, then loads the compiled code from the cache.
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import logging
-import multiprocessing
 import os
+import subprocess
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -36,7 +38,7 @@ numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
 log = logging.getLogger(__name__)
 _CHECKED: set[str] = set()
-_AHEAD: dict[str, multiprocessing.process.BaseProcess] = {}  # module -> its compiling process
+_AHEAD: dict[str, subprocess.Popen] = {}  # module -> the process compiling it
 
 
 def _cached(module: str) -> bool:
@@ -51,16 +53,21 @@ def _warm_up(modules: Sequence[str]) -> None:
         importlib.import_module(module).warm_up()
 
 
+def _stop_compiles() -> None:
+    """At exit: a compile ahead that nothing waited for (the job ended first) ends with it."""
+    for process in _AHEAD.values():
+        process.kill()
+
+
 def compile_ahead(modules: Sequence[str]) -> None:
     """Start compiling the kernels of ``modules`` not yet in the cache in one background process
-    (spawned: it inherits this process's cache settings, and none of its threads or state)."""
+    (a new interpreter with this one's environment, hence its cache settings; a plain
+    subprocess, so it works in any launcher's worker process)."""
     cold = [m for m in dict.fromkeys(modules) if m not in _AHEAD and not _cached(m)]
     if not cold:
         return
-    process = multiprocessing.get_context("spawn").Process(
-        target=_warm_up, args=(cold,), name="tactile_exp-compile", daemon=True
-    )
-    process.start()
+    code = "import sys; from tactile_exp.models.numba_setup import _warm_up; _warm_up(sys.argv[1:])"
+    process = subprocess.Popen([sys.executable, "-c", code, *cold], stdout=subprocess.DEVNULL)
     log.info(
         "compiling the %s kernels ahead (numba, first use with this cache), beside the data "
         "loading; cached in %s",
@@ -68,6 +75,9 @@ def compile_ahead(modules: Sequence[str]) -> None:
         numba.config.CACHE_DIR,
     )
     _AHEAD.update(dict.fromkeys(cold, process))
+
+
+atexit.register(_stop_compiles)
 
 
 def announce_compile(module: str) -> None:
@@ -80,9 +90,9 @@ def announce_compile(module: str) -> None:
     stem = module.rsplit(".", 1)[-1]
     process = _AHEAD.pop(module, None)
     if process is not None:
-        if process.is_alive():
+        if process.poll() is None:
             log.info("waiting for the %s kernels' compile ahead to finish", stem)
-        process.join()
+        process.wait()
     if not _cached(module):  # none ahead, or it failed: compiled here, on first call
         log.info(
             "compiling the %s kernels (numba, first use with this cache: about half a minute, "
