@@ -139,7 +139,6 @@ import hashlib
 import json
 import logging
 import math
-import multiprocessing
 import os
 import shutil
 import time
@@ -163,6 +162,7 @@ from tactile_exp.data.layout import (
     objects,
     published_test_split,
 )
+from tactile_exp.runtime import processes
 
 GENERATOR_VERSION = 5
 log = logging.getLogger(__name__)
@@ -742,7 +742,7 @@ def _write_parts(
             _write_part(part, photos, spec, oid)
             _progress(done, len(ids), start)
         return
-    ctx = multiprocessing.get_context("forkserver")  # safe when the parent has threads
+    ctx = processes.start_context("forkserver")  # safe when the parent has threads
     with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
         jobs = [
             pool.submit(_write_part, part, photos, spec, oid)

@@ -45,7 +45,7 @@ class Pool:
     def __init__(
         self, workers: int, *, init: Callable[..., None], initargs: tuple[Any, ...]
     ) -> None:
-        context = multiprocessing.get_context("spawn")
+        context = processes.start_context("spawn")
         records = context.Queue()
         self._listener = logging.handlers.QueueListener(records, _Relay())
         threads = max(1, cores.cores() // workers)
