@@ -1,16 +1,20 @@
 """Compiled CPU kernels (numba) for the haptic ConvNet's grouped temporal convolutions + ReLU.
 
-``F.conv1d(groups=32)`` runs these tiny per-group convolutions (1-8 channels, kernel 3-9) at a
-few GFLOP/s on CPU (DEPS.md §7). Here activations live as (groups, channels, time, batch) with
-the batch innermost and contiguous, so every filter tap is one vector FMA over the batch. The
-batch axis is padded to a multiple of ``LANES`` with zero gradients in the padding, so the
-kernels never handle a tail. Forward and backward of the whole three-layer stack run inside one
+``F.conv1d(groups=32)`` runs these tiny per-group convolutions (1-8 channels, kernel 3-9) at a few
+GFLOP/s on CPU (bench/bench_haptic_cnn.py). Here activations live as (groups, channels, time, batch)
+with the batch innermost and contiguous, so every filter tap is one vector FMA over the batch. The
+batch axis is padded to a multiple of ``LANES`` with zero gradients in the padding, so the kernels
+never handle a tail. Forward and backward of the whole three-layer stack run inside one
 ``torch.autograd.Function``: one transpose into the layout at entry, one out of it at exit. The
-training step (``GroupedConvHead``) also runs the one-output classification layer in the layout,
-so neither conv3's features nor their gradient are transposed (a step's CPU time -19%, measured).
-One parallel task per signal group runs every layer (``stack_forward``, ``stack_backward``), the
-backward's inner gradients in per-thread buffers; taps are shared by four output rows per pass.
-Layout arrays are reused across steps (``scratch``). Rates per kernel: bench/bench_haptic_cnn.py.
+training step (``GroupedConvHead``) also runs the one-output classification layer in the layout, so
+neither conv3's features nor their gradient are transposed (a step's CPU time -19%, measured). A
+task runs every layer of a range of signal groups (``stack_forward``, ``stack_backward``), the
+backward's inner gradients in per-task buffers; taps are shared by four output rows per pass. Tasks
+run side by side on threads (``_in_parallel``; the kernels release the GIL), one per numba thread
+(``numba.set_num_threads``): plain serial kernels compile in about two thirds of the time numba's
+parallel loops took (21 s instead of 31 s for the ConvNet's, measured), and the first compile is on
+a fresh clone's critical path. Layout arrays are reused across steps (``scratch``). Rates per
+kernel: bench/bench_haptic_cnn.py.
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
@@ -18,7 +22,9 @@ install), and its on-disk cache (``numba_setup``) makes the compile a once-per-m
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import torch
@@ -362,20 +368,20 @@ def _conv_grad_input(grad, w, stride, y, grad_x):  # pragma: no cover (compiled)
                 gr[m] *= np.float32(yr[m] > 0)
 
 
-@numba.njit(parallel=True, **_JIT)
+@numba.njit(**_JIT)
 def stack_forward(
-    x, w1, b1, w2, b2, w3, b3, strides, a1, a2, a3, head_w, partial
+    x, w1, b1, w2, b2, w3, b3, strides, a1, a2, a3, head_w, partial, start, stop
 ):  # pragma: no cover
-    """conv1..conv3 + ReLU of every group (x: (groups, c_in, T, n_pad) -> a1, a2, a3), and,
-    when ``head_w`` has rows, each group's share of the classification layer:
+    """conv1..conv3 + ReLU of groups ``start`` to ``stop`` (x: (groups, c_in, T, n_pad) -> a1,
+    a2, a3), and, when ``head_w`` has rows, each group's share of the classification layer:
     partial[g, m] = sum_r head_w[g, r] a3[g].flat[r, m].
 
-    One task per group runs all layers, so a layer's output is read by the next while still in
+    A group runs all layers, so a layer's output is read by the next while still in
     cache (a group's activations are ~3 MB at batch 1000), not fetched back from memory.
     conv1's output, the largest, is kept for the backward: recomputing it there from ``x``
     instead, in a per-thread buffer, saved no time in forward + backward (measured).
     """
-    for g in numba.prange(x.shape[0]):
+    for g in range(start, stop):
         _conv_relu(x[g], w1[g], b1[g], strides[0], a1[g])
         _conv_relu(a1[g], w2[g], b2[g], strides[1], a2[g])
         _conv_relu(a2[g], w3[g], b3[g], strides[2], a3[g])
@@ -388,22 +394,22 @@ def stack_forward(
                     out[m] += wr * src[m]
 
 
-@numba.njit(parallel=True, **_JIT)
+@numba.njit(**_JIT)
 def stack_backward(
-    x, a1, a2, a3, w1, w2, w3, strides, head_w, grad_scores, grad3, work, grads
+    x, a1, a2, a3, w1, w2, w3, strides, head_w, grad_scores, grad3, work, grads, slot, start, stop
 ):  # pragma: no cover (compiled)
-    """Every parameter's gradient, one task per group running all layers backwards.
+    """Every parameter's gradient of groups ``start`` to ``stop``, each group running all layers
+    backwards.
 
     conv3's gradient comes from the classification layer (``head_w`` has rows: grad3[g].flat[r,
     m] = head_w[g, r] grad_scores[m], masked by conv3's ReLU, and head_w's gradient goes to
-    grads[6]) or is given in ``grad3``. ``work`` holds one pair of gradient buffers per thread
+    grads[6]) or is given in ``grad3``. ``work[.][slot]`` is this task's pair of gradient buffers
     (conv2's and conv1's output gradients), reused from group to group while in cache.
     ``grads`` = (w1, b1, w2, b2, w3, b3, head_w) gradients, per group.
     """
     gw1, gb1, gw2, gb2, gw3, gb3, gwh = grads
     work2, work1 = work
-    for g in numba.prange(x.shape[0]):
-        tid = numba.get_thread_id()
+    for g in range(start, stop):
         d3 = grad3[g]
         if head_w.shape[0]:
             h, d = a3[g].reshape(-1, a3.shape[3]), d3.reshape(-1, a3.shape[3])
@@ -417,7 +423,7 @@ def stack_backward(
                 gwh[g, r] = total
         else:
             _mask(d3, a3[g])
-        d2, d1 = work2[tid], work1[tid]
+        d2, d1 = work2[slot], work1[slot]
         _grad_weight_bias(d3, a2[g], strides[2], gw3[g], gb3[g])
         _conv_grad_input(d3, w3[g], strides[2], a2[g], d2)
         _grad_weight_bias(d2, a1[g], strides[1], gw2[g], gb2[g])
@@ -425,20 +431,21 @@ def stack_backward(
         _grad_weight_bias(d1, x[g], strides[0], gw1[g], gb1[g])
 
 
-@numba.njit(parallel=True, **_JIT)
-def to_layout(x, rows, groups, out):  # pragma: no cover (compiled)
+@numba.njit(**_JIT)
+def to_layout(x, rows, groups, out, start, stop):  # pragma: no cover (compiled)
     """Rows ``rows`` of (N, c_in * groups, T), channel c in group c % groups -> (groups, c_in,
-    T, n_pad): the batch is read in place from the whole input, never copied out first.
+    T, n_pad), for the blocks of ``LANES`` instances ``start`` to ``stop``: the batch is read in
+    place from the whole input, never copied out first.
 
-    One task per ``LANES`` instances: each output row gets its ``LANES`` values in one go (a
+    Block by block: each output row gets its ``LANES`` values in one go (a
     whole cache line, one page per line), and each instance's channels are read in order, a
     sequential sweep of its signals. Tasks per channel, one instance at a time, wrote every
     line ``LANES`` times and read each instance in 600-byte pieces (10-28% more CPU time with
     the batch out of cache, measured).
     """
     channels, steps = x.shape[1], x.shape[2]
-    n, n_pad = rows.shape[0], out.shape[3]
-    for block in numba.prange(n_pad // LANES):
+    n = rows.shape[0]
+    for block in range(start, stop):
         m0 = block * LANES
         for c in range(channels):
             dst = out[c % groups, c // groups]
@@ -448,25 +455,44 @@ def to_layout(x, rows, groups, out):  # pragma: no cover (compiled)
                     dst[t, m] = x[rows[m], c, t] if m < n else np.float32(0.0)
 
 
-@numba.njit(parallel=True, **_JIT)
-def from_layout(h, n, out):  # pragma: no cover (compiled)
-    """(rows, n_pad) -> (n, rows): the exit transpose (and its adjoint with the roles swapped)."""
+@numba.njit(**_JIT)
+def from_layout(h, n, out, start, stop):  # pragma: no cover (compiled)
+    """(rows, n_pad) -> (n, rows) for the blocks of ``LANES`` rows ``start`` to ``stop``: the
+    exit transpose (and its adjoint with the roles swapped)."""
     rows = h.shape[0]
-    for r0 in numba.prange((rows + LANES - 1) // LANES):
+    for r0 in range(start, stop):
         for m in range(n):
             for r in range(r0 * LANES, min(rows, r0 * LANES + LANES)):
                 out[m, r] = h[r, m]
 
 
-@numba.njit(parallel=True, **_JIT)
-def into_layout(grad, out):  # pragma: no cover (compiled)
-    """(n, rows) -> (rows, n_pad) with zeros in the padding: the gradient's entry transpose."""
+@numba.njit(**_JIT)
+def into_layout(grad, out, start, stop):  # pragma: no cover (compiled)
+    """(n, rows) -> (rows, n_pad) with zeros in the padding, for the blocks of ``LANES`` rows
+    ``start`` to ``stop``: the gradient's entry transpose."""
     n, rows = grad.shape
     n_pad = out.shape[1]
-    for r0 in numba.prange((rows + LANES - 1) // LANES):
+    for r0 in range(start, stop):
         for m in range(n_pad):
             for r in range(r0 * LANES, min(rows, r0 * LANES + LANES)):
                 out[r, m] = grad[m, r] if m < n else np.float32(0.0)
+
+
+def _in_parallel(task: Callable[[int, int, int], None], count: int) -> None:
+    """``task(slot, start, stop)`` over ``range(count)`` cut into ``numba.get_num_threads()``
+    contiguous parts (slot: the part's index), run side by side: this thread takes the first,
+    a pool's threads the others (the kernels release the GIL)."""
+    parts = max(1, min(count, numba.get_num_threads()))
+    bounds = [count * k // parts for k in range(parts + 1)]
+    others = [_threads().submit(task, k, bounds[k], bounds[k + 1]) for k in range(1, parts)]
+    task(0, bounds[0], bounds[1])
+    for done in others:
+        done.result()
+
+
+@functools.cache
+def _threads() -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(max(1, numba.config.NUMBA_NUM_THREADS - 1), "conv-kernels")
 
 
 def _padded(n: int) -> int:
@@ -495,7 +521,8 @@ def _forward(
     _, channels, steps = x.shape
     n_pad = _padded(len(rows))
     h = scratch(groups, channels // groups, steps, n_pad)
-    to_layout(np.ascontiguousarray(x.detach().numpy()), rows.numpy(), groups, h)
+    batch, index = np.ascontiguousarray(x.detach().numpy()), rows.numpy()
+    _in_parallel(lambda _, a, b: to_layout(batch, index, groups, h, a, b), n_pad // LANES)
     acts = [h]
     for weight, stride in zip(params[0::2], strides, strict=True):
         h = scratch(
@@ -510,7 +537,12 @@ def _forward(
     else:
         head_w, partial = head_weight.detach().numpy().reshape(groups, -1), scratch(groups, n_pad)
     per_group = [_per_group(p.detach().numpy(), groups) for p in params]
-    stack_forward(acts[0], *per_group, strides, *acts[1:], head_w, partial)
+    _in_parallel(
+        lambda _, a, b: stack_forward(
+            acts[0], *per_group, strides, *acts[1:], head_w, partial, a, b
+        ),
+        groups,
+    )
     return acts, partial
 
 
@@ -540,7 +572,12 @@ def _backward(
         head_w = head_weight.detach().numpy().reshape(groups, -1)
         gwh = np.empty_like(head_w)
         grads.append(gwh)
-    stack_backward(*acts, *w, strides, head_w, grad_scores, grad3, work, (*gw, gwh))
+    _in_parallel(
+        lambda slot, a, b: stack_backward(
+            *acts, *w, strides, head_w, grad_scores, grad3, work, (*gw, gwh), slot, a, b
+        ),
+        groups,
+    )
     return [torch.from_numpy(g) for g in grads]
 
 
@@ -552,7 +589,7 @@ class GroupedConvStack(torch.autograd.Function):
         acts, _ = _forward(x, torch.arange(len(x)), params, groups, tuple(strides), None)
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         result = np.empty((len(x), h.shape[0]), np.float32)
-        from_layout(h, len(x), result)
+        _in_parallel(lambda _, a, b: from_layout(h, len(x), result, a, b), -(-len(h) // LANES))
         ctx.acts, ctx.groups, ctx.strides = acts, groups, tuple(strides)
         ctx.save_for_backward(*params[0::2])
         return torch.from_numpy(result)
@@ -563,7 +600,9 @@ class GroupedConvStack(torch.autograd.Function):
         acts = ctx.acts
         del ctx.acts  # free the activations as soon as the backward is done with them
         grad = scratch(*acts[-1].shape)
-        into_layout(np.ascontiguousarray(grad_out.numpy()), grad.reshape(-1, grad.shape[3]))
+        rows, grad_rows = np.ascontiguousarray(grad_out.numpy()), grad.reshape(-1, grad.shape[3])
+        blocks = -(-len(grad_rows) // LANES)
+        _in_parallel(lambda _, a, b: into_layout(rows, grad_rows, a, b), blocks)
         grads = _backward(acts, grad, ctx.saved_tensors, ctx.groups, ctx.strides)
         return (None, None, None, *grads)
 

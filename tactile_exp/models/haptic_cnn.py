@@ -1,13 +1,13 @@
 """The haptic ConvNet (M1): grouped temporal convolutions, one group per haptic signal.
 
-PyTorch's CPU grouped ``Conv1d`` is the project's hot spot (DEPS.md §7): with 32 groups of a few
-channels it runs at a few GFLOP/s. ``impl="compiled"`` runs the three conv + ReLU layers through
-numba kernels over a batch-innermost layout (``grouped_conv_numba``), an order of magnitude
-faster on CPU; ``impl="torch"`` runs the plain ``F.conv1d(groups=...)``; ``impl="auto"`` (default)
-picks compiled on CPU and torch on GPU (the kernels are CPU only). Both agree to float rounding
-(tests; ``bench/bench_haptic_cnn.py`` measures the speed). Training goes through
-``GroupedTemporalConvNet.scores``, which compiled runs the classification layer inside the
-kernels' layout too (``HapticCNN._train_scores``).
+PyTorch's CPU grouped ``Conv1d`` is the project's hot spot (bench/bench_haptic_cnn.py): with 32
+groups of a few channels it runs at a few GFLOP/s. ``impl="compiled"`` runs the three conv + ReLU
+layers through numba kernels over a batch-innermost layout (``grouped_conv_numba``), an order of
+magnitude faster on CPU; ``impl="torch"`` runs the plain ``F.conv1d(groups=...)``; ``impl="auto"``
+(default) picks compiled on CPU and torch on GPU (the kernels are CPU only). Both agree to float
+rounding (tests; ``bench/bench_haptic_cnn.py`` measures the speed). Training goes through
+``GroupedTemporalConvNet.scores``, which compiled runs the classification layer inside the kernels'
+layout too (``HapticCNN._train_scores``).
 """
 
 from __future__ import annotations

@@ -17,13 +17,13 @@ Two layouts of the trunk, chosen by ``modality.layout``:
 No weights are downloaded: ``build_trunk`` reads a file the user gives. A weights file written
 here records its layout (``save_weights``), so loading it into the other layout fails clearly.
 
-Design (why the trunk is preprocessing, not inside the model): the trunk is frozen (transfer, as
-the paper transfers every layer below 5a; training GoogLeNet on a 2-core CPU is out of reach,
-about 10 images/s per SGD step, DEPS.md section 6). Its features depend only on the image and the
-weights, so the ``visual`` modality computes them once per data set and weights file (one pass
-over the photographs, cached on disk and shared by every adjective, seed and Table I row), and
-the ``visual_googlenet`` model (``models/googlenet.py``) is the loss layer on them. The engine
-builds a fresh model for each adjective; a trunk inside the model would run 24 times per job.
+Design (why the trunk is preprocessing, not inside the model): the trunk is frozen (transfer, as the
+paper transfers every layer below 5a; training GoogLeNet on a 2-core CPU is out of reach, about 10
+images/s per SGD step, bench/bench_googlenet.py). Its features depend only on the image and the
+weights, so the ``visual`` modality computes them once per data set and weights file (one pass over
+the photographs, cached on disk and shared by every adjective, seed and Table I row), and the
+``visual_googlenet`` model (``models/googlenet.py``) is the loss layer on them. The engine builds a
+fresh model for each adjective; a trunk inside the model would run 24 times per job.
 """
 
 from __future__ import annotations
@@ -405,7 +405,7 @@ def pooled_features(
 ) -> np.ndarray:
     """``model.features`` of (n, 3, H, W) ``network_input`` images, in batches: (n, 832) float32.
 
-    ``channels_last`` runs about 2x faster on CPU (DEPS.md section 6; bench/bench_googlenet.py).
+    ``channels_last`` runs about 2x faster on CPU (bench/bench_googlenet.py).
     """
     if images.ndim != 4 or images.shape[1] != 3:
         raise ValueError(f"expected images of shape (n, 3, H, W), got {images.shape}")
