@@ -41,6 +41,7 @@ def test_first_compile_is_announced_once_and_only_without_cached_code(
     no compiled code of the module, once per process."""
     monkeypatch.setattr(numba_setup.numba.config, "CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(numba_setup, "_CHECKED", set())
+    monkeypatch.setattr(numba_setup, "_AHEAD", {})  # none started ahead by an earlier job
     caplog.set_level(logging.INFO, logger=numba_setup.__name__)
     module = "tactile_exp.models.grouped_conv_numba"
     numba_setup.announce_compile(module)
