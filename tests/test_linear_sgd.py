@@ -192,3 +192,30 @@ def test_a_loss_the_loop_does_not_compute_takes_torchs_path_or_is_refused(monkey
         for name in ("linear", "haptic_cnn"):  # refused when built, before any training
             with pytest.raises(ValueError, match="not 'squared_hinge': use impl=torch"):
                 MODELS.build(name, impl="compiled", **settings)
+
+
+def test_the_gram_matrix_is_computed_once_for_stages_on_the_same_features(monkeypatch):
+    """The head's hinge stage reuses its logistic stage's G (same tensor, unmodified), and gets
+    what a fresh product gives; features modified in place, or other features, get a new G."""
+    X, y = _separable(80, 400, seed=4)
+    products = []
+    matmul = torch.matmul
+    monkeypatch.setattr(
+        linear_sgd.torch, "matmul", lambda *a, **k: products.append(a[0].shape) or matmul(*a, **k)
+    )
+    schedule = dict(gram=True, epochs=5, batch_size=16, lr=0.01, momentum=0.9)
+    layer = nn.Linear(400, 1)
+    for loss in ("logistic", "hinge"):
+        linear_sgd_epochs(layer, X, y, loss=loss, generator=torch.Generator(), **schedule)
+    assert products == [(40, 400), (40, 400)]  # G's two halves, once
+    fresh = nn.Linear(400, 1)
+    fresh.load_state_dict(layer.state_dict())
+    again = nn.Linear(400, 1)
+    again.load_state_dict(layer.state_dict())
+    linear_sgd_epochs(fresh, X.clone(), y, loss="hinge", generator=torch.Generator(), **schedule)
+    linear_sgd_epochs(again, X, y, loss="hinge", generator=torch.Generator(), **schedule)
+    assert torch.equal(fresh.weight, again.weight)  # the kept G is the fresh product
+    products.clear()
+    X.mul_(2.0)
+    linear_sgd_epochs(layer, X, y, loss="hinge", generator=torch.Generator(), **schedule)
+    assert products == [(40, 400), (40, 400)]
