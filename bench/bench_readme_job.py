@@ -13,8 +13,8 @@ under it) and MLflow store, as on a fresh clone:
 
 Phases 1 + 2 are what a fresh clone pays. Wall and CPU seconds (children's user + system:
 both cores busy shows as CPU > wall; the generation's workers, children of a fork server, are
-not counted; the job's compile process is, the job waits for it) and the load average after each phase are printed;
-other work on the machine slows every phase, so read them with the load.
+not counted; the job's compile process is, the job waits for it) and the load average after each
+phase are printed; other work on the machine slows every phase, so read them with the load.
 
 Run: ``.venv/bin/python bench/bench_readme_job.py [--json bench/results/bench_readme_job.json]``
 """

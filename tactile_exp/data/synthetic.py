@@ -150,6 +150,7 @@ import h5py
 import numpy as np
 from scipy.signal import lfilter
 
+from tactile_exp import pools
 from tactile_exp.data import render
 from tactile_exp.data.layout import (
     ADC_MAX,
@@ -162,7 +163,6 @@ from tactile_exp.data.layout import (
     objects,
     published_test_split,
 )
-from tactile_exp.runtime import processes
 
 GENERATOR_VERSION = 5
 log = logging.getLogger(__name__)
@@ -742,7 +742,7 @@ def _write_parts(
             _write_part(part, photos, spec, oid)
             _progress(done, len(ids), start)
         return
-    ctx = processes.start_context("forkserver")  # safe when the parent has threads
+    ctx = pools.start_context("forkserver")  # safe when the parent has threads
     with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
         jobs = [
             pool.submit(_write_part, part, photos, spec, oid)

@@ -11,8 +11,6 @@ adjective workers (``runtime.workers``) and a terminated sweep's joblib workers
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
-import multiprocessing.context
 import os
 import signal
 import socket
@@ -24,22 +22,6 @@ from tactile_exp.runtime import termination
 
 KILLED_WAIT_S = 5.0  # how long ``stop`` waits for killed processes to end
 POLL_S = 0.1
-
-
-def start_context(method: str) -> multiprocessing.context.BaseContext:
-    """multiprocessing's ``method`` context ("spawn" or "forkserver") for this process's own pool.
-
-    A spawned or forkserver child first sets its parent's default start method; in a joblib
-    (loky) worker that is "loky", which a fresh child does not know, and every child died before
-    its first task (the synthetic generator's pool under ``hydra/launcher=joblib``). There the
-    default becomes ``method``: the worker itself starts no other processes.
-    """
-    if multiprocessing.get_start_method(allow_none=True) not in (
-        None,
-        *multiprocessing.get_all_start_methods(),
-    ):
-        multiprocessing.set_start_method(method, force=True)
-    return multiprocessing.get_context(method)
 
 
 def stat_fields(pid: int) -> list[str]:

@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable, Iterator
 from types import TracebackType
 from typing import Any
 
-from tactile_exp import cores
+from tactile_exp import cores, pools
 from tactile_exp.runtime import processes, termination
 
 log = logging.getLogger(__name__)
@@ -45,7 +45,7 @@ class Pool:
     def __init__(
         self, workers: int, *, init: Callable[..., None], initargs: tuple[Any, ...]
     ) -> None:
-        context = processes.start_context("spawn")
+        context = pools.start_context("spawn")
         records = context.Queue()
         self._listener = logging.handlers.QueueListener(records, _Relay())
         threads = max(1, cores.cores() // workers)
