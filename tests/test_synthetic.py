@@ -122,6 +122,32 @@ def test_trial_groups_datasets_shapes_and_dtypes(tiny):
             assert [a.decode() for a in g["adjectives_neg"][:]] == neg
 
 
+def test_trial_datasets_are_one_chunk_each_and_decode_to_the_simulated_arrays(tiny):
+    """The generator shuffles and deflates each array itself and writes it as one chunk: HDF5's
+    gzip and shuffle filters (any reader's) give back exactly the simulated values."""
+    props = object_properties(TINY)
+    with h5py.File(tiny, "r") as f:
+        for name in ("car_sponge_101_02", "brick_508_01", "pinball_launcher_703_02"):
+            t = TrialName.parse(name)
+            rng = np.random.default_rng([TINY.seed, t.object_id, t.trial])
+            expected = synthetic._trial(props[t.object_id], TINY.duration_scale, rng)
+            assert sorted(expected) == sorted(
+                k for k in _dataset_paths(f[name]) if not k.startswith("adjectives")
+            )
+            for key, arr in expected.items():
+                ds = f[name][key]
+                assert ds.chunks == ds.shape and ds.compression == "gzip" and ds.shuffle, key
+                values = ds[()]
+                assert values.dtype == arr.dtype and values.shape == arr.shape, key
+                assert values.tobytes() == arr.tobytes(), key
+
+
+def _dataset_paths(group: h5py.Group) -> list[str]:
+    out: list[str] = []
+    group.visititems(lambda k, v: out.append(k) if isinstance(v, h5py.Dataset) else None)
+    return out
+
+
 def test_full_state_sequence_with_contiguous_eps(tiny):
     with h5py.File(tiny, "r") as f:
         for name in ("car_sponge_101_01", "brick_508_02", "cologne_container__602_01"):
