@@ -61,7 +61,7 @@ through touch; thick and thin mostly through sight (the gripper sees thickness w
 nice and unpleasant only through the weak label effects of ``_LABEL_EFFECTS``.
 
 File: the real file's filters, gzip + shuffle, with one chunk per trial dataset (the real file
-has PyTables' chunks of ~64 KiB, e.g. (431, 19); a reader of either reads the other). The
+has PyTables' chunks of ~64 KiB, e.g. (431, 19); whatever reads the real file reads this). The
 generator applies both filters itself, ``_write_array``: the shuffle as a byte transpose, the
 deflate by ISA-L (``isal``, its level 1; the filter records gzip level 1) at about a seventh of
 zlib's level-1 CPU, which was three quarters of the write time, in a 2 % smaller file. One chunk
@@ -69,12 +69,13 @@ per dataset also reads faster (fewer chunks) although ISA-L's streams inflate ~2
 zlib's. Objects are spread over worker processes one at a time, each writing a part file that is
 copied in without recompression; the parent logs progress.
 
-Measured with ``bench/bench_data.py --before REV`` (the previous generator: HDF5's zlib level 1,
-h5py's automatic chunks such as (862, 3)): the full default file has the same arrays,
-attributes, links and JPEG bytes; generation 73-74 -> 49-50 s CPU over 2 rounds each,
-alternating (wall 50-72 -> 46-49 s on 2 cores shared with another job); the file 600 -> 588
-MB; reading every trial's datasets 20-21 -> 15 s (one core). Part of the CPU saving is the
-simulation and rendering: the same operations on the same values with fewer passes.
+Measured with ``bench/bench_data.py --before REV`` (2026-11-26, the 2-core development machine
+shared with another job; REV = the previous generator: HDF5's zlib level 1, h5py's automatic
+chunks such as (1042, 3) for an (8329, 19) array): the full default file holds the same arrays,
+attributes, links and JPEG bytes; generating it took 70.5 / 68.8 -> 43.9 / 45.3 s CPU and 42.9 /
+43.7 -> 26.1 / 31.2 s wall (2 rounds each, alternating); the file is 600 -> 588 MB; reading every
+trial's datasets 19.4 / 18.4 -> 14.5 / 13.6 s. Part of the CPU saving is in the simulation and
+the rendering: the same operations on the same values in fewer passes.
 
 Generator version 5 = version 4 with photographs whose views differ in what they show
 (``render``: a camera elevation per view index, from low side views that show the height to
