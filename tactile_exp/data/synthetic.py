@@ -72,9 +72,9 @@ copied in without recompression; the parent logs progress.
 Measured with ``bench/bench_data.py --before REV`` (2026-11-26, the 2-core development machine
 shared with another job; REV = the previous generator: HDF5's zlib level 1, h5py's automatic
 chunks such as (1042, 3) for an (8329, 19) array): the full default file holds the same arrays,
-attributes, links and JPEG bytes; generating it took 70.5 / 68.8 -> 43.9 / 45.3 s CPU and 42.9 /
-43.7 -> 26.1 / 31.2 s wall (2 rounds each, alternating); the file is 600 -> 588 MB; reading every
-trial's datasets 19.4 / 18.4 -> 14.5 / 13.6 s. Part of the CPU saving is in the simulation and
+attributes, links and JPEG bytes; generating it took 81.4 / 69.6 -> 46.9 / 45.3 s CPU and 47.1 /
+35.4 -> 23.8 / 23.0 s wall (2 rounds each, alternating); the file is 600 -> 588 MB; reading every
+trial's datasets 23.6 / 19.5 -> 14.8 / 15.4 s. Part of the CPU saving is in the simulation and
 the rendering: the same operations on the same values in fewer passes.
 
 Generator version 5 = version 4 with photographs whose views differ in what they show
