@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import logging
 from pathlib import Path
 
@@ -119,6 +120,32 @@ def test_trial_groups_datasets_shapes_and_dtypes(tiny):
             assert [a.decode() for a in g["adjectives"][:]] == list(obj.positives)
             neg = [a for a in ADJECTIVES if a not in obj.positives]
             assert [a.decode() for a in g["adjectives_neg"][:]] == neg
+
+
+def test_trial_datasets_are_one_chunk_each_and_decode_to_the_simulated_arrays(tiny):
+    """The generator shuffles and deflates each array itself and writes it as one chunk: HDF5's
+    gzip and shuffle filters (any reader's) give back exactly the simulated values."""
+    props = object_properties(TINY)
+    with h5py.File(tiny, "r") as f:
+        for name in ("car_sponge_101_02", "brick_508_01", "pinball_launcher_703_02"):
+            t = TrialName.parse(name)
+            rng = np.random.default_rng([TINY.seed, t.object_id, t.trial])
+            expected = synthetic._trial(props[t.object_id], TINY.duration_scale, rng)
+            assert sorted(expected) == sorted(
+                k for k in _dataset_paths(f[name]) if not k.startswith("adjectives")
+            )
+            for key, arr in expected.items():
+                ds = f[name][key]
+                assert ds.chunks == ds.shape and ds.compression == "gzip" and ds.shuffle, key
+                values = ds[()]
+                assert values.dtype == arr.dtype and values.shape == arr.shape, key
+                assert values.tobytes() == arr.tobytes(), key
+
+
+def _dataset_paths(group: h5py.Group) -> list[str]:
+    out: list[str] = []
+    group.visititems(lambda k, v: out.append(k) if isinstance(v, h5py.Dataset) else None)
+    return out
 
 
 def test_full_state_sequence_with_contiguous_eps(tiny):
@@ -434,6 +461,64 @@ def test_thermal_transient_decays_faster_on_effusive_materials():
 
     cool, warm = simulate({"effusivity": 1.0}, 1.0), simulate({"effusivity": 0.0}, 1.0)
     assert tail_fraction(cool) < 0.05 < 0.15 < tail_fraction(warm)
+
+
+def _pac_reference(p, finger, pdc, slide_pos, squeezing, rng):
+    """``synthetic._pac`` as plain whole-array expressions, the reference for its faster form."""
+    from tactile_exp.data.layout import ADC_MAX, PAC_PER_ROW
+
+    n = len(pdc)
+    contact = np.clip(pdc / 40.0, 0, 1)
+    c22 = np.repeat(contact, PAC_PER_ROW)
+    pos = np.interp(np.arange(n * PAC_PER_ROW) / PAC_PER_ROW, np.arange(n), slide_pos)
+    speed = np.abs(np.diff(pos, prepend=pos[0])) * synthetic._PAC_RATE
+    sliding = c22 * np.clip(speed / 0.01, 0, 3)
+    press = np.sqrt(np.clip(np.repeat(pdc, PAC_PER_ROW) / 100.0, 0, 1.5))
+    gain = p["contact_area"] * np.sqrt(sliding) * press
+    fibres = (4 + 30 * p["hairiness"]) * gain
+    sigma = rng.uniform(3.0, 4.5) + 2.5 * c22 + fibres
+    x = rng.standard_normal(len(c22), dtype=np.float32) * sigma
+    x += (6 + 100 * p["roughness"] ** 1.5) * gain * synthetic._texture(p, pos, rng)
+    kicks = np.zeros(len(c22))
+    edges = np.flatnonzero(np.diff((contact > 0.5).astype(int))) + 1
+    kicks[edges * PAC_PER_ROW] = (150 + 250 * p["stiffness"]) * rng.uniform(0.6, 1.4, len(edges))
+    bump = np.flatnonzero(np.diff(np.floor(pos / 0.004)) != 0) + 1
+    bump = bump[sliding[bump] > 0.1]
+    kicks[bump] += 300 * p["bumpiness"] * press[bump] * rng.choice([-1, 1], len(bump))
+    u = rng.random(len(c22))
+    slip_rate = (6 * p["stickiness"] + 1.5 * p["friction"]) / synthetic._PAC_RATE
+    slips = np.flatnonzero(u < slip_rate * np.clip(sliding, 0, 1))
+    kicks[slips] += (100 + 700 * p["stickiness"]) * rng.normal(0, 1, len(slips))
+    crackle_rate = 80 * p["crinkliness"] ** 2 / synthetic._PAC_RATE
+    crack = np.flatnonzero(u < crackle_rate * np.repeat(squeezing, PAC_PER_ROW))
+    kicks[crack] += 500 * p["crinkliness"] * rng.normal(0, 1, len(crack))
+    ring = synthetic._resonator(kicks, 250.0, 0.08, synthetic._PAC_RATE)
+    pac = synthetic._PAC_BASE[finger] + x + ring
+    spikes = np.flatnonzero(u > 1 - 0.002 * c22)
+    pac[spikes] = rng.choice([0, ADC_MAX], len(spikes))
+    pac = pac.reshape(n, PAC_PER_ROW) + synthetic._PAC_COL_OFFSET
+    return np.clip(np.rint(pac), 0, ADC_MAX).astype(np.int64)
+
+
+def test_pac_equals_the_plain_expressions_bit_for_bit(monkeypatch):
+    """_pac computes per row what only depends on the row, and in place: the same operations on
+    the same values, so the same bits and the same random draws as the plain expressions."""
+    fast = synthetic._pac
+    calls = []
+
+    def both(p, finger, pdc, slide_pos, squeezing, rng):
+        twin = copy.deepcopy(rng)
+        out = fast(p, finger, pdc, slide_pos, squeezing, rng)
+        ref = _pac_reference(p, finger, pdc, slide_pos, squeezing, twin)
+        calls.append(out.dtype == ref.dtype and out.tobytes() == ref.tobytes())
+        assert rng.bit_generator.state == twin.bit_generator.state
+        return out
+
+    monkeypatch.setattr(synthetic, "_pac", both)
+    props = object_properties(SyntheticSpec(object_ids=(118, 318, 509)))  # bumpy, crinkly, sticky
+    for oid, p in props.items():
+        synthetic._trial(p, 0.5, np.random.default_rng([0, oid, 1]))
+    assert calls == [True] * 6
 
 
 def test_porous_foam_pressure_rises_late_in_squeeze():

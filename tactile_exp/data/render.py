@@ -128,7 +128,7 @@ def render_view(
     horizon = rng.uniform(0.35, 0.45)
     wall = np.array([105, 62, 38], np.float32) * (0.8 + 0.3 * yy / horizon)
     table = np.array([45, 75, 115], np.float32) * (0.75 + 0.35 * yy)
-    img = np.where(yy < horizon, wall, table) * np.ones((1, w, 1), np.float32)
+    img = np.repeat(np.where(yy < horizon, wall, table), w, axis=1)
     img += 6 * _smooth_noise(rng, h, w, (6, 9))[..., None]
 
     # Plate: near-circular ellipse, brushed aluminium.
@@ -141,12 +141,12 @@ def render_view(
     plate = ((x - cx) / radius) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
     brushed = _smooth_noise(rng, h, w, (h // 2, max(w // 24, 2)))
     shade = PLATE_GREY * light * (1 + 0.05 * light_dir * (x - cx) / radius - 0.04 * (y - cy) / ry)
-    plate_img = (shade + 3.0 * brushed)[..., None] + np.array([3, 0, -2], np.float32)
-    img = np.where(plate[..., None], plate_img, img)
+    plate_img = (shade[plate] + 3.0 * brushed[plate])[:, None] + np.array([3, 0, -2], np.float32)
 
-    # Soft contact shadow under the object.
+    # Soft contact shadow under the object (on the plate; elsewhere the factor is 1).
     shadow = np.exp(-(((x - cx) / (0.6 * radius)) ** 2) - ((y - cy) / (0.25 * ry)) ** 2)
-    img *= (1 - 0.25 * shadow * plate)[..., None]
+    plate_img *= (1 - 0.25 * shadow[plate])[:, None]
+    img[plate] = plate_img
 
     _draw_object(img, props, rng, (cx, cy, radius), light, light_dir, elevation)
     if rng.random() < OCCLUDE_P:
