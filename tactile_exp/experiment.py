@@ -19,7 +19,6 @@ from tactile_exp.config import Settings
 from tactile_exp.core import AdjectiveResult, kernels, load, open_data
 from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
-from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import object_counts
 from tactile_exp.runtime import workers
 
@@ -71,10 +70,15 @@ def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -
 
 def run(settings: Settings) -> JobResult:
     """Run (or skip, if already FINISHED) one job and log it to MLflow."""
+    dataset, modality, splits = open_data(settings)  # generated on first use
+    compiled = kernels(settings, modality)
+    if compiled:  # a first compile (empty cache) overlaps opening the store and preprocessing
+        from tactile_exp.models.numba_setup import compile_ahead
+
+        compile_ahead(compiled)
     tracker = recording.open_tracker(settings)
     if settings.tracking.skip_finished:
-        identity = DATA_SOURCES.build(settings.data.name, **settings.data.params).identity()
-        done = recording.finished_job(tracker, settings, identity)
+        done = recording.finished_job(tracker, settings, dataset.identity())
         if done is not None and not settings.is_trial and not tracker.child_metrics(done, "auc"):
             done = None  # a search trial's job: it logged no test metric, so run it again
         if done is not None:
@@ -87,12 +91,6 @@ def run(settings: Settings) -> JobResult:
             validation = recording.val_metrics(tracker, done, settings.metrics)
             return JobResult(done, {}, skipped=True, validation=validation)
     tracker.end_stale_runs(settings.config_hash)
-    dataset, modality, splits = open_data(settings)
-    compiled = kernels(settings, modality)
-    if compiled:  # their first compile (an empty cache) overlaps the data's preprocessing
-        from tactile_exp.models.numba_setup import compile_ahead
-
-        compile_ahead(compiled)
     with recording.job_run(tracker, settings) as parent_id:
         modality.check(dataset)
         recording.record_data(tracker, parent_id, dataset, label_notes(settings, dataset, splits))
