@@ -209,3 +209,28 @@ def test_a_jobs_compiled_kernels_are_its_models_and_its_parts_models(
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard]"))
     _, modality, _ = core.open_data(settings)
     assert {k.rsplit(".", 1)[-1] for k in core.kernels(settings, modality)} == expected
+
+
+def test_the_haptic_check_reads_the_biotac_frames_alone(tiny_config, monkeypatch, tmp_path):
+    """Preprocessing the whole data set (``Haptic.check``) reads no gripper, accelerometer or
+    transform arrays (a sixth of the reading): the arrays are those of a full read."""
+    settings = settings_from_config(tiny_config(ROW_I, adjectives="[hard]"))
+    dataset, _, _ = core.load(settings)
+    asked = []
+    iter_trials = type(dataset).iter_trials
+
+    def spy(self, names=None, optional=True):
+        asked.append(optional)
+        return iter_trials(self, names, optional=optional)
+
+    monkeypatch.setattr(type(dataset), "iter_trials", spy)
+    modality = MODALITIES.build("haptic", cache_dir=tmp_path / "empty")
+    modality.check(dataset)
+    assert asked == [False]
+    from tactile_exp.preprocess.haptic import compute_haptic_arrays
+
+    monkeypatch.setattr(type(dataset), "iter_trials", iter_trials)
+    full = compute_haptic_arrays(dataset)
+    checked = modality.arrays(Trials(dataset, tuple(t.name for t in dataset.trials)))
+    np.testing.assert_array_equal(checked.signals, full.signals)
+    np.testing.assert_array_equal(checked.scatter, full.scatter)
