@@ -786,7 +786,7 @@ def _workers(spec: SyntheticSpec, n_objects: int) -> int:
 
 
 def _progress(done: int, total: int, start: float) -> None:
-    """One line per tenth of the objects: the default file takes a minute or more."""
+    """One line per tenth of the objects: the default file takes half a minute or more."""
     if done == total or done % max(1, total // 10) == 0:
         log.info(
             "synthetic PHAC-2: %d/%d objects (%.0f s)", done, total, time.perf_counter() - start
