@@ -12,9 +12,11 @@ task runs every layer of a range of signal groups (``stack_forward``, ``stack_ba
 backward's inner gradients in per-task buffers; taps are shared by four output rows per pass. Tasks
 run side by side on threads (``_in_parallel``; the kernels release the GIL), one per numba thread
 (``numba.set_num_threads``): plain serial kernels compile in about two thirds of the time numba's
-parallel loops took (21 s instead of 31 s for the ConvNet's, measured), and the first compile is on
-a fresh clone's critical path. Layout arrays are reused across steps (``scratch``). Rates per
-kernel: bench/bench_haptic_cnn.py.
+parallel loops took (20 s instead of 31-33 s for the ConvNet's), and the first compile is on a
+fresh clone's critical path (the README job: 80-91 s instead of 104 s, bench_readme_job). They run
+~6% slower a step than the parallel loops (which gave their arrays noalias: one thread, 37.3
+against 35.1 ms), measured side by side. Layout arrays are reused across steps (``scratch``).
+Rates per kernel: bench/bench_haptic_cnn.py.
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
