@@ -143,6 +143,7 @@ class HapticCNN(SGDModel):
     """
 
     accepts = ("signals",)  # (n, channels, time): groups must divide channels (check_input)
+    body_kernels = ("tactile_exp.models.grouped_conv_numba",)
     # Fitted: conv3's (channels, time), the map each row of ``transform`` flattens (Fig. 6)
     conv3_shape_: tuple[int, int] | None = None
 
@@ -203,10 +204,6 @@ class HapticCNN(SGDModel):
                 f"haptic_cnn expects X of shape (n, channels, time) with channels a multiple "
                 f"of groups={groups} (one group per signal), got {X.shape}"
             )
-
-    def kernels(self) -> tuple[str, ...]:
-        compiled = self.runs_compiled
-        return super().kernels() + (("tactile_exp.models.grouped_conv_numba",) if compiled else ())
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         net = GroupedTemporalConvNet(*input_shape, **self.net_args)

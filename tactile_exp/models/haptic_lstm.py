@@ -65,6 +65,7 @@ class HapticLSTM(SGDModel):
     """
 
     accepts = ("signals",)  # (n, channels, time): 32 per finger for PHAC-2, any C elsewhere
+    body_kernels = ("tactile_exp.models.lstm_kernels",)
 
     def __init__(
         self,
@@ -99,10 +100,6 @@ class HapticLSTM(SGDModel):
         self, body: nn.Module, classifier: nn.Linear
     ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
         return lambda X, index: classifier(body(X, index)).squeeze(1)
-
-    def kernels(self) -> tuple[str, ...]:
-        compiled = self.runs_compiled
-        return super().kernels() + (("tactile_exp.models.lstm_kernels",) if compiled else ())
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         impl = self.impl

@@ -68,6 +68,9 @@ FINETUNE_WARNED: set[tuple[str, str, str | None]] = set()
 class SGDModel(Model):
     """A body plus a linear classification layer, trained by the two-stage SGD schedule."""
 
+    # The modules of the body's compiled kernels (``Model.kernels``), beside ``linear_sgd``.
+    body_kernels: tuple[str, ...] = ()
+
     storable = True
     onnx_refusal = None  # its body and classification layer are plain torch modules
     # Capability, declared: whether head() standardises the combined features (LinearModel)
@@ -112,8 +115,9 @@ class SGDModel(Model):
         return self.impl == "compiled" or (self.impl == "auto" and self.device_.type == "cpu")
 
     def kernels(self) -> tuple[str, ...]:
-        """The classification layer's compiled SGD (``linear_sgd``) where it runs."""
-        return ("tactile_exp.models.linear_sgd",) if self.runs_compiled else ()
+        """The classification layer's compiled SGD (``linear_sgd``) and the body's kernel
+        modules (``body_kernels``), where they run."""
+        return ("tactile_exp.models.linear_sgd", *self.body_kernels) if self.runs_compiled else ()
 
     @abstractmethod
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
