@@ -42,7 +42,13 @@ def _training_keys(settings: config.Settings, tmp_path: Path) -> dict[str, str]:
 
 
 @pytest.mark.parametrize("job", PINNED, ids=lambda job: " ".join(job["overrides"]) or "defaults")
-def test_hashes_and_training_keys_of_existing_jobs_are_unchanged(compose_config, job, tmp_path):
+def test_hashes_and_training_keys_of_existing_jobs_are_unchanged(
+    compose_config, job, tmp_path, monkeypatch
+):
+    # cache_dir is hashed and defaults to $TACTILE_EXP_CACHE or ~/.cache/tactile_exp: composed
+    # where the pins were computed (HOME=/root, no $TACTILE_EXP_CACHE), whatever this machine's
+    monkeypatch.delenv("TACTILE_EXP_CACHE", raising=False)
+    monkeypatch.setenv("HOME", "/root")
     overrides = job["overrides"]
     settings = settings_from_config(compose_config(overrides), overrides=tuple(overrides))
     assert settings.config_hash == job["config_hash"]
