@@ -1,8 +1,9 @@
 """Machine-readable bench results: ``--json OUT`` of a bench script writes one of these files.
 
-Each file records the bench, its command line, the UTC date, the machine (CPU model, cores, load
-average at the end, torch and numba versions) and the figures the bench printed, so that the
-documentation's benchmark tables are generated from them (``bench/results_page.py``), not typed.
+Each file records the bench, its command line, the UTC date, the machine (CPU model, cores,
+GPU, load average at the end, torch and numba versions) and the figures the bench printed, so
+that the documentation's benchmark tables are generated from them (``bench/results_page.py``),
+not typed.
 """
 
 from __future__ import annotations
@@ -29,12 +30,15 @@ def _cpu_model() -> str:
 
 
 def machine() -> dict[str, Any]:
-    """What the figures depend on: the CPU, its cores, its load, the library versions."""
+    """What the figures depend on: the CPU, its cores, a CUDA GPU where torch sees one, its
+    load, the library versions."""
     import numba
     import torch
 
+    gpu = {"gpu": torch.cuda.get_device_name(0)} if torch.cuda.is_available() else {}
     return {
         "cpu": _cpu_model(),
+        **gpu,
         "cores": os.cpu_count(),
         "load_average_1min": round(os.getloadavg()[0], 2),
         "python": platform.python_version(),

@@ -65,7 +65,9 @@ def page(results: Path = RESULTS, bench: Path = BENCH) -> str:
         out += [
             f"## {r['bench']}",
             "",
-            f"Measured {r['date']} on {m['cpu']}, {m['cores']} cores ({load}load average "
+            f"Measured {r['date']} on {m['cpu']}, {m['cores']} cores"
+            + (f", GPU {m['gpu']}" if "gpu" in m else "")
+            + f" ({load}load average "
             f"{m['load_average_1min']} at the end), Python {m['python']}, torch {m['torch']}, "
             f"numba {m['numba']}." + (f" {r['notes']}." if r["notes"] else ""),
             "",

@@ -56,3 +56,11 @@ def test_an_idle_machine_is_not_called_shared(tmp_path: Path):
     (tmp_path / "results" / "bench_fast.json").write_text(json.dumps(idle))
     page = results_page.page(tmp_path / "results", tmp_path)
     assert "2 cores (load average 0.3 at the end)" in page
+
+
+def test_a_gpu_in_the_record_is_named_beside_the_cores(tmp_path: Path):
+    (tmp_path / "results").mkdir()
+    on_gpu = {**RECORD, "machine": {**RECORD["machine"], "gpu": "Some GPU"}}
+    (tmp_path / "results" / "bench_fast.json").write_text(json.dumps(on_gpu))
+    page = results_page.page(tmp_path / "results", tmp_path)
+    assert "on Some CPU, 2 cores, GPU Some GPU (a shared machine" in page
