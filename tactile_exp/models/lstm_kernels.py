@@ -80,92 +80,97 @@ def _gather(X, rows, start, inputs):
 
 
 @numba.njit(**_JIT)
-def _project(w, bias, inputs, C, out):
-    """The input projection of every time step at once: ``out`` (4H, n) = bias + ``w[:, :C]`` @
-    ``inputs[:C]`` (C, n), in blocks of four gates x four inputs (one load and store of an
-    output per sixteen FMAs: the projection is most of the forward pass's arithmetic)."""
-    G, n = out.shape
-    for gate in range(G):
-        bg = bias[gate]
-        for m in range(n):
-            out[gate, m] = bg
-    c4 = C - C % 4
-    for g in range(0, G, 4):
-        o0, o1, o2, o3 = out[g], out[g + 1], out[g + 2], out[g + 3]
-        for k in range(0, c4, 4):
-            x0, x1, x2, x3 = inputs[k], inputs[k + 1], inputs[k + 2], inputs[k + 3]
-            a0, a1, a2, a3 = w[g, k], w[g, k + 1], w[g, k + 2], w[g, k + 3]
-            b0, b1, b2, b3 = w[g + 1, k], w[g + 1, k + 1], w[g + 1, k + 2], w[g + 1, k + 3]
-            c0, c1, c2, c3 = w[g + 2, k], w[g + 2, k + 1], w[g + 2, k + 2], w[g + 2, k + 3]
-            d0, d1, d2, d3 = w[g + 3, k], w[g + 3, k + 1], w[g + 3, k + 2], w[g + 3, k + 3]
-            for m in range(n):
-                y0, y1, y2, y3 = x0[m], x1[m], x2[m], x3[m]
-                o0[m] += a0 * y0 + a1 * y1 + a2 * y2 + a3 * y3
-                o1[m] += b0 * y0 + b1 * y1 + b2 * y2 + b3 * y3
-                o2[m] += c0 * y0 + c1 * y1 + c2 * y2 + c3 * y3
-                o3[m] += d0 * y0 + d1 * y1 + d2 * y2 + d3 * y3
-        for k in range(c4, C):
-            x = inputs[k]
-            a0, b0, c0, d0 = w[g, k], w[g + 1, k], w[g + 2, k], w[g + 3, k]
-            for m in range(n):
-                y = x[m]
-                o0[m] += a0 * y
-                o1[m] += b0 * y
-                o2[m] += c0 * y
-                o3[m] += d0 * y
-
-
-@numba.njit(**_JIT)
 def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
     """Run the LSTM over one gathered chunk. ``w`` (4H, C + H) is ``[weight_ih | weight_hh]``,
     gates in nn.LSTM's order (i, f, g, o), ``inputs`` (C + H, T, CHUNK) the inputs x_t above the
     states h_{t-1}, which this fills. Keeps the gate activations ``acts`` (4H, T, CHUNK), c_{t-1}
-    ``c_prev`` and tanh(c_t) ``tanh_c`` (H, T, CHUNK) for backward; ends with h_T, c_T in h, c."""
+    ``c_prev`` and tanh(c_t) ``tanh_c`` (H, T, CHUNK) for backward; ends with h_T, c_T in h, c.
+
+    Step by step, so that what a step touches (~20 KB) stays in L1: four gates at a time, each
+    gate's sum is its bias, then its inputs, then its states, four at a time (one load and store
+    of four sums per sixteen FMAs); then per state its four nonlinearities, and the cell update
+    in a second pass that reads them back from ``acts`` (in the same pass, the compiler
+    rearranged the update's arithmetic across the nonlinearities, off by float rounding)."""
     G, K = w.shape
     H = G // 4
     C = K - H
     T = inputs.shape[1]
-    n = T * CHUNK
-    _project(w, bias, inputs.reshape(K, n), C, acts.reshape(G, n))
-    h[:] = 0
+    c4 = C - C % 4
+    k4 = K - H % 4
     c[:] = 0
+    for j in range(H):
+        for b in range(CHUNK):
+            inputs[C + j, 0, b] = 0
     for t in range(T):
+        for g in range(0, G, 4):
+            bg0, bg1, bg2, bg3 = bias[g], bias[g + 1], bias[g + 2], bias[g + 3]
+            for b in range(CHUNK):
+                acts[g, t, b] = bg0
+                acts[g + 1, t, b] = bg1
+                acts[g + 2, t, b] = bg2
+                acts[g + 3, t, b] = bg3
+            for k in range(0, c4, 4):
+                _add4x4(w, inputs, acts, g, k, t)
+            for k in range(c4, C):
+                _add4x1(w, inputs, acts, g, k, t)
+            for k in range(C, k4, 4):
+                _add4x4(w, inputs, acts, g, k, t)
+            for k in range(k4, K):
+                _add4x1(w, inputs, acts, g, k, t)
+        last = t == T - 1
         for j in range(H):
             for b in range(CHUNK):
-                c_prev[j, t, b] = c[j, b]
-                inputs[C + j, t, b] = h[j, b]
-        # four states at a time, then gate by gate: one load and store of a gate's sum per four
-        # FMAs, and consecutive FMAs update different gates, so none waits for the last
-        k4 = K - (K - C) % 4
-        for k in range(C, k4, 4):
-            for gate in range(G):
-                w0, w1, w2, w3 = w[gate, k], w[gate, k + 1], w[gate, k + 2], w[gate, k + 3]
-                for b in range(CHUNK):
-                    acts[gate, t, b] += (
-                        w0 * inputs[k, t, b]
-                        + w1 * inputs[k + 1, t, b]
-                        + w2 * inputs[k + 2, t, b]
-                        + w3 * inputs[k + 3, t, b]
-                    )
-        for k in range(k4, K):
-            for gate in range(G):
-                wk = w[gate, k]
-                for b in range(CHUNK):
-                    acts[gate, t, b] += wk * inputs[k, t, b]
-        for gate in range(G):
-            if 2 * H <= gate < 3 * H:
-                for b in range(CHUNK):
-                    acts[gate, t, b] = _tanh(acts[gate, t, b])
-            else:
-                for b in range(CHUNK):
-                    acts[gate, t, b] = _HALF * _tanh(_HALF * acts[gate, t, b]) + _HALF
-        for j in range(H):
+                i = _HALF * _tanh(_HALF * acts[j, t, b]) + _HALF
+                f = _HALF * _tanh(_HALF * acts[H + j, t, b]) + _HALF
+                g = _tanh(acts[2 * H + j, t, b])
+                o = _HALF * _tanh(_HALF * acts[3 * H + j, t, b]) + _HALF
+                acts[j, t, b] = i
+                acts[H + j, t, b] = f
+                acts[2 * H + j, t, b] = g
+                acts[3 * H + j, t, b] = o
             for b in range(CHUNK):
-                cv = acts[H + j, t, b] * c[j, b] + acts[j, t, b] * acts[2 * H + j, t, b]
+                cp = c[j, b]
+                c_prev[j, t, b] = cp
+                cv = acts[H + j, t, b] * cp + acts[j, t, b] * acts[2 * H + j, t, b]
                 tc = _tanh(cv)
                 c[j, b] = cv
                 tanh_c[j, t, b] = tc
                 h[j, b] = acts[3 * H + j, t, b] * tc
+            if not last:
+                for b in range(CHUNK):
+                    inputs[C + j, t + 1, b] = h[j, b]
+
+
+@numba.njit(inline="always", fastmath=True, error_model="numpy")
+def _add4x4(w, inputs, acts, g, k, t):
+    """Gates g..g+3 of step t += their weights x inputs k..k+3."""
+    a0, a1, a2, a3 = w[g, k], w[g, k + 1], w[g, k + 2], w[g, k + 3]
+    b0, b1, b2, b3 = w[g + 1, k], w[g + 1, k + 1], w[g + 1, k + 2], w[g + 1, k + 3]
+    c0, c1, c2, c3 = w[g + 2, k], w[g + 2, k + 1], w[g + 2, k + 2], w[g + 2, k + 3]
+    d0, d1, d2, d3 = w[g + 3, k], w[g + 3, k + 1], w[g + 3, k + 2], w[g + 3, k + 3]
+    for b in range(CHUNK):
+        y0, y1, y2, y3 = (
+            inputs[k, t, b],
+            inputs[k + 1, t, b],
+            inputs[k + 2, t, b],
+            inputs[k + 3, t, b],
+        )
+        acts[g, t, b] += a0 * y0 + a1 * y1 + a2 * y2 + a3 * y3
+        acts[g + 1, t, b] += b0 * y0 + b1 * y1 + b2 * y2 + b3 * y3
+        acts[g + 2, t, b] += c0 * y0 + c1 * y1 + c2 * y2 + c3 * y3
+        acts[g + 3, t, b] += d0 * y0 + d1 * y1 + d2 * y2 + d3 * y3
+
+
+@numba.njit(inline="always", fastmath=True, error_model="numpy")
+def _add4x1(w, inputs, acts, g, k, t):
+    """Gates g..g+3 of step t += their weights x input k."""
+    a0, b0, c0, d0 = w[g, k], w[g + 1, k], w[g + 2, k], w[g + 3, k]
+    for b in range(CHUNK):
+        y = inputs[k, t, b]
+        acts[g, t, b] += a0 * y
+        acts[g + 1, t, b] += b0 * y
+        acts[g + 2, t, b] += c0 * y
+        acts[g + 3, t, b] += d0 * y
 
 
 @numba.njit(**_JIT)
