@@ -366,6 +366,13 @@ class Before:
         self.child.wait()
 
 
+# Idle BLAS and OpenMP threads spin for up to ~0.2 s after their work before they sleep: with
+# ``--before``, two processes take turns on the cores, and one's spinning threads took a core
+# from the other's next pass (the ConvNet's backward ran at half speed in the child, the same code
+# on both sides). A pause before each timing lets them sleep first.
+SETTLE_S = 0.25
+
+
 def interleaved(timers: dict[str, Timer], repeats: int) -> dict[str, tuple[float, float]]:
     """Best wall and CPU seconds of each timer: one warm-up each, then ``repeats`` rounds."""
     for timer in timers.values():
@@ -373,6 +380,7 @@ def interleaved(timers: dict[str, Timer], repeats: int) -> dict[str, tuple[float
     best = {name: (float("inf"), float("inf")) for name in timers}
     for _ in range(repeats):
         for name, timer in timers.items():
+            time.sleep(SETTLE_S)
             wall, cpu = timer()
             best[name] = (min(best[name][0], wall), min(best[name][1], cpu))
     return best
