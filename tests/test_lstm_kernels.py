@@ -41,16 +41,13 @@ def test_compiled_matches_nn_lstm_forward_and_gradients(batch, channels, steps, 
 
 def _paper_sized_step(rows: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
     """h_T and the gradients of (x, every LSTM parameter) at the paper's sizes (C=32, T=150,
-    H=10, the model's init), the rows ``rows`` of 400 instances read in place; checks that the
-    forward without gradients gives the same h_T."""
+    H=10, the model's init), the rows ``rows`` of 400 instances read in place."""
     torch.manual_seed(0)
     body = LSTMBody(32, impl="compiled")
     x = torch.randn(400, 32, 150, requires_grad=True)
     weights = torch.randn(len(rows), 10)
     out = lstm_last_hidden(x, body.lstm, rows)
     (out * weights).sum().backward()
-    with torch.no_grad():  # keeps no chunk for a backward: the same forward, bit for bit
-        assert torch.equal(lstm_last_hidden(x, body.lstm, rows), out.detach())
     return out.detach(), [x.grad] + [p.grad for p in body.lstm.parameters()]
 
 

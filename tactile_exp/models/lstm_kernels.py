@@ -4,15 +4,14 @@
 the paper's sizes (hidden 10, 150 steps) it is bound by per-call overhead, not arithmetic. Here
 a batch is cut into chunks of ``CHUNK`` instances, and each chunk runs forward and backward
 through time inside one numba loop, with the chunk as the innermost, contiguous axis (layout
-(feature, time, chunk)), so every gate update is one vector FMA over the chunk. The forward
-runs step by step, each step's input projection, recurrence and cell update on data in L1; the
-weight gradients are summed per chunk (~5 MB of arrays at C=32), not as whole-batch matrix
-products through memory, which made the earlier kernels memory-bound. Chunks run in parallel on
-numba's threads. A forward that a backward will follow keeps every chunk's activations and
-states for it (~63 MB a batch of 1,000, in reused ``scratch`` memory): writing and re-reading
-them costs less than the forward, which backward would otherwise run again; a forward without
-gradients keeps one chunk per thread. Each chunk's weight gradient is summed on its own and the
-chunks' in a fixed order, so results do not depend on the thread count.
+(feature, time, chunk)), so every gate update is one vector FMA over the chunk. A chunk's
+arrays (~5 MB at C=32) stay in cache: the input projection, the recurrence and the
+weight gradients are computed there instead of as whole-batch matrix products through memory,
+which made the earlier kernels memory-bound (they gathered, transposed and multiplied
+(feature, time, batch) arrays of ~25 MB each per step). Chunks run in parallel on numba's
+threads. The forward pass keeps nothing: backward recomputes a chunk's forward in cache, which
+costs less than writing and re-reading the activations. Each chunk's weight gradient is summed
+on its own and the chunks' in a fixed order, so results do not depend on the thread count.
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
@@ -27,7 +26,6 @@ import numpy as np
 import torch
 
 from tactile_exp.models.numba_setup import announce_compile, numba
-from tactile_exp.models.scratch import scratch
 
 # error_model="numpy": no ZeroDivisionError check inside the loops, which blocks vectorisation.
 _JIT = dict(fastmath=True, error_model="numpy", cache=True)
@@ -295,62 +293,57 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_w, d_b):
 
 
 @numba.njit(parallel=True, **_JIT)
-def _forward(X, rows, w, bias, inputs, acts, c_prev, tanh_c, h_last, parts):
+def _forward(X, rows, w, bias, h_last, parts):
     """h_T (len(rows), H) of the instances ``X[rows]`` (N, C, T), chunks shared by ``parts``
-    threads. Chunk ``i`` runs in slot ``i % len(inputs)`` of ``inputs``, ``acts``, ``c_prev``
-    and ``tanh_c`` (slots, ..., T, CHUNK): one slot per chunk keeps every chunk's forward for
-    ``_backward``, one per thread keeps none."""
-    H = w.shape[0] // 4
+    threads."""
+    G, K = w.shape
+    H = G // 4
+    T = X.shape[2]
     n_chunks = (len(rows) + CHUNK - 1) // CHUNK
-    slots = inputs.shape[0]
     for p in numba.prange(parts):
+        inputs = np.empty((K, T, CHUNK), np.float32)
+        acts = np.empty((G, T, CHUNK), np.float32)
+        c_prev = np.empty((H, T, CHUNK), np.float32)
+        tanh_c = np.empty((H, T, CHUNK), np.float32)
         h = np.empty((H, CHUNK), np.float32)
         c = np.empty((H, CHUNK), np.float32)
         for chunk in range(p, n_chunks, parts):
-            s = chunk % slots
             start = chunk * CHUNK
-            _gather(X, rows, start, inputs[s])
-            _chunk_forward(w, bias, inputs[s], acts[s], c_prev[s], tanh_c[s], h, c)
+            _gather(X, rows, start, inputs)
+            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
             for b in range(min(CHUNK, len(rows) - start)):
                 for j in range(H):
                     h_last[start + b, j] = h[j, b]
 
 
 @numba.njit(parallel=True, **_JIT)
-def _backward(w, inputs, acts, c_prev, tanh_c, dh_last, d_w, d_b, dx, parts):
-    """Gradients of the loss through h_T from the chunks ``_forward`` kept (one slot each):
-    each chunk's weight and bias gradients in ``d_w`` (n_chunks, 4H, C + H) and ``d_b``
-    (n_chunks, 4H) (the caller sums them in order), and d loss / d X[rows] in ``dx`` (len(rows),
-    C, T) unless ``dx`` is empty; as ``_forward``."""
+def _backward(X, rows, w, bias, dh_last, d_w, d_b, dx, parts):
+    """Gradients of the loss through h_T: each chunk's weight and bias gradients in ``d_w``
+    (n_chunks, 4H, C + H) and ``d_b`` (n_chunks, 4H) (the caller sums them in order), and d loss
+    / d X[rows] in ``dx`` (len(rows), C, T) unless ``dx`` is empty; as ``_forward``."""
     G, K = w.shape
     H = G // 4
     C = K - H
-    T = inputs.shape[2]
-    n_rows = len(dh_last)
+    T = X.shape[2]
     n_chunks = d_w.shape[0]
     for p in numba.prange(parts):
+        inputs = np.empty((K, T, CHUNK), np.float32)
+        acts = np.empty((G, T, CHUNK), np.float32)
+        c_prev = np.empty((H, T, CHUNK), np.float32)
+        tanh_c = np.empty((H, T, CHUNK), np.float32)
         d_gates = np.empty((G, T, CHUNK), np.float32)
-        dh = np.empty((H, CHUNK), np.float32)
-        dc = np.empty((H, CHUNK), np.float32)
+        h = np.empty((H, CHUNK), np.float32)
+        c = np.empty((H, CHUNK), np.float32)
         for chunk in range(p, n_chunks, parts):
             start = chunk * CHUNK
-            n = min(CHUNK, n_rows - start)
-            dh[:] = 0  # lanes past the last row stay zero
+            n = min(CHUNK, len(rows) - start)
+            _gather(X, rows, start, inputs)
+            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
+            h[:] = 0  # now d loss / d h_T; lanes past the last row stay zero
             for b in range(n):
                 for j in range(H):
-                    dh[j, b] = dh_last[start + b, j]
-            _chunk_backward(
-                w,
-                inputs[chunk],
-                acts[chunk],
-                c_prev[chunk],
-                tanh_c[chunk],
-                dh,
-                dc,
-                d_gates,
-                d_w[chunk],
-                d_b[chunk],
-            )
+                    h[j, b] = dh_last[start + b, j]
+            _chunk_backward(w, inputs, acts, c_prev, tanh_c, h, c, d_gates, d_w[chunk], d_b[chunk])
             if dx.shape[0] > 0:
                 for b in range(n):
                     for ch in range(C):
@@ -370,44 +363,39 @@ def _parts(n_rows: int) -> int:
 class LSTMLastHidden(torch.autograd.Function):
     """The last hidden state (B, H) of a one-layer LSTM over the rows ``rows`` of (N, C, T)
     float32 CPU input, with ``nn.LSTM``'s parameters (weight_ih (4H, C), weight_hh (4H, H),
-    bias_ih, bias_hh); ``keep``: whether a backward will follow (the forward then keeps every
-    chunk's states for it)."""
+    bias_ih, bias_hh)."""
 
     @staticmethod
-    def forward(ctx, x, rows, keep, w_ih, w_hh, b_ih, b_hh):  # type: ignore[override]
+    def forward(ctx, x, rows, w_ih, w_hh, b_ih, b_hh):  # type: ignore[override]
         w = torch.cat([w_ih, w_hh], 1).detach().contiguous()
         bias = (b_ih + b_hh).detach().contiguous()
-        (G, K), H, T = w.shape, w_hh.shape[1], x.shape[2]
-        parts = _parts(len(rows))
-        slots = (len(rows) + CHUNK - 1) // CHUNK if keep else parts
-        states = tuple(scratch(slots, n, T, CHUNK) for n in (K, G, H, H))
-        h_last = np.empty((len(rows), H), np.float32)
+        h_last = np.empty((len(rows), w_hh.shape[1]), np.float32)
         X = x.detach().numpy()
-        _forward(X, rows.numpy(), w.numpy(), bias.numpy(), *states, h_last, parts)
-        if keep:
-            ctx.save_for_backward(x, rows)
-            ctx.kept = (w, states)
+        _forward(X, rows.numpy(), w.numpy(), bias.numpy(), h_last, _parts(len(rows)))
+        ctx.save_for_backward(x, rows)
+        ctx.weights = (w, bias)
         return torch.from_numpy(h_last)
 
     @staticmethod
     def backward(ctx, dh):  # type: ignore[override]
         x, rows = ctx.saved_tensors
-        w, states = ctx.kept
-        del ctx.kept  # the states go back to the scratch pool once backward is done
+        w, bias = ctx.weights
         G, K = w.shape
-        n_chunks = states[0].shape[0]
+        n_chunks = (len(rows) + CHUNK - 1) // CHUNK
         d_w = np.empty((n_chunks, G, K), np.float32)
         d_b = np.empty((n_chunks, G), np.float32)
         dx = np.empty((len(rows) if ctx.needs_input_grad[0] else 0, *x.shape[1:]), np.float32)
+        X = x.detach().numpy()
         dh_last = dh.contiguous().numpy()
-        _backward(w.numpy(), *states, dh_last, d_w, d_b, dx, _parts(len(rows)))
+        parts = _parts(len(rows))
+        _backward(X, rows.numpy(), w.numpy(), bias.numpy(), dh_last, d_w, d_b, dx, parts)
         d_w_all = torch.from_numpy(d_w.sum(0))
         d_b_all = torch.from_numpy(d_b.sum(0))
         C = x.shape[1]
         d_x = None
         if ctx.needs_input_grad[0]:
             d_x = torch.zeros_like(x).index_add_(0, rows, torch.from_numpy(dx))
-        return d_x, None, None, d_w_all[:, :C], d_w_all[:, C:], d_b_all, d_b_all
+        return d_x, None, d_w_all[:, :C], d_w_all[:, C:], d_b_all, d_b_all
 
 
 def lstm_last_hidden(
@@ -422,9 +410,8 @@ def lstm_last_hidden(
     if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(x):
         raise IndexError(f"compiled LSTM: rows must lie in [0, {len(x)}), the rows of x")
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
-    keep = torch.is_grad_enabled() and any(t.requires_grad for t in (x, *params))
     announce_compile(__name__)
-    return LSTMLastHidden.apply(x, rows, keep, *params)
+    return LSTMLastHidden.apply(x, rows, *params)
 
 
 def warm_up() -> None:
