@@ -32,8 +32,7 @@ conv2 and conv3 (conv1's input needs none) and the head's; LSTM forward 2 x 4H(C
 and instance, backward 2 x 4H(C + H) (weight gradient) + 2 x 4H x H (the state's gradient).
 Nonlinearities, layout changes and any pass a kernel runs again (a backward that recomputes the
 forward) are not counted: they are the kernels' overhead, so a rate here is the useful arithmetic
-per second. The LSTM's forward runs with gradients on, as in training: it keeps what its
-backward needs.
+per second.
 
 ``--before REV`` also times the package at git revision ``REV`` (exported once per commit under
 the cache folder, with its own numba cache) in a child process, interleaved item by item with

@@ -4,14 +4,17 @@
 the paper's sizes (hidden 10, 150 steps) it is bound by per-call overhead, not arithmetic. Here
 a batch is cut into chunks of ``CHUNK`` instances, and each chunk runs forward and backward
 through time inside one numba loop, with the chunk as the innermost, contiguous axis (layout
-(feature, time, chunk)), so every gate update is one vector FMA over the chunk. A chunk's
-arrays (~5 MB at C=32) stay in cache: the input projection, the recurrence and the
-weight gradients are computed there instead of as whole-batch matrix products through memory,
-which made the earlier kernels memory-bound (they gathered, transposed and multiplied
-(feature, time, batch) arrays of ~25 MB each per step). Chunks run in parallel on numba's
-threads. The forward pass keeps nothing: backward recomputes a chunk's forward in cache, which
-costs less than writing and re-reading the activations. Each chunk's weight gradient is summed
-on its own and the chunks' in a fixed order, so results do not depend on the thread count.
+(feature, time, chunk)), so every gate update is one vector FMA over the chunk. The forward
+runs step by step, each step's input projection, recurrence and cell update on data in L1; the
+weight gradients are summed per chunk (~5 MB of arrays at C=32), not as whole-batch matrix
+products through memory, which made the earlier kernels memory-bound. Chunks run in parallel on
+numba's threads. The forward pass keeps nothing: backward recomputes a chunk's forward in cache.
+Keeping every chunk's activations for the backward instead (~63 MB a batch of 1,000) made a
+training step 1.25x faster alone, but in the Table I grid, two jobs side by side on two cores,
+the LSTM job gained ~1% and the ConvNet job beside it lost ~7% (row G 24.6 min, H 25.4 against
+24.9 and 23.6, docs/scale.md): writing and re-reading them takes the memory bandwidth the
+other job needs. Each chunk's weight gradient is summed on its own and the chunks' in a fixed
+order, so results do not depend on the thread count.
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
