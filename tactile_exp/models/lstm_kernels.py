@@ -13,8 +13,8 @@ Keeping every chunk's activations for the backward instead (~63 MB a batch of 1,
 training step 1.25x faster alone, but in the Table I grid, two jobs side by side on two cores,
 the LSTM job gained ~3% and the ConvNet job beside it lost ~5% (rows G and H against the grid
 before, scaled by the machine's speed on rows A to F; docs/scale.md): writing and re-reading
-them takes the memory bandwidth the other job needs. Each chunk's weight gradient is summed on its own and the chunks' in a fixed
-order, so results do not depend on the thread count.
+them takes the memory bandwidth the other job needs. Each chunk's weight gradient is summed on
+its own and the chunks' in a fixed order, so results do not depend on the thread count.
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
