@@ -33,6 +33,8 @@ import bench_roofline as cpu  # noqa: E402  (the shapes and FLOP counts)
 
 MATMUL = 8192
 COPY_GIB = 1
+SGEMM = f"sgemm {MATMUL}^3 (float32, TF32 off)"
+COPY = f"copy {COPY_GIB} GiB (device to device)"
 
 
 def _timed(fn: Callable[[], object]) -> Callable[[], float]:
@@ -51,14 +53,8 @@ def ceilings(device: torch.device) -> tuple[dict[str, Callable[[], float]], dict
     a = torch.randn(MATMUL, MATMUL, device=device)
     src = torch.empty(COPY_GIB * 2**30 // 4, device=device)
     dst = torch.empty_like(src)
-    timers = {
-        f"sgemm {MATMUL}^3 (float32, TF32 off)": _timed(lambda: torch.mm(a, a)),
-        f"copy {COPY_GIB} GiB (device to device)": _timed(lambda: dst.copy_(src)),
-    }
-    work = {
-        f"sgemm {MATMUL}^3 (float32, TF32 off)": 2 * MATMUL**3 / 1e9,
-        f"copy {COPY_GIB} GiB (device to device)": 2 * COPY_GIB * 2**30 / 1e9,
-    }
+    timers = {SGEMM: _timed(lambda: torch.mm(a, a)), COPY: _timed(lambda: dst.copy_(src))}
+    work = {SGEMM: 2 * MATMUL**3 / 1e9, COPY: 2 * COPY_GIB * 2**30 / 1e9}
     return timers, work
 
 
@@ -119,11 +115,12 @@ def main() -> None:
         for name, timer in pass_timers(device, b).items():
             timers[f"{name}, batch {b}"] = timer
             work[f"{name}, batch {b}"] = flops[name] * scale[b]
-    best = cpu.interleaved({n: (lambda t=t: (t(), 0.0)) for n, t in timers.items()}, args.repeats)
+    # No pause between timings: one process, and each timing ends synchronised with the GPU.
+    walls = {n: (lambda t=t: (t(), 0.0)) for n, t in timers.items()}
+    best = cpu.interleaved(walls, args.repeats, settle_s=0.0)
     seconds = {n: wall for n, (wall, _) in best.items()}
-    sgemm, copy = list(work)[:2]
-    peak = work[sgemm] / seconds[sgemm]
-    bandwidth = work[copy] / seconds[copy]
+    peak = work[SGEMM] / seconds[SGEMM]
+    bandwidth = work[COPY] / seconds[COPY]
     props = torch.cuda.get_device_properties(device)
     print(
         f"{props.name}, torch {torch.__version__}, best of {args.repeats} (interleaved): "

@@ -120,7 +120,6 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
                 _add4x4(w, inputs, acts, g, k, t)
             for k in range(k4, K):
                 _add4x1(w, inputs, acts, g, k, t)
-        last = t == T - 1
         for j in range(H):
             for b in range(CHUNK):
                 i = _HALF * _tanh(_HALF * acts[j, t, b]) + _HALF
@@ -139,7 +138,7 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
                 c[j, b] = cv
                 tanh_c[j, t, b] = tc
                 h[j, b] = acts[3 * H + j, t, b] * tc
-            if not last:
+            if t + 1 < T:
                 for b in range(CHUNK):
                     inputs[C + j, t + 1, b] = h[j, b]
 
