@@ -18,6 +18,16 @@ fresh clone's critical path (the README job: 80-91 s instead of 104 s, bench_rea
 against 35.1 ms), measured side by side. Layout arrays are reused across steps (``scratch``).
 Rates per kernel: bench/bench_haptic_cnn.py.
 
+Measured and not kept (one thread, batch 1000, old and new kernels in one process, interleaved):
+passes with every tap written out in the source (generated code; four rows' sums stay in
+registers over all 20 taps of conv2 and conv3, the ReLU or its mask applied before the one
+store; bit-identical results) made a training step 1.07-1.09x faster but the first compile 23 ->
+41 s, which a fresh clone's first job waits for; 512-bit vectors (numba's CPU features without
+``prefer-256-bit``), with the batch padded to 16 or 64 lanes, made a step 10-15% slower; the
+batch in chunks of 128-336 lanes with conv1 and conv2 recomputed in the backward, so that a
+group's layers stay in L2, made it 1.3-2x slower; the entry transpose through a per-channel tile
+of 16 instances, or gathered from a once-transposed training set, was slower than ``to_layout``.
+
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
 """
