@@ -18,8 +18,9 @@ its own and the chunks' in a fixed order, so results do not depend on the thread
 Also measured and not kept (one thread, batch 1000, in one process): a chunk's input projection
 as one BLAS product (numba's ``np.dot``) before its recurrence, a forward 1.2x slower; the input
 projection kept from the forward for the backward's recomputation (24 MB a batch, bit-identical),
-a training step 1.2-1.3x slower; four gates' sums over all 42 inputs written out in the source,
-not vectorised by the compiler (7x slower).
+a training step 1.2-1.3x slower; eight inputs per pass instead of four, a forward 1.1x slower;
+four gates' sums over all 42 inputs written out in the source, not vectorised by the compiler
+(7x slower).
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
