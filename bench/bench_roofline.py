@@ -330,6 +330,12 @@ class Before:
             ["git", "-C", str(ROOT), "rev-parse", rev], check=True, capture_output=True, text=True
         ).stdout.strip()
         self.sha = sha
+        self.subject = subprocess.run(  # names the revision in the result file's notes
+            ["git", "-C", str(ROOT), "log", "-1", "--format=%s", sha],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
         cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
         folder = cache / "bench-before" / sha  # kept: its kernels compile once per revision
         if not (folder / "tactile_exp").exists():
@@ -474,8 +480,11 @@ def main() -> None:
             "the conv kernels' inner loop on resident rows and memory bandwidth x the pass's "
             "FLOP per byte (the script's docstring); the targets are against sgemm"
         )
-        if args.before:
-            notes += "; before = the package at the --before revision, timed in a child process"
+        if before is not None:
+            notes += (
+                f"; before = the package at --before {args.before} (the commit "
+                f"'{before.subject}'), timed in a child process"
+            )
         write(args.json, "bench_roofline", figures, notes)
 
 

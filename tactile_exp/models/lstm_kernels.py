@@ -12,9 +12,10 @@ numba's threads. The forward pass keeps nothing: backward recomputes a chunk's f
 Keeping every chunk's activations for the backward instead (~63 MB a batch of 1,000) made a
 training step 1.25x faster alone, but in the Table I grid, two jobs side by side on two cores,
 the LSTM job gained ~3% and the ConvNet job beside it lost ~5% (rows G and H against the grid
-before, scaled by the machine's speed on rows A to F; docs/scale.md): writing and re-reading
-them takes the memory bandwidth the other job needs. Each chunk's weight gradient is summed on
-its own and the chunks' in a fixed order, so results do not depend on the thread count.
+before, scaled by the machine's speed on rows A to F, which neither version touches): writing
+and re-reading them takes the memory bandwidth the other job needs. Each chunk's weight
+gradient is summed on its own and the chunks' in a fixed order, so results do not depend on the
+thread count.
 Also measured and not kept (one thread, batch 1000, in one process): a chunk's input projection
 as one BLAS product (numba's ``np.dot``) before its recurrence, a forward 1.2x slower; the input
 projection kept from the forward for the backward's recomputation (24 MB a batch, bit-identical),
