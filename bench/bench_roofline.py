@@ -19,12 +19,16 @@ of them alike; best of ``--repeats``):
 
 - what the ConvNet's shapes permit (``attainable``): with 4 output channels per group no pass is
   a large matrix product, so beside sgemm the bench measures two ceilings of its own and holds
-  each ConvNet pass against the lowest: the conv kernels' inner loop (``_weighted_sum4``: 4 rows
-  x 20 taps, conv2's) on rows that stay in L1 (256 lanes) and at the batch's 1008 lanes (rows in
-  L2), one thread; and memory: a 64 MB copy's bytes per second times the pass's FLOPs per byte
-  of the traffic it cannot avoid when every layer's output is kept for the backward (forward:
-  read the batch, write the layout's input and the three activations; backward: read those
-  four, write and read conv3's gradient);
+  each ConvNet pass against the lowest: the conv kernels' inner loop (``_combine``: 4 rows x 20
+  taps, conv2's, one register tile) on rows that stay in L1 (256 lanes) and at the batch's 1008
+  lanes (rows in L2), one thread; and memory: a 64 MB copy's bytes per second times the pass's
+  FLOPs per byte of the traffic it cannot avoid when every layer's output is kept for the
+  backward (forward: read the batch, write the layout's input and the three activations;
+  backward: read those four, write and read conv3's gradient);
+- what the LSTM's kernels permit: their gate sums' inner loop (``tap_sums`` over the 42 inputs,
+  four gates a tile) for all 40 gates of one step, on a chunk's rows in L1, one thread: each
+  LSTM pass is held against the lower of it and sgemm (a chunk's working set stays in cache, so
+  memory sets no lower bound);
 
 FLOPs are counted from the shapes, 2 per multiply-add, only the arithmetic a pass needs: forward
 convolutions and the head; backward the weight gradients of every layer, the input gradients of
@@ -152,37 +156,65 @@ def loop_name(lanes: int) -> str:
 
 
 COPY = f"copy {COPY_MB} MB (numpy), 1 thread"
+LSTM_INPUTS = CHANNELS + HIDDEN  # a gate's sum runs over the inputs x_t, then the states h_t-1
+LSTM_LOOP_CALLS = 2000
+
+
+def lstm_loop_name() -> str:
+    from tactile_exp.models.lstm_kernels import CHUNK
+
+    return (
+        f"lstm inner loop, {4 * HIDDEN} gates x {LSTM_INPUTS} inputs x {CHUNK} lanes (in L1), "
+        "1 thread"
+    )
 
 
 def bound_gflop() -> dict[str, float]:
     """GFLOP of the inner-loop timers; GB (read + written) of the copy."""
+    from tactile_exp.models.lstm_kernels import CHUNK
+
     loops = {loop_name(n): 2 * 4 * LOOP_TAPS * n * LOOP_CALLS / 1e9 for n in LOOP_LANES}
-    return {**loops, COPY: 2 * COPY_MB * 2**20 / 1e9}
+    gates = 2 * 4 * HIDDEN * LSTM_INPUTS * CHUNK * LSTM_LOOP_CALLS / 1e9
+    return {**loops, lstm_loop_name(): gates, COPY: 2 * COPY_MB * 2**20 / 1e9}
 
 
 def bound_timers() -> dict[str, Timer]:
-    """The inner loop of the conv kernels on resident rows, and a memory copy."""
+    """The inner loops of the conv and LSTM kernels on resident rows, and a memory copy."""
     from tactile_exp.models import grouped_conv_numba as conv
+    from tactile_exp.models import lstm_kernels as lstm
+    from tactile_exp.models.vector_tiles import PLAIN, tap_sums
 
     numba = conv.numba
 
     @numba.njit
-    def loop(rows, src, chans, times, wts, bias, calls):
+    def gate_sums(w, inputs, acts, bias, calls):  # one step's gates, as _chunk_forward runs them
+        gates, k = w.shape
+        taps = np.arange(k) * lstm.CHUNK
+        flat_w, flat_in, flat_acts = w.reshape(-1), inputs.reshape(-1), acts.reshape(-1)
         for _ in range(calls):
-            conv._weighted_sum4(
-                rows[0], rows[1], rows[2], rows[3], src, chans, times, wts, 0, LOOP_TAPS, bias
-            )
+            for g in range(0, gates, 4):
+                at = g * lstm.CHUNK
+                tap_sums(flat_w, g * k, k, 1, flat_in, 0, taps, k, flat_acts, at, lstm.CHUNK,
+                         bias, g, lstm.CHUNK, PLAIN, flat_acts)  # fmt: skip
+
+    @numba.njit
+    def loop(rows, src, taps, wts, bias, calls):
+        for _ in range(calls):
+            conv._combine(rows, 0, src, taps, wts, LOOP_TAPS, bias, PLAIN, rows)
 
     rng = np.random.default_rng(0)
     timers = {}
     for lanes in LOOP_LANES:
         src = rng.standard_normal((WIDTH, KERNEL, lanes), dtype=np.float32)
-        rows = np.zeros((4, lanes), np.float32)
-        chans = np.repeat(np.arange(WIDTH), KERNEL)
-        times = np.tile(np.arange(KERNEL), WIDTH)
+        rows = np.zeros((4, 1, lanes), np.float32)
+        taps = np.arange(LOOP_TAPS) * lanes  # every row of src, in order
         wts = rng.standard_normal((LOOP_TAPS, 4), dtype=np.float32)
-        args = (rows, src, chans, times, wts, np.zeros(4, np.float32), LOOP_CALLS)
+        args = (rows, src, taps, wts, np.zeros(4, np.float32), LOOP_CALLS)
         timers[loop_name(lanes)] = _timed(lambda args=args: loop(*args))
+    w = rng.standard_normal((4 * HIDDEN, LSTM_INPUTS), dtype=np.float32)
+    inputs = rng.standard_normal((LSTM_INPUTS, lstm.CHUNK), dtype=np.float32)
+    acts, bias = np.zeros((4 * HIDDEN, lstm.CHUNK), np.float32), np.zeros(4 * HIDDEN, np.float32)
+    timers[lstm_loop_name()] = _timed(lambda: gate_sums(w, inputs, acts, bias, LSTM_LOOP_CALLS))
     a = np.ones(COPY_MB * 2**20 // 4, np.float32)
     b = np.empty_like(a)
     timers[COPY] = _timed(lambda: np.copyto(b, a))
@@ -464,6 +496,16 @@ def main() -> None:
                 share = 100 * conv_gflop()[name] / best[key][1] / bound
                 figures[f"{key}, % of attainable per CPU s"] = round(share, 1)
                 print(f"  {key:46s} {intensity:5.2f} FLOP/B, bound {bound:6.1f}: {share:5.1f}%")
+    lstm_loop_cpu = gflop[lstm_loop_name()] / best[lstm_loop_name()][1]
+    bound = min(ceiling_cpu, lstm_loop_cpu)
+    print(f"attainable per CPU s for the LSTM: {bound:.1f} (the lower of sgemm and its inner loop)")
+    for name in lstm_gflop():
+        figures[f"{name}, attainable GFLOP per CPU s"] = round(bound, 1)
+        for key in (name, f"{name} (before)"):
+            if key in best:
+                share = 100 * lstm_gflop()[name] / best[key][1] / bound
+                figures[f"{key}, % of attainable per CPU s"] = round(share, 1)
+                print(f"  {key:46s} {share:5.1f}%")
     for name in ("convnet forward+backward", "lstm forward+backward"):
         if f"{name} (before)" in best:
             speedup = best[f"{name} (before)"][0] / best[name][0]
@@ -478,7 +520,8 @@ def main() -> None:
             "sgemm per CPU s compares FLOPs per CPU second of all threads, steadier than wall "
             "time when other work shares the cores; attainable per CPU s: the lowest of sgemm, "
             "the conv kernels' inner loop on resident rows and memory bandwidth x the pass's "
-            "FLOP per byte (the script's docstring); the targets are against sgemm"
+            "FLOP per byte; for the LSTM the lower of sgemm and its gate sums' inner loop on "
+            "rows in L1 (the script's docstring); the targets are against sgemm"
         )
         if before is not None:
             notes += (

@@ -9,24 +9,23 @@ never handle a tail. Forward and backward of the whole three-layer stack run ins
 training step (``GroupedConvHead``) also runs the one-output classification layer in the layout, so
 neither conv3's features nor their gradient are transposed (a step's CPU time -19%, measured). A
 task runs every layer of a range of signal groups (``stack_forward``, ``stack_backward``), the
-backward's inner gradients in per-task buffers; taps are shared by four output rows per pass. Tasks
-run side by side on threads (``_in_parallel``; the kernels release the GIL), one per numba thread
-(``numba.set_num_threads``): plain serial kernels compile in about two thirds of the time numba's
-parallel loops took (20 s instead of 31-33 s for the ConvNet's), and the first compile is on a
-fresh clone's critical path (the README job: 80-91 s instead of 104 s, bench_readme_job). They run
-~6% slower a step than the parallel loops (which gave their arrays noalias: one thread, 37.3
-against 35.1 ms), measured side by side. Layout arrays are reused across steps (``scratch``).
-Rates per kernel: bench/bench_haptic_cnn.py.
+backward's inner gradients in per-task buffers. The inner loops are register tiles
+(``vector_tiles``): an output step's taps feed ``ROWS`` output channels whose sums stay in
+registers, the ReLU (or, backward, its mask) applied before the one store; the weight gradient's
+dot products over the batch go four channels x four taps per tile; the entry transpose goes in
+square tiles. Against numba's own loops they made a training step 1.4x faster (one thread,
+batch 1000, interleaved in one process) and the first compile shorter (21 against 26 s). The
+forward and the input gradients are bit-identical to those loops; the weight gradients differ
+in the last bits (another summation order). Tasks run side by side on threads (``_in_parallel``;
+the kernels release the GIL), one per numba thread (``numba.set_num_threads``): plain serial
+kernels compile in about two thirds of the time numba's parallel loops took, and the first
+compile is on a fresh clone's critical path (the README job, bench_readme_job). Layout arrays
+are reused across steps (``scratch``). Rates per kernel: bench/bench_haptic_cnn.py.
 
 Measured and not kept (one thread, batch 1000, old and new kernels in one process, interleaved):
-passes with every tap written out in the source (generated code; four rows' sums stay in
-registers over all 20 taps of conv2 and conv3, the ReLU or its mask applied before the one
-store; bit-identical results) made a training step 1.07-1.09x faster but the first compile 23 ->
-41 s, which a fresh clone's first job waits for; 512-bit vectors (numba's CPU features without
-``prefer-256-bit``), with the batch padded to 16 or 64 lanes, made a step 10-15% slower; the
-batch in chunks of 128-336 lanes with conv1 and conv2 recomputed in the backward, so that a
-group's layers stay in L2, made it 1.3-2x slower; the entry transpose through a per-channel tile
-of 16 instances, or gathered from a once-transposed training set, was slower than ``to_layout``.
+the batch in chunks of 128-336 lanes with conv1 and conv2 recomputed in the backward, so that a
+group's layers stay in L2, made a step 1.3-2x slower; the entry transpose gathered from a
+once-transposed training set was slower than ``to_layout``.
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
@@ -44,8 +43,18 @@ from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.numba_setup import announce_compile, numba
 from tactile_exp.models.scratch import scratch
+from tactile_exp.models.vector_tiles import (
+    GATED,
+    PLAIN,
+    RELU,
+    ROWS,
+    WIDTH,
+    lane_dots,
+    tap_sums,
+    transpose_tile,
+)
 
-LANES = 16  # batch padding: two AVX2 float32 vectors
+LANES = 16  # batch padding: a whole number of vectors at every width (vector_tiles.WIDTH)
 # Reassociation lets the weight-gradient reductions vectorise; no nnan/ninf, so NaNs propagate.
 # ReLUs and their masks are written v * (v > 0), not max(v, 0) or a conditional: those compile
 # to a branch per element (NaN semantics), mispredicted on every other one; conv1's forward ran
@@ -60,22 +69,23 @@ def conv_out_len(length: int, kernel: int, stride: int) -> int:
 
 
 @numba.njit(**_JIT)
-def _weighted_sum(row, src, chans, times, weights, count, bias):  # pragma: no cover (compiled)
-    """row[:] = bias + sum_q weights[q] * src[chans[q], times[q], :], four taps per pass.
+def _weighted_sum(row, src, taps, weights, count, bias):  # pragma: no cover (compiled)
+    """row[:] = bias + sum_q weights[q] * src[taps[q]:taps[q] + n] (src flat), four taps per pass:
+    the rows of a layer whose width is not a multiple of ``ROWS``, one at a time.
 
-    Four rows per pass keep the row's loads and stores at 1.5 per FMA instead of 3 (one tap
+    Four taps per pass keep the row's loads and stores at 1.5 per FMA instead of 3 (one tap
     per pass); the first pass writes the row, so it is never zeroed first.
     """
     n = row.shape[0]
     q = 0
     while q < count:
         take = min(4, count - q)
-        s0, w0 = src[chans[q], times[q]], weights[q]
+        s0, w0 = src[taps[q] : taps[q] + n], weights[q]
         if take == 4:
             s1, s2, s3 = (
-                src[chans[q + 1], times[q + 1]],
-                src[chans[q + 2], times[q + 2]],
-                src[chans[q + 3], times[q + 3]],
+                src[taps[q + 1] : taps[q + 1] + n],
+                src[taps[q + 2] : taps[q + 2] + n],
+                src[taps[q + 3] : taps[q + 3] + n],
             )
             w1, w2, w3 = weights[q + 1], weights[q + 2], weights[q + 3]
             if q == 0:
@@ -85,7 +95,7 @@ def _weighted_sum(row, src, chans, times, weights, count, bias):  # pragma: no c
                 for m in range(n):
                     row[m] += (w0 * s0[m] + w1 * s1[m]) + (w2 * s2[m] + w3 * s3[m])
         elif take == 3:
-            s1, s2 = src[chans[q + 1], times[q + 1]], src[chans[q + 2], times[q + 2]]
+            s1, s2 = src[taps[q + 1] : taps[q + 1] + n], src[taps[q + 2] : taps[q + 2] + n]
             w1, w2 = weights[q + 1], weights[q + 2]
             if q == 0:
                 for m in range(n):
@@ -94,7 +104,7 @@ def _weighted_sum(row, src, chans, times, weights, count, bias):  # pragma: no c
                 for m in range(n):
                     row[m] += (w0 * s0[m] + w1 * s1[m]) + w2 * s2[m]
         elif take == 2:
-            s1, w1 = src[chans[q + 1], times[q + 1]], weights[q + 1]
+            s1, w1 = src[taps[q + 1] : taps[q + 1] + n], weights[q + 1]
             if q == 0:
                 for m in range(n):
                     row[m] = bias + w0 * s0[m] + w1 * s1[m]
@@ -114,86 +124,30 @@ def _weighted_sum(row, src, chans, times, weights, count, bias):  # pragma: no c
 
 
 @numba.njit(**_JIT)
-def _weighted_sum4(r0, r1, r2, r3, src, chans, times, wts, d, count, bias):  # pragma: no cover
-    """r_e[:] = bias[d + e] + sum_q wts[q, d + e] src[chans[q], times[q], :] for four rows
-    r0..r3 at once, four taps per pass (then two, then one): each source vector loaded once
-    feeds four FMAs, and each row is loaded and stored once per four taps. Four taps per pass
-    instead of two made conv2's and conv3's forward and input gradient 15-20% faster."""
-    n = r0.shape[0]
-    b0, b1, b2, b3 = bias[d], bias[d + 1], bias[d + 2], bias[d + 3]
-    if count == 0:  # no tap reaches these rows (kernel < stride at the edge)
-        for m in range(n):
-            r0[m], r1[m], r2[m], r3[m] = b0, b1, b2, b3
-    q = 0
-    while q < count:
-        s0 = src[chans[q], times[q]]
-        a0, a1, a2, a3 = wts[q, d], wts[q, d + 1], wts[q, d + 2], wts[q, d + 3]
-        if q + 4 <= count:
-            s1 = src[chans[q + 1], times[q + 1]]
-            s2 = src[chans[q + 2], times[q + 2]]
-            s3 = src[chans[q + 3], times[q + 3]]
-            c0, c1, c2, c3 = wts[q + 1, d], wts[q + 1, d + 1], wts[q + 1, d + 2], wts[q + 1, d + 3]
-            e0, e1, e2, e3 = wts[q + 2, d], wts[q + 2, d + 1], wts[q + 2, d + 2], wts[q + 2, d + 3]
-            f0, f1, f2, f3 = wts[q + 3, d], wts[q + 3, d + 1], wts[q + 3, d + 2], wts[q + 3, d + 3]
-            if q == 0:
-                for m in range(n):
-                    u, v, p, z = s0[m], s1[m], s2[m], s3[m]
-                    r0[m] = b0 + (a0 * u + c0 * v) + (e0 * p + f0 * z)
-                    r1[m] = b1 + (a1 * u + c1 * v) + (e1 * p + f1 * z)
-                    r2[m] = b2 + (a2 * u + c2 * v) + (e2 * p + f2 * z)
-                    r3[m] = b3 + (a3 * u + c3 * v) + (e3 * p + f3 * z)
-            else:
-                for m in range(n):
-                    u, v, p, z = s0[m], s1[m], s2[m], s3[m]
-                    r0[m] += (a0 * u + c0 * v) + (e0 * p + f0 * z)
-                    r1[m] += (a1 * u + c1 * v) + (e1 * p + f1 * z)
-                    r2[m] += (a2 * u + c2 * v) + (e2 * p + f2 * z)
-                    r3[m] += (a3 * u + c3 * v) + (e3 * p + f3 * z)
-            q += 4
-        elif q + 2 <= count:
-            s1 = src[chans[q + 1], times[q + 1]]
-            c0, c1, c2, c3 = wts[q + 1, d], wts[q + 1, d + 1], wts[q + 1, d + 2], wts[q + 1, d + 3]
-            if q == 0:
-                for m in range(n):
-                    u, v = s0[m], s1[m]
-                    r0[m] = b0 + a0 * u + c0 * v
-                    r1[m] = b1 + a1 * u + c1 * v
-                    r2[m] = b2 + a2 * u + c2 * v
-                    r3[m] = b3 + a3 * u + c3 * v
-            else:
-                for m in range(n):
-                    u, v = s0[m], s1[m]
-                    r0[m] += a0 * u + c0 * v
-                    r1[m] += a1 * u + c1 * v
-                    r2[m] += a2 * u + c2 * v
-                    r3[m] += a3 * u + c3 * v
-            q += 2
-        else:
-            if q == 0:
-                for m in range(n):
-                    u = s0[m]
-                    r0[m], r1[m], r2[m], r3[m] = b0 + a0 * u, b1 + a1 * u, b2 + a2 * u, b3 + a3 * u
-            else:
-                for m in range(n):
-                    u = s0[m]
-                    r0[m] += a0 * u
-                    r1[m] += a1 * u
-                    r2[m] += a2 * u
-                    r3[m] += a3 * u
-            q += 1
-
-
-@numba.njit(**_JIT)
-def _combine(dst, s, src, chans, times, wts, count, bias):  # pragma: no cover (compiled)
-    """dst[e, s, :] = bias[e] + sum_{q < count} wts[q, e] src[chans[q], times[q], :] for every
-    destination channel e: the taps are shared by all of them, so four go per pass."""
+def _combine(dst, s, src, taps, wts, count, bias, mode, gate):  # pragma: no cover (compiled)
+    """dst[e, s, :] = f(bias[e] + sum_{q < count} wts[q, e] src.flat[taps[q]:taps[q] + n]) for
+    every destination channel e, f by ``mode`` as in ``tap_sums`` (``gate`` laid out as ``dst``):
+    the taps are shared by all channels, so ``ROWS`` go per register tile, the rest one by one."""
+    c_out, t_dst, n = dst.shape
+    flat_dst, flat_src, flat_w, flat_gate = (
+        dst.reshape(-1),
+        src.reshape(-1),
+        wts.reshape(-1),
+        gate.reshape(-1),
+    )
     e = 0
-    while e + 4 <= dst.shape[0]:
-        r0, r1, r2, r3 = dst[e, s], dst[e + 1, s], dst[e + 2, s], dst[e + 3, s]
-        _weighted_sum4(r0, r1, r2, r3, src, chans, times, wts, e, count, bias)
-        e += 4
-    while e < dst.shape[0]:
-        _weighted_sum(dst[e, s], src, chans, times, wts[:, e], count, bias[e])
+    while e + ROWS <= c_out:
+        at = (e * t_dst + s) * n
+        tap_sums(flat_w, e, 1, c_out, flat_src, 0, taps, count, flat_dst, at, t_dst * n, bias, e, n,
+                 mode, flat_gate)  # fmt: skip
+        e += ROWS
+    while e < c_out:
+        row = dst[e, s]
+        _weighted_sum(row, flat_src, taps, wts[:, e], count, bias[e])
+        if mode != PLAIN:
+            mask = row if mode == RELU else gate[e, s]
+            for m in range(n):
+                row[m] *= np.float32(mask[m] > 0)  # see _JIT
         e += 1
 
 
@@ -204,11 +158,10 @@ def _conv_relu(x, w, b, stride, out):  # pragma: no cover (compiled)
     Walks time once with every output channel at each step, so the input rows a step reads
     stay in cache for all channels; each output row is built in place.
     """
-    c_in, t_in, _ = x.shape
+    c_in, t_in, n = x.shape
     c_out, k = w.shape[0], w.shape[2]
     pad = k // 2
-    chans = np.empty(c_in * k, np.int64)
-    times = np.empty(c_in * k, np.int64)
+    taps = np.empty(c_in * k, np.int64)  # the input rows of output step t, as flat offsets
     wts = np.empty((c_in * k, c_out), np.float32)
     for t in range(out.shape[1]):
         count = 0
@@ -216,75 +169,11 @@ def _conv_relu(x, w, b, stride, out):  # pragma: no cover (compiled)
             for j in range(k):
                 ti = t * stride - pad + j
                 if 0 <= ti < t_in:
-                    chans[count], times[count] = i, ti
+                    taps[count] = (i * t_in + ti) * n
                     for o in range(c_out):
                         wts[count, o] = w[o, i, j]
                     count += 1
-        _combine(out, t, x, chans, times, wts, count, b)
-        for o in range(c_out):
-            row = out[o, t]
-            for m in range(row.shape[0]):
-                v = row[m]
-                row[m] = v * np.float32(v > 0)  # ReLU, see _JIT
-
-
-@numba.njit(**_JIT)
-def _dots4x4(g0, g1, g2, g3, s0, s1, s2, s3, acc, o, i, j):  # pragma: no cover (compiled)
-    """acc[o + e, i, j + f] += g_e . s_f for four gradient rows and four source rows (four
-    taps): sixteen dot products reduced in registers, eight loads per sixteen FMAs."""
-    d00 = d01 = d02 = d03 = d10 = d11 = d12 = d13 = np.float32(0.0)
-    d20 = d21 = d22 = d23 = d30 = d31 = d32 = d33 = np.float32(0.0)
-    for m in range(s0.shape[0]):
-        u, v, p, z = s0[m], s1[m], s2[m], s3[m]
-        a, b, c, e = g0[m], g1[m], g2[m], g3[m]
-        d00 += a * u
-        d01 += a * v
-        d02 += a * p
-        d03 += a * z
-        d10 += b * u
-        d11 += b * v
-        d12 += b * p
-        d13 += b * z
-        d20 += c * u
-        d21 += c * v
-        d22 += c * p
-        d23 += c * z
-        d30 += e * u
-        d31 += e * v
-        d32 += e * p
-        d33 += e * z
-    acc[o, i, j] += d00
-    acc[o, i, j + 1] += d01
-    acc[o, i, j + 2] += d02
-    acc[o, i, j + 3] += d03
-    acc[o + 1, i, j] += d10
-    acc[o + 1, i, j + 1] += d11
-    acc[o + 1, i, j + 2] += d12
-    acc[o + 1, i, j + 3] += d13
-    acc[o + 2, i, j] += d20
-    acc[o + 2, i, j + 1] += d21
-    acc[o + 2, i, j + 2] += d22
-    acc[o + 2, i, j + 3] += d23
-    acc[o + 3, i, j] += d30
-    acc[o + 3, i, j + 1] += d31
-    acc[o + 3, i, j + 2] += d32
-    acc[o + 3, i, j + 3] += d33
-
-
-@numba.njit(**_JIT)
-def _dots4x1(g0, g1, g2, g3, s0, acc, o, i, j):  # pragma: no cover (compiled)
-    """acc[o + e, i, j] += g_e . s0 for four gradient rows: one tap."""
-    d0 = d1 = d2 = d3 = np.float32(0.0)
-    for m in range(s0.shape[0]):
-        u = s0[m]
-        d0 += g0[m] * u
-        d1 += g1[m] * u
-        d2 += g2[m] * u
-        d3 += g3[m] * u
-    acc[o, i, j] += d0
-    acc[o + 1, i, j] += d1
-    acc[o + 2, i, j] += d2
-    acc[o + 3, i, j] += d3
+        _combine(out, t, x, taps, wts, count, b, RELU, out)
 
 
 @numba.njit(**_JIT)
@@ -293,15 +182,17 @@ def _grad_weight_bias(grad, x, stride, grad_w, grad_b):  # pragma: no cover (com
     by the ReLU): grad_w[o, i, j] = sum_{t, m} grad[o, t, m] x[i, t * stride - pad + j, m].
 
     Walks time once, with the gradient rows of a step in cache for every input row and tap
-    that uses them; output channels go in fours and taps in fours (``_dots4x4``: half the
-    loads per FMA of taps in pairs), the last taps one at a time.
+    that uses them: ``ROWS`` output channels x four taps per register tile (``lane_dots``),
+    the channels of a width that is not a multiple of ``ROWS`` one by one.
     """
     c_in, t_in, n = x.shape
-    c_out, k = grad_w.shape[0], grad_w.shape[2]
+    c_out, t_out, k = grad_w.shape[0], grad.shape[1], grad_w.shape[2]
     pad = k // 2
     acc = np.zeros((c_out, c_in, k), np.float32)
+    flat_grad, flat_x, flat_acc = grad.reshape(-1), x.reshape(-1), acc.reshape(-1)
+    taps = np.empty(k, np.int64)
     grad_b[:] = 0.0
-    for t in range(grad.shape[1]):
+    for t in range(t_out):
         for o in range(c_out):
             row, total = grad[o, t], np.float32(0.0)
             for m in range(n):
@@ -311,19 +202,14 @@ def _grad_weight_bias(grad, x, stride, grad_w, grad_b):  # pragma: no cover (com
         j1 = min(k, t_in + pad - t * stride)
         base = t * stride - pad
         for i in range(c_in):
+            for j in range(j0, j1):
+                taps[j - j0] = (i * t_in + base + j) * n
             o = 0
-            while o + 4 <= c_out:
-                g0, g1, g2, g3 = grad[o, t], grad[o + 1, t], grad[o + 2, t], grad[o + 3, t]
-                j = j0
-                while j + 4 <= j1:
-                    s0, s1 = x[i, base + j], x[i, base + j + 1]
-                    s2, s3 = x[i, base + j + 2], x[i, base + j + 3]
-                    _dots4x4(g0, g1, g2, g3, s0, s1, s2, s3, acc, o, i, j)
-                    j += 4
-                while j < j1:
-                    _dots4x1(g0, g1, g2, g3, x[i, base + j], acc, o, i, j)
-                    j += 1
-                o += 4
+            while o + ROWS <= c_out:
+                at = (o * c_in + i) * k + j0
+                lane_dots(flat_grad, (o * t_out + t) * n, t_out * n, flat_x, 0, taps, j1 - j0,
+                          flat_acc, at, c_in * k, 1, n)  # fmt: skip
+                o += ROWS
             while o < c_out:
                 gr = grad[o, t]
                 for j in range(j0, j1):
@@ -354,12 +240,11 @@ def _conv_grad_input(grad, w, stride, y, grad_x):  # pragma: no cover (compiled)
     Gather form over input time: each input-gradient row is built in place (never zeroed),
     every input channel from the same taps.
     """
-    c_out, t_out, _ = grad.shape
+    c_out, t_out, n = grad.shape
     c_in, t_in = grad_x.shape[0], grad_x.shape[1]
     k = w.shape[2]
     pad = k // 2
-    chans = np.empty(c_out * k, np.int64)
-    times = np.empty(c_out * k, np.int64)
+    taps = np.empty(c_out * k, np.int64)  # the gradient rows reaching input step s, flat
     wts = np.empty((c_out * k, c_in), np.float32)
     zeros = np.zeros(c_in, np.float32)
     for s in range(t_in):
@@ -369,15 +254,11 @@ def _conv_grad_input(grad, w, stride, y, grad_x):  # pragma: no cover (compiled)
             if shifted < 0 or shifted % stride or shifted // stride >= t_out:
                 continue
             for o in range(c_out):
-                chans[count], times[count] = o, shifted // stride
+                taps[count] = (o * t_out + shifted // stride) * n
                 for i in range(c_in):
                     wts[count, i] = w[o, i, j]
                 count += 1
-        _combine(grad_x, s, grad, chans, times, wts, count, zeros)
-        for i in range(c_in):
-            gr, yr = grad_x[i, s], y[i, s]
-            for m in range(gr.shape[0]):
-                gr[m] *= np.float32(yr[m] > 0)
+        _combine(grad_x, s, grad, taps, wts, count, zeros, GATED, y)
 
 
 @numba.njit(**_JIT)
@@ -449,22 +330,31 @@ def to_layout(x, rows, groups, out, start, stop):  # pragma: no cover (compiled)
     T, n_pad), for the blocks of ``LANES`` instances ``start`` to ``stop``: the batch is read in
     place from the whole input, never copied out first.
 
-    Block by block: each output row gets its ``LANES`` values in one go (a
-    whole cache line, one page per line), and each instance's channels are read in order, a
-    sequential sweep of its signals. Tasks per channel, one instance at a time, wrote every
-    line ``LANES`` times and read each instance in 600-byte pieces (10-28% more CPU time with
-    the batch out of cache, measured).
+    Block by block, each instance's channels in order (a sequential sweep of its signals), in
+    square tiles of ``WIDTH`` instances x ``WIDTH`` steps transposed in registers
+    (``transpose_tile``); the last steps, and instances past the batch's last whole tile, one
+    value at a time.
     """
     channels, steps = x.shape[1], x.shape[2]
-    n = rows.shape[0]
+    n, n_pad = rows.shape[0], out.shape[3]
+    flat_x, flat_out = x.reshape(-1), out.reshape(-1)
+    tiled = steps - steps % WIDTH
+    starts = np.empty(WIDTH, np.int64)
     for block in range(start, stop):
-        m0 = block * LANES
         for c in range(channels):
             dst = out[c % groups, c // groups]
-            for t in range(steps):
-                for lane in range(LANES):
-                    m = m0 + lane
-                    dst[t, m] = x[rows[m], c, t] if m < n else np.float32(0.0)
+            at = ((c % groups) * out.shape[1] + c // groups) * steps * n_pad
+            for m0 in range(block * LANES, (block + 1) * LANES, WIDTH):
+                first = 0
+                if m0 + WIDTH <= n:
+                    for i in range(WIDTH):
+                        starts[i] = (rows[m0 + i] * channels + c) * steps
+                    for t in range(0, tiled, WIDTH):
+                        transpose_tile(flat_x, starts, t, flat_out, at + m0, n_pad)
+                    first = tiled
+                for t in range(first, steps):
+                    for m in range(m0, m0 + WIDTH):
+                        dst[t, m] = x[rows[m], c, t] if m < n else np.float32(0.0)
 
 
 @numba.njit(**_JIT)

@@ -16,12 +16,15 @@ before, scaled by the machine's speed on rows A to F, which neither version touc
 and re-reading them takes the memory bandwidth the other job needs. Each chunk's weight
 gradient is summed on its own and the chunks' in a fixed order, so results do not depend on the
 thread count.
-Also measured and not kept (one thread, batch 1000, in one process): a chunk's input projection
-as one BLAS product (numba's ``np.dot``) before its recurrence, a forward 1.2x slower; the input
-projection kept from the forward for the backward's recomputation (24 MB a batch, bit-identical),
-a training step 1.2-1.3x slower; eight inputs per pass instead of four, a forward 1.1x slower;
-four gates' sums over all 42 inputs written out in the source, not vectorised by the compiler
-(7x slower).
+The gate sums (forward) and the states' gradient (backward) are register tiles
+(``vector_tiles.tap_sums``: four gates' sums over all 42 inputs stay in registers), and the
+chunk's gather transposes square tiles in registers: against numba's own loops a training step
+ran 1.5x faster (one thread, batch 1000, interleaved in one process), with bit-identical
+results. Also measured and not kept (the same way): the weight gradient as register tiles
+(``lane_dots``), 1.2x faster alone but ~5% of a step, and it changes the last bits of the
+weights, which row G's 200 epochs amplify; a chunk's input projection as one BLAS product
+(numba's ``np.dot``) before its recurrence, a forward 1.2x slower; the input projection kept
+from the forward for the backward's recomputation (24 MB a batch), a step 1.2-1.3x slower.
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
@@ -36,6 +39,7 @@ import numpy as np
 import torch
 
 from tactile_exp.models.numba_setup import announce_compile, numba
+from tactile_exp.models.vector_tiles import PLAIN, ROWS, WIDTH, tap_sums, transpose_tile
 
 # error_model="numpy": no ZeroDivisionError check inside the loops, which blocks vectorisation.
 _JIT = dict(fastmath=True, error_model="numpy", cache=True)
@@ -75,14 +79,23 @@ CHUNK = 64
 
 @numba.njit(**_JIT)
 def _gather(X, rows, start, inputs):
-    """``inputs[:C]`` (C, T, CHUNK) <- X[rows[start:start + CHUNK]] (rows, C, T), transposed;
+    """``inputs[:C]`` (C, T, CHUNK) <- X[rows[start:start + CHUNK]] (rows, C, T), transposed in
+    tiles of ``WIDTH`` instances x ``WIDTH`` steps (``transpose_tile``), the rest one by one;
     lanes past the last row are zero, so they carry zeros through forward and backward."""
     _, C, T = X.shape
     n = min(CHUNK, len(rows) - start)
-    for c in range(C):  # input by input: a (T, CHUNK) block of 38 KB, transposed in L1
+    tiled, steps = n - n % WIDTH, T - T % WIDTH
+    flat, flat_in = X.reshape(-1), inputs.reshape(-1)
+    starts = np.empty(WIDTH, np.int64)
+    for c in range(C):
+        for b0 in range(0, tiled, WIDTH):
+            for i in range(WIDTH):
+                starts[i] = (rows[start + b0 + i] * C + c) * T
+            for t in range(0, steps, WIDTH):
+                transpose_tile(flat, starts, t, flat_in, c * T * CHUNK + b0, CHUNK)
         for b in range(n):
             r = rows[start + b]
-            for t in range(T):
+            for t in range(steps if b < tiled else 0, T):
                 inputs[c, t, b] = X[r, c, t]
         for t in range(T):
             for b in range(n, CHUNK):
@@ -96,37 +109,27 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
     states h_{t-1}, which this fills. Keeps the gate activations ``acts`` (4H, T, CHUNK), c_{t-1}
     ``c_prev`` and tanh(c_t) ``tanh_c`` (H, T, CHUNK) for backward; ends with h_T, c_T in h, c.
 
-    Step by step, so that what a step touches (~20 KB) stays in L1: four gates at a time, each
-    gate's sum is its bias, then its inputs, then its states, four at a time (one load and store
-    of four sums per sixteen FMAs); then per state its four nonlinearities, and the cell update
-    in a second pass that reads them back from ``acts`` (in the same pass, the compiler
-    rearranged the update's arithmetic across the nonlinearities, off by float rounding)."""
+    Step by step, so that what a step touches (~20 KB) stays in L1: four gates at a time
+    (``tap_sums``), each gate's sum is its bias, then its inputs, then its states; then per state
+    its four nonlinearities, and the cell update in a second pass that reads them back from
+    ``acts`` (in the same pass, the compiler rearranged the update's arithmetic across the
+    nonlinearities, off by float rounding)."""
     G, K = w.shape
     H = G // 4
     C = K - H
     T = inputs.shape[1]
-    c4 = C - C % 4
-    k4 = K - H % 4
+    step = T * CHUNK  # floats from one input's (or gate's) row to the next
     c[:] = 0
     for j in range(H):
         for b in range(CHUNK):
             inputs[C + j, 0, b] = 0
+    w_flat, x_flat, acts_flat = w.reshape(-1), inputs.reshape(-1), acts.reshape(-1)
+    taps = np.arange(K) * step  # input k of step t: x_flat[t * CHUNK + taps[k] + lane]
     for t in range(T):
-        for g in range(0, G, 4):
-            bg0, bg1, bg2, bg3 = bias[g], bias[g + 1], bias[g + 2], bias[g + 3]
-            for b in range(CHUNK):
-                acts[g, t, b] = bg0
-                acts[g + 1, t, b] = bg1
-                acts[g + 2, t, b] = bg2
-                acts[g + 3, t, b] = bg3
-            for k in range(0, c4, 4):
-                _add4x4(w, inputs, acts, g, k, t)
-            for k in range(c4, C):
-                _add4x1(w, inputs, acts, g, k, t)
-            for k in range(C, k4, 4):
-                _add4x4(w, inputs, acts, g, k, t)
-            for k in range(k4, K):
-                _add4x1(w, inputs, acts, g, k, t)
+        for g in range(0, G, ROWS):
+            at = g * step + t * CHUNK
+            tap_sums(w_flat, g * K, K, 1, x_flat, t * CHUNK, taps, K, acts_flat, at, step, bias, g,
+                     CHUNK, PLAIN, acts_flat)  # fmt: skip
         for j in range(H):
             for b in range(CHUNK):
                 i = _HALF * _tanh(_HALF * acts[j, t, b]) + _HALF
@@ -148,38 +151,6 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
             if t + 1 < T:
                 for b in range(CHUNK):
                     inputs[C + j, t + 1, b] = h[j, b]
-
-
-@numba.njit(inline="always", fastmath=True, error_model="numpy")
-def _add4x4(w, inputs, acts, g, k, t):
-    """Gates g..g+3 of step t += their weights x inputs k..k+3."""
-    a0, a1, a2, a3 = w[g, k], w[g, k + 1], w[g, k + 2], w[g, k + 3]
-    b0, b1, b2, b3 = w[g + 1, k], w[g + 1, k + 1], w[g + 1, k + 2], w[g + 1, k + 3]
-    c0, c1, c2, c3 = w[g + 2, k], w[g + 2, k + 1], w[g + 2, k + 2], w[g + 2, k + 3]
-    d0, d1, d2, d3 = w[g + 3, k], w[g + 3, k + 1], w[g + 3, k + 2], w[g + 3, k + 3]
-    for b in range(CHUNK):
-        y0, y1, y2, y3 = (
-            inputs[k, t, b],
-            inputs[k + 1, t, b],
-            inputs[k + 2, t, b],
-            inputs[k + 3, t, b],
-        )
-        acts[g, t, b] += a0 * y0 + a1 * y1 + a2 * y2 + a3 * y3
-        acts[g + 1, t, b] += b0 * y0 + b1 * y1 + b2 * y2 + b3 * y3
-        acts[g + 2, t, b] += c0 * y0 + c1 * y1 + c2 * y2 + c3 * y3
-        acts[g + 3, t, b] += d0 * y0 + d1 * y1 + d2 * y2 + d3 * y3
-
-
-@numba.njit(inline="always", fastmath=True, error_model="numpy")
-def _add4x1(w, inputs, acts, g, k, t):
-    """Gates g..g+3 of step t += their weights x input k."""
-    a0, b0, c0, d0 = w[g, k], w[g + 1, k], w[g + 2, k], w[g + 3, k]
-    for b in range(CHUNK):
-        y = inputs[k, t, b]
-        acts[g, t, b] += a0 * y
-        acts[g + 1, t, b] += b0 * y
-        acts[g + 2, t, b] += c0 * y
-        acts[g + 3, t, b] += d0 * y
 
 
 @numba.njit(**_JIT)
@@ -254,6 +225,16 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_w, d_b):
     H = G // 4
     C = K - H
     T = inputs.shape[1]
+    step = T * CHUNK
+    rows = -(-H // ROWS) * ROWS  # the states' gradient in whole tiles, the last rows zero
+    w_state = np.zeros((rows, G), np.float32)  # weight_hh transposed: d h_t-1 = w_state @ d_gates
+    for g in range(G):
+        for k in range(H):
+            w_state[k, g] = w[g, C + k]
+    dh_sum = np.empty((rows, CHUNK), np.float32)
+    zero = np.zeros(ROWS, np.float32)
+    w_state_flat, d_flat, dh_flat = w_state.reshape(-1), d_gates.reshape(-1), dh_sum.reshape(-1)
+    taps = np.arange(G) * step  # gate g of step t: d_flat[t * CHUNK + taps[g] + lane]
     dc[:] = 0
     for t in range(T - 1, -1, -1):
         for j in range(H):
@@ -271,25 +252,13 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_w, d_b):
                 d_gates[3 * H + j, t, b] = d * tc * o * (_ONE - o)
                 dcn = dcv * f
                 dc[j, b] = dcn if abs(dcn) >= _TINY else _ZERO
-        dh[:] = 0
-        for gate in range(0, G, 4):  # four gates at a time, as in the forward pass
-            for k in range(H):
-                w0, w1, w2, w3 = (
-                    w[gate, C + k],
-                    w[gate + 1, C + k],
-                    w[gate + 2, C + k],
-                    w[gate + 3, C + k],
-                )
-                for b in range(CHUNK):
-                    dh[k, b] += (
-                        w0 * d_gates[gate, t, b]
-                        + w1 * d_gates[gate + 1, t, b]
-                        + w2 * d_gates[gate + 2, t, b]
-                        + w3 * d_gates[gate + 3, t, b]
-                    )
+        for k in range(0, rows, ROWS):
+            tap_sums(w_state_flat, k * G, G, 1, d_flat, t * CHUNK, taps, G, dh_flat, k * CHUNK,
+                     CHUNK, zero, 0, CHUNK, PLAIN, dh_flat)  # fmt: skip
         for k in range(H):
             for b in range(CHUNK):
-                dh[k, b] = dh[k, b] if abs(dh[k, b]) >= _TINY else _ZERO
+                s = dh_sum[k, b]
+                dh[k, b] = s if abs(s) >= _TINY else _ZERO
     n = T * CHUNK
     flat_d = d_gates.reshape(G, n)
     flat_in = inputs.reshape(K, n)

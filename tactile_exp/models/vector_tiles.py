@@ -1,0 +1,294 @@
+"""Register tiles written with LLVM vector types: the compiled kernels' inner loops.
+
+numba vectorises a loop over lanes, but between the loop's passes it keeps running sums in
+memory: a gate's sum over 42 inputs is loaded and stored once per few inputs, and those loads
+and stores, not the arithmetic, set the rate. Here the sums of ``ROWS`` rows over a block of
+lanes stay in vector registers across all their inputs (taps): each input vector is loaded once
+for four FMAs and each weight once per vector. The LSTM's gate sums ran at 51 GFLOP/s as numba's
+loop and run at 154 as a tile (one thread, in L1; bench/bench_roofline.py, 2-core Xeon,
+2026-11-27). The code is LLVM IR emitted by numba intrinsics, so it compiles with the calling
+kernel and is cached with it: no compiler at install. numba's cache checks the calling kernel's
+file, not this one: after editing this file, empty the cache (``NUMBA_CACHE_DIR``).
+
+- ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
+  with the ReLU or its backward applied before the one store;
+- ``lane_dots``: the dot products over the batch of a weight gradient;
+- ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout).
+
+The vector width follows the CPU numba compiles for: 16 float32 lanes with AVX-512, 8 with
+AVX2, else 4. ``tap_sums`` sums each lane in the same order at any width (the bias, then one
+``fma`` per tap), so its results do not depend on the machine; ``lane_dots`` reduces each sum's
+lanes by halves, so its last bits do (never on the thread count).
+"""
+
+from __future__ import annotations
+
+from llvmlite import binding, ir
+from numba import types
+from numba.core import cgutils
+from numba.core.errors import TypingError
+from numba.extending import intrinsic
+
+from tactile_exp.models.numba_setup import numba
+
+ROWS = 4  # rows of a tile: four gates share each input vector
+PLAIN, RELU, GATED = 0, 1, 2  # what tap_sums applies to its sums before storing them
+
+
+def _features() -> set[str]:
+    """The CPU features numba compiles for: the host's (none known when ``NUMBA_CPU_NAME`` names
+    another CPU), with ``NUMBA_CPU_FEATURES``' +feature and -feature applied, as LLVM does."""
+    host = numba.config.CPU_NAME in (None, "host")
+    features = {f for f, on in binding.get_host_cpu_features().items() if on} if host else set()
+    for change in (numba.config.CPU_FEATURES or "").split(","):
+        if change[:1] == "+":
+            features.add(change[1:])
+        elif change[:1] == "-":
+            features.discard(change[1:])
+    return features
+
+
+def _lanes(features: set[str]) -> tuple[int, int]:
+    """(floats per vector, vectors per tile) for these features: a tile's running sums (ROWS x
+    vectors) take half of the vector registers (32 with AVX-512, 16 with AVX2)."""
+    if "avx512f" in features:
+        return 16, 4
+    if "avx2" in features:
+        return 8, 2
+    return 4, 2
+
+
+WIDTH, VECTORS = _lanes(_features())
+TILE = WIDTH * VECTORS  # lanes a tile covers
+
+
+def _check(name: str, **arrays: types.Type) -> None:
+    """The tiles read and write float32 arrays in C order (offsets count floats from the start)."""
+    for arg, ty in arrays.items():
+        if not (isinstance(ty, types.Array) and ty.dtype == types.float32 and ty.layout == "C"):
+            raise TypingError(f"{name}: {arg} must be a C-contiguous float32 array, got {ty}")
+
+
+def _data(context, builder, ty, value):
+    """The float32 pointer to the first element of array ``value``."""
+    return context.make_array(ty)(context, builder, value).data
+
+
+@intrinsic
+def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at, out_step, bias,
+             bias_at, lanes, mode, gate):  # fmt: skip  # noqa: ARG001
+    """For the ``ROWS`` rows r and the lanes m < ``lanes`` (a multiple of ``WIDTH``), with
+    ``o = out_at + r * out_step + m``: ``out[o] = f(bias[bias_at + r]
+    + sum_{q < count} w[w_at + r * w_row + q * w_col] * x[x_at + taps[q] + m])``,
+    indices into the flat arrays (``taps``: int64 offsets of the input rows). The sum runs
+    q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width. ``f`` by
+    ``mode`` (``PLAIN``, ``RELU``, ``GATED``): v; the ReLU v * (v > 0); or v * (gate[o] > 0),
+    a ReLU's backward (``gate``: the ReLU's output, laid out as ``out``; read only if GATED).
+    The product form keeps a NaN a NaN."""
+    _check("tap_sums", w=w, x=x, out=out, bias=bias, gate=gate)
+    if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
+        raise TypingError(f"tap_sums: taps must be an int64 array, got {taps}")
+    i = types.intp
+    sig = types.void(w, i, i, i, x, i, taps, i, out, i, i, bias, i, i, i, gate)
+
+    def codegen(context, builder, signature, args):
+        w_p, x_p, o_p, b_p = (
+            builder.gep(_data(context, builder, signature.args[n], args[n]), [args[n + 1]])
+            for n in (0, 4, 8, 11)
+        )
+        taps_p = _data(context, builder, signature.args[6], args[6])
+        gate_p = builder.gep(_data(context, builder, signature.args[15], args[15]), [args[9]])
+        w_r, w_c, q_n, o_s, m_n, mode = (args[n] for n in (2, 3, 7, 10, 13, 14))
+        relu, gated = (
+            builder.icmp_signed("==", mode, ir.Constant(mode.type, f)) for f in (RELU, GATED)
+        )
+        f32, i32 = ir.FloatType(), ir.IntType(32)
+        vec = ir.VectorType(f32, WIDTH)
+        fma = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{WIDTH}f32"
+        )
+        undef = ir.Constant(vec, ir.Undefined)
+        zero = ir.Constant(vec, [0.0] * WIDTH)
+        first = ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH)
+
+        def const(n):
+            return ir.Constant(q_n.type, n)
+
+        def splat(value):
+            return builder.shuffle_vector(
+                builder.insert_element(undef, value, ir.Constant(i32, 0)), undef, first
+            )
+
+        def at(base, offset):  # the vector of WIDTH floats at base + offset (floats)
+            return builder.bitcast(builder.gep(base, [offset]), vec.as_pointer())
+
+        sums = [cgutils.alloca_once(builder, vec) for _ in range(ROWS * VECTORS)]
+
+        def tile(m, vectors):  # ROWS x vectors sums in registers over every tap, then stored
+            for r in range(ROWS):
+                start = splat(builder.load(builder.gep(b_p, [const(r)])))
+                for v in range(vectors):
+                    builder.store(start, sums[r * VECTORS + v])
+            with cgutils.for_range(builder, q_n) as loop:
+                q = loop.index
+                row = builder.add(builder.load(builder.gep(taps_p, [q])), m)
+                xs = [
+                    builder.load(at(x_p, builder.add(row, const(v * WIDTH))), align=4)
+                    for v in range(vectors)
+                ]
+                for r in range(ROWS):
+                    at_w = builder.add(builder.mul(const(r), w_r), builder.mul(q, w_c))
+                    weight = splat(builder.load(builder.gep(w_p, [at_w])))
+                    for v in range(vectors):
+                        slot = sums[r * VECTORS + v]
+                        builder.store(builder.call(fma, [weight, xs[v], builder.load(slot)]), slot)
+            for r in range(ROWS):
+                base = builder.add(builder.mul(const(r), o_s), m)
+                for v in range(vectors):
+                    offset = builder.add(base, const(v * WIDTH))
+                    value = builder.load(sums[r * VECTORS + v])
+                    gate_value = builder.load(at(gate_p, offset), align=4)
+                    positive = builder.fcmp_ordered(
+                        ">", builder.select(relu, value, gate_value), zero
+                    )
+                    masked = builder.fmul(value, builder.uitofp(positive, vec))
+                    value = builder.select(builder.or_(relu, gated), masked, value)
+                    builder.store(value, at(o_p, offset), align=4)
+
+        tiled = builder.sub(m_n, builder.srem(m_n, const(TILE)))
+        with cgutils.for_range_slice(builder, const(0), tiled, const(TILE)) as (m, _):
+            tile(m, VECTORS)
+        with cgutils.for_range_slice(builder, tiled, m_n, const(WIDTH)) as (m, _):
+            tile(m, 1)  # the lanes past the last whole tile, a vector at a time
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: ARG001
+    """``out[out_at + j * out_step + i] = src[starts[i] + t + j]`` for i, j < ``WIDTH``: a square
+    tile of ``WIDTH`` rows of ``src`` (each starting at an index in ``starts``, int64), written
+    out transposed. One vector load per row, ``WIDTH`` x log2(``WIDTH``) shuffles and one vector
+    store per column, where a scalar transpose takes a load and a store per float."""
+    _check("transpose_tile", src=src, out=out)
+    if not (isinstance(starts, types.Array) and starts.dtype == types.int64):
+        raise TypingError(f"transpose_tile: starts must be an int64 array, got {starts}")
+    i = types.intp
+    sig = types.void(src, starts, i, out, i, i)
+
+    def codegen(context, builder, signature, args):
+        src_v, starts_v, t0, out_v, out_at, o_s = args
+        f32, i32 = ir.FloatType(), ir.IntType(32)
+        vec = ir.VectorType(f32, WIDTH)
+        src_p = _data(context, builder, signature.args[0], src_v)
+        starts_p = _data(context, builder, signature.args[1], starts_v)
+        tile = []
+        for row in range(WIDTH):
+            begin = builder.load(builder.gep(starts_p, [ir.Constant(t0.type, row)]))
+            first = builder.gep(src_p, [builder.add(begin, t0)])
+            tile.append(builder.load(builder.bitcast(first, vec.as_pointer()), align=4))
+        d = WIDTH // 2
+        while d:  # swap the off-diagonal d x d blocks of every 2d x 2d block
+            low = [lane + WIDTH - d if lane & d else lane for lane in range(WIDTH)]
+            high = [lane + WIDTH if lane & d else lane + d for lane in range(WIDTH)]
+            masks = [ir.Constant(ir.VectorType(i32, WIDTH), m) for m in (low, high)]
+            for row in range(WIDTH):
+                if not row & d:
+                    a, b = tile[row], tile[row + d]
+                    tile[row] = builder.shuffle_vector(a, b, masks[0])
+                    tile[row + d] = builder.shuffle_vector(a, b, masks[1])
+            d //= 2
+        out_p = builder.gep(_data(context, builder, signature.args[3], out_v), [out_at])
+        for j in range(WIDTH):
+            offset = builder.mul(builder.add(t0, ir.Constant(t0.type, j)), o_s)
+            target = builder.bitcast(builder.gep(out_p, [offset]), vec.as_pointer())
+            builder.store(tile[j], target, align=4)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def lane_dots(typingctx, a, a_at, a_step, b, b_at, taps, count, out, out_at, out_row, out_col,
+              lanes):  # fmt: skip  # noqa: ARG001
+    """For the ``ROWS`` rows r of ``a`` and the taps q < ``count``:
+    ``out[out_at + r * out_row + q * out_col] += sum_{m < lanes} a[a_at + r * a_step + m]
+    * b[b_at + taps[q] + m]`` (``lanes`` a multiple of ``WIDTH``): the dot products over the
+    batch of a weight gradient, four taps at a time in a tile of ROWS x 4 vector sums (eight
+    loads per sixteen FMAs), each reduced at the end by halves (lanes m and m + WIDTH / 2 first).
+    """
+    _check("lane_dots", a=a, b=b, out=out)
+    if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
+        raise TypingError(f"lane_dots: taps must be an int64 array, got {taps}")
+    i = types.intp
+    sig = types.void(a, i, i, b, i, taps, i, out, i, i, i, i)
+
+    def codegen(context, builder, signature, args):
+        a_p, b_p, o_p = (
+            builder.gep(_data(context, builder, signature.args[n], args[n]), [args[n + 1]])
+            for n in (0, 3, 7)
+        )
+        taps_p = _data(context, builder, signature.args[5], args[5])
+        a_s, q_n, o_r, o_c, m_n = (args[n] for n in (2, 6, 9, 10, 11))
+        f32, i32 = ir.FloatType(), ir.IntType(32)
+        vec = ir.VectorType(f32, WIDTH)
+        fma = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{WIDTH}f32"
+        )
+
+        def const(n):
+            return ir.Constant(q_n.type, n)
+
+        def at(base, offset):
+            return builder.bitcast(builder.gep(base, [offset]), vec.as_pointer())
+
+        def total(v):  # the lanes' sum, by halves
+            width = WIDTH
+            while width > 1:
+                width //= 2
+                low = ir.Constant(ir.VectorType(i32, width), list(range(width)))
+                high = ir.Constant(ir.VectorType(i32, width), list(range(width, 2 * width)))
+                v = builder.fadd(
+                    builder.shuffle_vector(v, v, low), builder.shuffle_vector(v, v, high)
+                )
+            return builder.extract_element(v, ir.Constant(i32, 0))
+
+        sums = [cgutils.alloca_once(builder, vec) for _ in range(ROWS * 4)]
+
+        def block(q0, taps_in_block):  # ROWS rows x taps_in_block taps from tap q0
+            for s in sums[: ROWS * taps_in_block]:
+                builder.store(ir.Constant(vec, [0.0] * WIDTH), s)
+            starts = [
+                builder.load(builder.gep(taps_p, [builder.add(q0, const(f))]))
+                for f in range(taps_in_block)
+            ]
+            with cgutils.for_range_slice(builder, const(0), m_n, const(WIDTH)) as (m, _):
+                rows = [
+                    builder.load(at(a_p, builder.add(builder.mul(const(r), a_s), m)), align=4)
+                    for r in range(ROWS)
+                ]
+                xs = [builder.load(at(b_p, builder.add(s, m)), align=4) for s in starts]
+                for r in range(ROWS):
+                    for f in range(taps_in_block):
+                        slot = sums[r * 4 + f] if taps_in_block == 4 else sums[r]
+                        builder.store(builder.call(fma, [rows[r], xs[f], builder.load(slot)]), slot)
+            for r in range(ROWS):
+                for f in range(taps_in_block):
+                    slot = sums[r * 4 + f] if taps_in_block == 4 else sums[r]
+                    index = builder.add(
+                        builder.mul(const(r), o_r), builder.mul(builder.add(q0, const(f)), o_c)
+                    )
+                    target = builder.gep(o_p, [index])
+                    builder.store(
+                        builder.fadd(builder.load(target), total(builder.load(slot))), target
+                    )
+
+        whole = builder.sub(q_n, builder.srem(q_n, const(4)))
+        with cgutils.for_range_slice(builder, const(0), whole, const(4)) as (q0, _):
+            block(q0, 4)
+        with cgutils.for_range_slice(builder, whole, q_n, const(1)) as (q0, _):
+            block(q0, 1)
+        return context.get_dummy_value()
+
+    return sig, codegen

@@ -1,0 +1,174 @@
+"""The register tiles against numpy: sums, masks, dot products, transposes; the vector width."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from numba.core.errors import TypingError
+
+from tactile_exp.models import vector_tiles as vt
+from tactile_exp.models.numba_setup import numba
+
+
+@numba.njit
+def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
+    """Every row of ``out`` in tiles of ROWS (w: (rows, taps) as the LSTM's gates use it)."""
+    flat_w, flat_x, flat_out, flat_gate = (
+        w.reshape(-1),
+        x.reshape(-1),
+        out.reshape(-1),
+        gate.reshape(-1),
+    )
+    for r in range(0, w.shape[0], vt.ROWS):
+        vt.tap_sums(flat_w, r * w.shape[1], w.shape[1], 1, flat_x, 0, taps, count, flat_out,
+                    r * out_step, out_step, bias, r, lanes, mode, flat_gate)  # fmt: skip
+
+
+@numba.njit
+def _lane_dots(a, b, taps, count, out, lanes):
+    flat_a, flat_b, flat_out = a.reshape(-1), b.reshape(-1), out.reshape(-1)
+    for r in range(0, a.shape[0], vt.ROWS):
+        vt.lane_dots(flat_a, r * a.shape[1], a.shape[1], flat_b, 0, taps, count, flat_out,
+                     r * out.shape[1], out.shape[1], 1, lanes)  # fmt: skip
+
+
+@numba.njit
+def _transpose(src, starts, t, out, out_at, out_step):
+    vt.transpose_tile(src.reshape(-1), starts, t, out.reshape(-1), out_at, out_step)
+
+
+def _case(rows=8, taps=21, lanes=3 * vt.TILE + 2 * vt.WIDTH, seed=0):
+    """Weights, inputs (taps rows, in reverse order in memory), biases; lanes past whole tiles."""
+    rng = np.random.default_rng(seed)
+    w = rng.standard_normal((rows, taps), dtype=np.float32)
+    x = rng.standard_normal((taps, lanes), dtype=np.float32)
+    order = np.arange(taps)[::-1].copy()  # tap q reads row order[q]
+    return w, x, order, rng.standard_normal(rows, dtype=np.float32)
+
+
+def _sums(w, x, order, bias, count, lanes):
+    expected = (
+        bias[:, None].astype(np.float64)
+        + w[:, :count].astype(np.float64) @ x[order[:count], :lanes]
+    )
+    out = np.full((w.shape[0], x.shape[1]), np.nan, np.float32)
+    return expected, out
+
+
+@pytest.mark.parametrize("count", [0, 1, 5, 21])
+def test_tap_sums_match_numpy_on_every_lane_and_leave_the_rest(count):
+    w, x, order, bias = _case()
+    lanes = x.shape[1] - vt.WIDTH  # the last vector of each row is not written
+    expected, out = _sums(w, x, order, bias, count, lanes)
+    _tap_sums(w, x, order * x.shape[1], count, out, x.shape[1], bias, lanes, vt.PLAIN, out)
+    np.testing.assert_allclose(out[:, :lanes], expected, rtol=1e-5, atol=1e-5)
+    assert np.isnan(out[:, lanes:]).all()
+
+
+def test_tap_sums_relu_and_gated_masks_keep_nans():
+    w, x, order, bias = _case()
+    lanes = x.shape[1]
+    x[3, 5] = np.nan  # tap 17 reads row 3: lane 5 of every output row is NaN
+    plain = np.empty((w.shape[0], lanes), np.float32)
+    relu, gated = np.empty_like(plain), np.empty_like(plain)
+    gate = np.where(np.arange(lanes) % 3 == 0, -1.0, 1.0).astype(np.float32) * np.ones_like(plain)
+    taps = order * lanes
+    for mode, out, g in ((vt.PLAIN, plain, plain), (vt.RELU, relu, relu), (vt.GATED, gated, gate)):
+        _tap_sums(w, x, taps, x.shape[0], out, lanes, bias, lanes, mode, g)
+    finite = ~np.isnan(plain)
+    assert (
+        np.isnan(plain[:, 5]).all() and np.isnan(relu[:, 5]).all() and np.isnan(gated[:, 5]).all()
+    )
+    np.testing.assert_array_equal(relu[finite], (plain * (plain > 0))[finite])
+    np.testing.assert_array_equal(gated[finite], (plain * (gate > 0))[finite])
+    assert (relu[finite] >= 0).all() and (plain[finite] < 0).any()
+
+
+def test_tap_sums_are_the_same_at_every_vector_width():
+    """Each lane is summed in one order (bias, then one fma per tap) at any width: a child
+    process compiled for 4-float vectors gives the same bits as this one."""
+    w, x, order, bias = _case(rows=4, taps=42, lanes=64)
+    out = np.empty((4, 64), np.float32)
+    _tap_sums(w, x, order * 64, 42, out, 64, bias, 64, vt.PLAIN, out)
+    code = (
+        "import json, numpy as np, test_vector_tiles as t\n"
+        "from tactile_exp.models import vector_tiles as vt\n"
+        "w, x, order, bias = t._case(rows=4, taps=42, lanes=64)\n"
+        "out = np.empty((4, 64), np.float32)\n"
+        "t._tap_sums(w, x, order * 64, 42, out, 64, bias, 64, vt.PLAIN, out)\n"
+        "print(json.dumps([vt.WIDTH, out.view(np.uint32).tolist()]))\n"
+    )
+    env = {
+        **os.environ,
+        "NUMBA_CPU_FEATURES": "-avx512f,-avx2",
+        "PYTHONPATH": os.path.dirname(__file__),
+    }
+    child = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    width, bits = json.loads(child.stdout)
+    assert width == 4
+    np.testing.assert_array_equal(np.array(bits, np.uint32), out.view(np.uint32))
+
+
+@pytest.mark.parametrize("count", [1, 3, 4, 7])
+def test_lane_dots_add_the_dot_products_over_the_lanes(count):
+    rng = np.random.default_rng(count)
+    lanes = 2 * vt.TILE + vt.WIDTH
+    a = rng.standard_normal((8, lanes), dtype=np.float32)
+    b = rng.standard_normal((count + 2, lanes), dtype=np.float32)
+    taps = (np.arange(count) + 2) * lanes  # rows 2.. of b
+    out = np.ones((8, count), np.float32)
+    _lane_dots(a, b, taps, count, out, lanes)
+    expected = 1.0 + a.astype(np.float64) @ b[2:].astype(np.float64).T
+    np.testing.assert_allclose(out, expected, rtol=1e-5, atol=1e-4)
+
+
+def test_transpose_tile_writes_the_rows_as_columns():
+    rng = np.random.default_rng(0)
+    src = rng.standard_normal((40, 50), dtype=np.float32)
+    rows = rng.permutation(40)[: vt.WIDTH]
+    out = np.full((60, 3 * vt.WIDTH), np.nan, np.float32)
+    _transpose(src, rows * 50 + 1, 7, out, 5 * out.shape[1] + vt.WIDTH, out.shape[1])
+    block = out[5 + 7 : 5 + 7 + vt.WIDTH, vt.WIDTH : 2 * vt.WIDTH]
+    np.testing.assert_array_equal(block, src[rows, 8 : 8 + vt.WIDTH].T)
+    assert np.isnan(out).sum() == out.size - vt.WIDTH**2
+
+
+def test_tiles_refuse_arrays_they_cannot_address():
+    w, x, order, bias = _case(rows=4)
+    out = np.empty((4, x.shape[1]), np.float32)
+    with pytest.raises(TypingError, match="w must be a C-contiguous float32 array"):
+        _tap_sums(w.astype(np.float64), x, order, 1, out, x.shape[1], bias, vt.WIDTH, vt.PLAIN, out)
+    with pytest.raises(TypingError, match="taps must be an int64 array"):
+        _tap_sums(w, x, order.astype(np.int32), 1, out, x.shape[1], bias, vt.WIDTH, vt.PLAIN, out)
+
+
+@pytest.mark.parametrize(
+    ("name", "features", "on", "off"),
+    [
+        (None, "-avx512f", {"sse2"}, {"avx512f"}),
+        ("generic", None, set(), {"sse2", "avx2"}),
+        ("generic", "+avx2,+fma", {"avx2", "fma"}, {"avx512f"}),
+    ],
+)
+def test_the_features_are_numbas_target(monkeypatch, name, features, on, off):
+    """The host's features, or none for another named CPU, with NUMBA_CPU_FEATURES applied."""
+    monkeypatch.setattr(numba.config, "CPU_NAME", name)
+    monkeypatch.setattr(numba.config, "CPU_FEATURES", features)
+    found = vt._features()
+    assert on <= found and not off & found
+
+
+@pytest.mark.parametrize(
+    ("features", "width", "registers"),
+    [({"avx512f", "avx2"}, 16, 32), ({"avx2", "fma"}, 8, 16), ({"sse2"}, 4, 16), (set(), 4, 16)],
+)
+def test_a_tile_fits_the_vector_registers(features, width, registers):
+    """The running sums, a tap's input vectors and a weight stay in registers at every width."""
+    got, vectors = vt._lanes(features)
+    assert got == width
+    assert vt.ROWS * vectors + vectors + 1 <= registers
