@@ -8,8 +8,9 @@ several jobs (seeds, splits) shows their summed time. The grid is one sweep (the
 tag: ``multirun/<date>/<time>``), by default the one whose job started last.
 
 Run after a grid, e.g. ``python -m tactile_exp -m sweep=table1``:
-``.venv/bin/python bench/bench_grid.py [--experiment tactile_exp] [--sweep-id ID] [--json OUT]``
-(``--json``: the figures with the machine and the date, ``bench/record.py``).
+``.venv/bin/python bench/bench_grid.py [--experiment tactile_exp] [--sweep-id ID] [--json OUT]
+[--note TEXT]`` (``--json``: the figures with the machine and the date, ``bench/record.py``;
+``--note``: how the grid ran, which the runs do not record, e.g. its launcher).
 """
 
 from __future__ import annotations
@@ -87,6 +88,9 @@ def main() -> None:
     parser.add_argument("--experiment", default="tactile_exp", help="the MLflow experiment")
     parser.add_argument("--sweep-id", default=None, help="default: the newest job's sweep")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    parser.add_argument(
+        "--note", default="", help="how the grid ran (launcher, caches), kept with the figures"
+    )
     args = parser.parse_args()
     try:
         tracker = Tracker.open(args.tracking_uri, args.experiment)
@@ -115,7 +119,10 @@ def main() -> None:
     if args.json:
         from record import write
 
-        write(args.json, "bench_grid", figures, f"sweep {sweep_id or '(none)'}, {len(runs)} jobs")
+        notes = f"sweep {sweep_id or '(none)'}, {len(runs)} jobs" + (
+            f"; {args.note}" if args.note else ""
+        )
+        write(args.json, "bench_grid", figures, notes)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shlex
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
@@ -53,7 +54,7 @@ def write(path: Path, bench: str, figures: dict[str, Any], notes: str = "") -> N
     ``{"value": x, "unit": u}``), in the order the bench printed them."""
     record = {
         "bench": bench,
-        "command": " ".join(["python", *sys.argv]),
+        "command": shlex.join(["python", *sys.argv]),  # quoted: the line runs as printed
         "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": machine(),
         "notes": notes,

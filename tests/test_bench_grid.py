@@ -73,13 +73,15 @@ def test_script_prints_the_table_and_writes_json(grid, mlflow_uri, tmp_path, mon
     monkeypatch.syspath_prepend(str(ROOT / "bench"))  # as when run as a script: record.py
     out = tmp_path / "grid.json"
     args = ["bench_grid.py", "--tracking-uri", mlflow_uri]
-    monkeypatch.setattr(sys, "argv", [*args, "--json", str(out)])
+    monkeypatch.setattr(sys, "argv", [*args, "--json", str(out), "--note", "joblib, 2 jobs"])
     bench_grid.main()
     text = capsys.readouterr().out
     assert "G    table1_g_haptic_lstm" in text and "grid: 18.0 min wall" in text
-    figures = json.loads(out.read_text())["figures"]
+    result = json.loads(out.read_text())
+    figures = result["figures"]
     assert figures["row G, min"] == 17.0 and figures["grid wall, min"] == 18.0
     assert figures["sum of job times, min"] == 33.0
+    assert result["notes"].endswith(" jobs; joblib, 2 jobs")
     monkeypatch.setattr(sys, "argv", [*args, "--sweep-id", "x"])
     with pytest.raises(SystemExit, match="error: no job runs with sweep_id 'x'"):
         bench_grid.main()

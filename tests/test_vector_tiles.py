@@ -28,14 +28,6 @@ def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
 
 
 @numba.njit
-def _lane_dots(a, b, taps, count, out, lanes):
-    flat_a, flat_b, flat_out = a.reshape(-1), b.reshape(-1), out.reshape(-1)
-    for r in range(0, a.shape[0], vt.ROWS):
-        vt.lane_dots(flat_a, r * a.shape[1], a.shape[1], flat_b, 0, taps, count, flat_out,
-                     r * out.shape[1], out.shape[1], 1, lanes)  # fmt: skip
-
-
-@numba.njit
 def _transpose(src, starts, t, out, out_at, out_step):
     vt.transpose_tile(src.reshape(-1), starts, t, out.reshape(-1), out_at, out_step)
 
@@ -112,19 +104,6 @@ def test_tap_sums_are_the_same_at_every_vector_width():
     width, bits = json.loads(child.stdout)
     assert width == 4
     np.testing.assert_array_equal(np.array(bits, np.uint32), out.view(np.uint32))
-
-
-@pytest.mark.parametrize("count", [1, 3, 4, 7])
-def test_lane_dots_add_the_dot_products_over_the_lanes(count):
-    rng = np.random.default_rng(count)
-    lanes = 2 * vt.TILE + vt.WIDTH
-    a = rng.standard_normal((8, lanes), dtype=np.float32)
-    b = rng.standard_normal((count + 2, lanes), dtype=np.float32)
-    taps = (np.arange(count) + 2) * lanes  # rows 2.. of b
-    out = np.ones((8, count), np.float32)
-    _lane_dots(a, b, taps, count, out, lanes)
-    expected = 1.0 + a.astype(np.float64) @ b[2:].astype(np.float64).T
-    np.testing.assert_allclose(out, expected, rtol=1e-5, atol=1e-4)
 
 
 def test_transpose_tile_writes_the_rows_as_columns():

@@ -9,14 +9,15 @@ never handle a tail. Forward and backward of the whole three-layer stack run ins
 training step (``GroupedConvHead``) also runs the one-output classification layer in the layout, so
 neither conv3's features nor their gradient are transposed (a step's CPU time -19%, measured). A
 task runs every layer of a range of signal groups (``stack_forward``, ``stack_backward``), the
-backward's inner gradients in per-task buffers. The inner loops are register tiles
-(``vector_tiles``): an output step's taps feed ``ROWS`` output channels whose sums stay in
-registers, the ReLU (or, backward, its mask) applied before the one store; the weight gradient's
-dot products over the batch go four channels x four taps per tile; the entry transpose goes in
-square tiles. Against numba's own loops they made a training step 1.4x faster (one thread,
-batch 1000, interleaved in one process) and the first compile shorter (21 against 26 s). The
-forward and the input gradients are bit-identical to those loops; the weight gradients differ
-in the last bits (another summation order). Tasks run side by side on threads (``_in_parallel``;
+backward's inner gradients in per-task buffers. The convolutions' inner loops are
+register tiles (``vector_tiles``): an output step's taps feed ``ROWS`` output channels whose
+sums stay in registers, the ReLU (or, backward, its mask) applied before the one store; the
+entry transpose goes in square tiles. Against numba's own loops they made a training step 1.3x
+faster (one thread, batch 1000, interleaved in one process) and the first compile shorter (21
+against 26 s), with bit-identical results. The weight gradients keep numba's loops (``_dots4x4``:
+sixteen dot products in registers): as register tiles of dot products over the batch they made
+a step at most 5% faster and summed in another order, which moved the rows built on the
+ConvNets by float rounding. Tasks run side by side on threads (``_in_parallel``;
 the kernels release the GIL), one per numba thread (``numba.set_num_threads``): plain serial
 kernels compile in about two thirds of the time numba's parallel loops took, and the first
 compile is on a fresh clone's critical path (the README job, bench_readme_job). Layout arrays
@@ -49,7 +50,6 @@ from tactile_exp.models.vector_tiles import (
     RELU,
     ROWS,
     WIDTH,
-    lane_dots,
     tap_sums,
     transpose_tile,
 )
@@ -177,22 +177,79 @@ def _conv_relu(x, w, b, stride, out):  # pragma: no cover (compiled)
 
 
 @numba.njit(**_JIT)
+def _dots4x4(g0, g1, g2, g3, s0, s1, s2, s3, acc, o, i, j):  # pragma: no cover (compiled)
+    """acc[o + e, i, j + f] += g_e . s_f for four gradient rows and four source rows (four
+    taps): sixteen dot products reduced in registers, eight loads per sixteen FMAs."""
+    d00 = d01 = d02 = d03 = d10 = d11 = d12 = d13 = np.float32(0.0)
+    d20 = d21 = d22 = d23 = d30 = d31 = d32 = d33 = np.float32(0.0)
+    for m in range(s0.shape[0]):
+        u, v, p, z = s0[m], s1[m], s2[m], s3[m]
+        a, b, c, e = g0[m], g1[m], g2[m], g3[m]
+        d00 += a * u
+        d01 += a * v
+        d02 += a * p
+        d03 += a * z
+        d10 += b * u
+        d11 += b * v
+        d12 += b * p
+        d13 += b * z
+        d20 += c * u
+        d21 += c * v
+        d22 += c * p
+        d23 += c * z
+        d30 += e * u
+        d31 += e * v
+        d32 += e * p
+        d33 += e * z
+    acc[o, i, j] += d00
+    acc[o, i, j + 1] += d01
+    acc[o, i, j + 2] += d02
+    acc[o, i, j + 3] += d03
+    acc[o + 1, i, j] += d10
+    acc[o + 1, i, j + 1] += d11
+    acc[o + 1, i, j + 2] += d12
+    acc[o + 1, i, j + 3] += d13
+    acc[o + 2, i, j] += d20
+    acc[o + 2, i, j + 1] += d21
+    acc[o + 2, i, j + 2] += d22
+    acc[o + 2, i, j + 3] += d23
+    acc[o + 3, i, j] += d30
+    acc[o + 3, i, j + 1] += d31
+    acc[o + 3, i, j + 2] += d32
+    acc[o + 3, i, j + 3] += d33
+
+
+@numba.njit(**_JIT)
+def _dots4x1(g0, g1, g2, g3, s0, acc, o, i, j):  # pragma: no cover (compiled)
+    """acc[o + e, i, j] += g_e . s0 for four gradient rows: one tap."""
+    d0 = d1 = d2 = d3 = np.float32(0.0)
+    for m in range(s0.shape[0]):
+        u = s0[m]
+        d0 += g0[m] * u
+        d1 += g1[m] * u
+        d2 += g2[m] * u
+        d3 += g3[m] * u
+    acc[o, i, j] += d0
+    acc[o + 1, i, j] += d1
+    acc[o + 2, i, j] += d2
+    acc[o + 3, i, j] += d3
+
+
+@numba.njit(**_JIT)
 def _grad_weight_bias(grad, x, stride, grad_w, grad_b):  # pragma: no cover (compiled)
     """One group's weight and bias gradients from its output gradient ``grad`` (already masked
     by the ReLU): grad_w[o, i, j] = sum_{t, m} grad[o, t, m] x[i, t * stride - pad + j, m].
 
     Walks time once, with the gradient rows of a step in cache for every input row and tap
-    that uses them: ``ROWS`` output channels x four taps per register tile (``lane_dots``),
-    the channels of a width that is not a multiple of ``ROWS`` one by one.
+    that uses them; output channels go in fours and taps in fours (``_dots4x4``: half the
+    loads per FMA of taps in pairs), the last taps one at a time.
     """
     c_in, t_in, n = x.shape
-    c_out, t_out, k = grad_w.shape[0], grad.shape[1], grad_w.shape[2]
+    c_out, k = grad_w.shape[0], grad_w.shape[2]
     pad = k // 2
     acc = np.zeros((c_out, c_in, k), np.float32)
-    flat_grad, flat_x, flat_acc = grad.reshape(-1), x.reshape(-1), acc.reshape(-1)
-    taps = np.empty(k, np.int64)
     grad_b[:] = 0.0
-    for t in range(t_out):
+    for t in range(grad.shape[1]):
         for o in range(c_out):
             row, total = grad[o, t], np.float32(0.0)
             for m in range(n):
@@ -202,14 +259,19 @@ def _grad_weight_bias(grad, x, stride, grad_w, grad_b):  # pragma: no cover (com
         j1 = min(k, t_in + pad - t * stride)
         base = t * stride - pad
         for i in range(c_in):
-            for j in range(j0, j1):
-                taps[j - j0] = (i * t_in + base + j) * n
             o = 0
-            while o + ROWS <= c_out:
-                at = (o * c_in + i) * k + j0
-                lane_dots(flat_grad, (o * t_out + t) * n, t_out * n, flat_x, 0, taps, j1 - j0,
-                          flat_acc, at, c_in * k, 1, n)  # fmt: skip
-                o += ROWS
+            while o + 4 <= c_out:
+                g0, g1, g2, g3 = grad[o, t], grad[o + 1, t], grad[o + 2, t], grad[o + 3, t]
+                j = j0
+                while j + 4 <= j1:
+                    s0, s1 = x[i, base + j], x[i, base + j + 1]
+                    s2, s3 = x[i, base + j + 2], x[i, base + j + 3]
+                    _dots4x4(g0, g1, g2, g3, s0, s1, s2, s3, acc, o, i, j)
+                    j += 4
+                while j < j1:
+                    _dots4x1(g0, g1, g2, g3, x[i, base + j], acc, o, i, j)
+                    j += 1
+                o += 4
             while o < c_out:
                 gr = grad[o, t]
                 for j in range(j0, j1):

@@ -20,9 +20,9 @@ The gate sums (forward) and the states' gradient (backward) are register tiles
 (``vector_tiles.tap_sums``: four gates' sums over all 42 inputs stay in registers), and the
 chunk's gather transposes square tiles in registers: against numba's own loops a training step
 ran 1.5x faster (one thread, batch 1000, interleaved in one process), with bit-identical
-results. Also measured and not kept (the same way): the weight gradient as register tiles
-(``lane_dots``), 1.2x faster alone but ~5% of a step, and it changes the last bits of the
-weights, which row G's 200 epochs amplify; a chunk's input projection as one BLAS product
+results. Also measured and not kept (the same way): the weight gradient as register tiles of dot
+products over the lanes, 1.2x faster alone but ~5% of a step, and it summed in another order,
+whose last bits row G's 200 epochs amplify; a chunk's input projection as one BLAS product
 (numba's ``np.dot``) before its recurrence, a forward 1.2x slower; the input projection kept
 from the forward for the backward's recomputation (24 MB a batch), a step 1.2-1.3x slower.
 

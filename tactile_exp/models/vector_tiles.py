@@ -12,13 +12,11 @@ file, not this one: after editing this file, empty the cache (``NUMBA_CACHE_DIR`
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
   with the ReLU or its backward applied before the one store;
-- ``lane_dots``: the dot products over the batch of a weight gradient;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout).
 
 The vector width follows the CPU numba compiles for: 16 float32 lanes with AVX-512, 8 with
 AVX2, else 4. ``tap_sums`` sums each lane in the same order at any width (the bias, then one
-``fma`` per tap), so its results do not depend on the machine; ``lane_dots`` reduces each sum's
-lanes by halves, so its last bits do (never on the thread count).
+``fma`` per tap), so its results do not depend on the machine or the thread count.
 """
 
 from __future__ import annotations
@@ -204,91 +202,6 @@ def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: A
             offset = builder.mul(builder.add(t0, ir.Constant(t0.type, j)), o_s)
             target = builder.bitcast(builder.gep(out_p, [offset]), vec.as_pointer())
             builder.store(tile[j], target, align=4)
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
-@intrinsic
-def lane_dots(typingctx, a, a_at, a_step, b, b_at, taps, count, out, out_at, out_row, out_col,
-              lanes):  # fmt: skip  # noqa: ARG001
-    """For the ``ROWS`` rows r of ``a`` and the taps q < ``count``:
-    ``out[out_at + r * out_row + q * out_col] += sum_{m < lanes} a[a_at + r * a_step + m]
-    * b[b_at + taps[q] + m]`` (``lanes`` a multiple of ``WIDTH``): the dot products over the
-    batch of a weight gradient, four taps at a time in a tile of ROWS x 4 vector sums (eight
-    loads per sixteen FMAs), each reduced at the end by halves (lanes m and m + WIDTH / 2 first).
-    """
-    _check("lane_dots", a=a, b=b, out=out)
-    if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
-        raise TypingError(f"lane_dots: taps must be an int64 array, got {taps}")
-    i = types.intp
-    sig = types.void(a, i, i, b, i, taps, i, out, i, i, i, i)
-
-    def codegen(context, builder, signature, args):
-        a_p, b_p, o_p = (
-            builder.gep(_data(context, builder, signature.args[n], args[n]), [args[n + 1]])
-            for n in (0, 3, 7)
-        )
-        taps_p = _data(context, builder, signature.args[5], args[5])
-        a_s, q_n, o_r, o_c, m_n = (args[n] for n in (2, 6, 9, 10, 11))
-        f32, i32 = ir.FloatType(), ir.IntType(32)
-        vec = ir.VectorType(f32, WIDTH)
-        fma = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{WIDTH}f32"
-        )
-
-        def const(n):
-            return ir.Constant(q_n.type, n)
-
-        def at(base, offset):
-            return builder.bitcast(builder.gep(base, [offset]), vec.as_pointer())
-
-        def total(v):  # the lanes' sum, by halves
-            width = WIDTH
-            while width > 1:
-                width //= 2
-                low = ir.Constant(ir.VectorType(i32, width), list(range(width)))
-                high = ir.Constant(ir.VectorType(i32, width), list(range(width, 2 * width)))
-                v = builder.fadd(
-                    builder.shuffle_vector(v, v, low), builder.shuffle_vector(v, v, high)
-                )
-            return builder.extract_element(v, ir.Constant(i32, 0))
-
-        sums = [cgutils.alloca_once(builder, vec) for _ in range(ROWS * 4)]
-
-        def block(q0, taps_in_block):  # ROWS rows x taps_in_block taps from tap q0
-            for s in sums[: ROWS * taps_in_block]:
-                builder.store(ir.Constant(vec, [0.0] * WIDTH), s)
-            starts = [
-                builder.load(builder.gep(taps_p, [builder.add(q0, const(f))]))
-                for f in range(taps_in_block)
-            ]
-            with cgutils.for_range_slice(builder, const(0), m_n, const(WIDTH)) as (m, _):
-                rows = [
-                    builder.load(at(a_p, builder.add(builder.mul(const(r), a_s), m)), align=4)
-                    for r in range(ROWS)
-                ]
-                xs = [builder.load(at(b_p, builder.add(s, m)), align=4) for s in starts]
-                for r in range(ROWS):
-                    for f in range(taps_in_block):
-                        slot = sums[r * 4 + f] if taps_in_block == 4 else sums[r]
-                        builder.store(builder.call(fma, [rows[r], xs[f], builder.load(slot)]), slot)
-            for r in range(ROWS):
-                for f in range(taps_in_block):
-                    slot = sums[r * 4 + f] if taps_in_block == 4 else sums[r]
-                    index = builder.add(
-                        builder.mul(const(r), o_r), builder.mul(builder.add(q0, const(f)), o_c)
-                    )
-                    target = builder.gep(o_p, [index])
-                    builder.store(
-                        builder.fadd(builder.load(target), total(builder.load(slot))), target
-                    )
-
-        whole = builder.sub(q_n, builder.srem(q_n, const(4)))
-        with cgutils.for_range_slice(builder, const(0), whole, const(4)) as (q0, _):
-            block(q0, 4)
-        with cgutils.for_range_slice(builder, whole, q_n, const(1)) as (q0, _):
-            block(q0, 1)
         return context.get_dummy_value()
 
     return sig, codegen
