@@ -36,7 +36,8 @@ def _value(v: object) -> str:
 
 def page(results: Path = RESULTS, bench: Path = BENCH) -> str:
     scripts = sorted(bench.glob("bench_*.py"))
-    records = [json.loads(p.read_text()) for p in sorted(results.glob("*.json"))]
+    files = sorted(results.glob("*.json"))
+    records = [json.loads(p.read_text()) for p in files]
     measured = {r["bench"] for r in records}
     out = [
         "# Benchmarks",
@@ -58,12 +59,12 @@ def page(results: Path = RESULTS, bench: Path = BENCH) -> str:
         has = "yes" if s.stem in measured else "none yet"
         out.append(f"| `bench/{s.name}` | {_summary(s).replace('|', '/')} | {has} |")
     out.append("")
-    for r in records:
+    for path, r in zip(files, records, strict=True):
         m = r["machine"]
         shared = m["load_average_1min"] > m["cores"]
         load = "a shared machine: " if shared else ""
         out += [
-            f"## {r['bench']}",
+            f"## {r['bench']}" + (f" ({path.name})" if path.stem != r["bench"] else ""),
             "",
             f"Measured {r['date']} on {m['cpu']}, {m['cores']} cores"
             + (f", GPU {m['gpu']}" if "gpu" in m else "")

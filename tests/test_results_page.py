@@ -64,3 +64,11 @@ def test_a_gpu_in_the_record_is_named_beside_the_cores(tmp_path: Path):
     (tmp_path / "results" / "bench_fast.json").write_text(json.dumps(on_gpu))
     page = results_page.page(tmp_path / "results", tmp_path)
     assert "on Some CPU, 2 cores, GPU Some GPU (a shared machine" in page
+
+
+def test_two_result_files_of_one_bench_are_told_apart_by_file(tmp_path: Path):
+    (tmp_path / "results").mkdir()
+    for name in ("bench_fast.json", "bench_fast_gpu.json"):
+        (tmp_path / "results" / name).write_text(json.dumps(RECORD))
+    page = results_page.page(tmp_path / "results", tmp_path)
+    assert "\n## bench_fast\n" in page and "\n## bench_fast (bench_fast_gpu.json)\n" in page
