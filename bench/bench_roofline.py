@@ -426,6 +426,24 @@ def interleaved(
     return best
 
 
+def _attained(
+    figures: dict[str, float],
+    best: dict[str, tuple[float, float]],
+    name: str,
+    gflop: float,
+    bound: float,
+) -> list[tuple[str, float]]:
+    """(name, % of ``bound``) for the pass ``name`` and its ``--before`` version where timed:
+    GFLOP per CPU s against the attainable ``bound``; recorded in ``figures`` too."""
+    shares = []
+    for key in (name, f"{name} (before)"):
+        if key in best:
+            share = 100 * gflop / best[key][1] / bound
+            figures[f"{key}, % of attainable per CPU s"] = round(share, 1)
+            shares.append((key, share))
+    return shares
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
@@ -491,21 +509,15 @@ def main() -> None:
         bound = min(ceiling_cpu, loop_cpu, copy_cpu * intensity)
         figures[f"{name}, FLOP per byte of memory traffic"] = round(intensity, 2)
         figures[f"{name}, attainable GFLOP per CPU s"] = round(bound, 1)
-        for key in (name, f"{name} (before)"):
-            if key in best:
-                share = 100 * conv_gflop()[name] / best[key][1] / bound
-                figures[f"{key}, % of attainable per CPU s"] = round(share, 1)
-                print(f"  {key:46s} {intensity:5.2f} FLOP/B, bound {bound:6.1f}: {share:5.1f}%")
+        for key, share in _attained(figures, best, name, conv_gflop()[name], bound):
+            print(f"  {key:46s} {intensity:5.2f} FLOP/B, bound {bound:6.1f}: {share:5.1f}%")
     lstm_loop_cpu = gflop[lstm_loop_name()] / best[lstm_loop_name()][1]
     bound = min(ceiling_cpu, lstm_loop_cpu)
     print(f"attainable per CPU s for the LSTM: {bound:.1f} (the lower of sgemm and its inner loop)")
     for name in lstm_gflop():
         figures[f"{name}, attainable GFLOP per CPU s"] = round(bound, 1)
-        for key in (name, f"{name} (before)"):
-            if key in best:
-                share = 100 * lstm_gflop()[name] / best[key][1] / bound
-                figures[f"{key}, % of attainable per CPU s"] = round(share, 1)
-                print(f"  {key:46s} {share:5.1f}%")
+        for key, share in _attained(figures, best, name, lstm_gflop()[name], bound):
+            print(f"  {key:46s} {share:5.1f}%")
     for name in ("convnet forward+backward", "lstm forward+backward"):
         if f"{name} (before)" in best:
             speedup = best[f"{name} (before)"][0] / best[name][0]
