@@ -8,7 +8,9 @@ for four FMAs and each weight once per vector. The LSTM's gate sums ran at 51 GF
 loop and run at 154 as a tile (one thread, in L1; bench/bench_roofline.py, 2-core Xeon,
 2026-11-27). The code is LLVM IR emitted by numba intrinsics, so it compiles with the calling
 kernel and is cached with it: no compiler at install. numba's cache checks the calling kernel's
-file, not this one: after editing this file, empty the cache (``NUMBA_CACHE_DIR``).
+file, not this one: after editing this file, empty the cache (``NUMBA_CACHE_DIR``). Like C, the
+tiles check no bounds: the kernels keep their offsets inside their arrays (their tests check
+every shape against torch).
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
   with the ReLU or its backward applied before the one store;
@@ -81,8 +83,8 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
     indices into the flat arrays (``taps``: int64 offsets of the input rows). The sum runs
     q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width. ``f`` by
     ``mode`` (``PLAIN``, ``RELU``, ``GATED``): v; the ReLU v * (v > 0); or v * (gate[o] > 0),
-    a ReLU's backward (``gate``: the ReLU's output, laid out as ``out``; read only if GATED).
-    The product form keeps a NaN a NaN."""
+    a ReLU's backward (``gate``: the ReLU's output, laid out as ``out``). ``gate[o]`` is read in
+    every mode, so pass ``out`` itself when not GATED. The product form keeps a NaN a NaN."""
     _check("tap_sums", w=w, x=x, out=out, bias=bias, gate=gate)
     if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
         raise TypingError(f"tap_sums: taps must be an int64 array, got {taps}")
