@@ -182,20 +182,15 @@ def bound_timers() -> dict[str, Timer]:
     """The inner loops of the conv and LSTM kernels on resident rows, and a memory copy."""
     from tactile_exp.models import grouped_conv_numba as conv
     from tactile_exp.models import lstm_kernels as lstm
-    from tactile_exp.models.vector_tiles import PLAIN, tap_sums
+    from tactile_exp.models.vector_tiles import PLAIN
 
     numba = conv.numba
 
     @numba.njit
     def gate_sums(w, inputs, acts, bias, calls):  # one step's gates, as _chunk_forward runs them
-        gates, k = w.shape
-        taps = np.arange(k) * lstm.CHUNK
-        flat_w, flat_in, flat_acts = w.reshape(-1), inputs.reshape(-1), acts.reshape(-1)
+        taps = np.arange(w.shape[1]) * lstm.CHUNK
         for _ in range(calls):
-            for g in range(0, gates, 4):
-                at = g * lstm.CHUNK
-                tap_sums(flat_w, g * k, k, 1, flat_in, 0, taps, k, flat_acts, at, lstm.CHUNK,
-                         bias, g, lstm.CHUNK, PLAIN, flat_acts)  # fmt: skip
+            lstm._gate_sums(w, bias, inputs, acts, taps, 0)
 
     @numba.njit
     def loop(rows, src, taps, wts, bias, calls):
@@ -212,8 +207,9 @@ def bound_timers() -> dict[str, Timer]:
         args = (rows, src, taps, wts, np.zeros(4, np.float32), LOOP_CALLS)
         timers[loop_name(lanes)] = _timed(lambda args=args: loop(*args))
     w = rng.standard_normal((4 * HIDDEN, LSTM_INPUTS), dtype=np.float32)
-    inputs = rng.standard_normal((LSTM_INPUTS, lstm.CHUNK), dtype=np.float32)
-    acts, bias = np.zeros((4 * HIDDEN, lstm.CHUNK), np.float32), np.zeros(4 * HIDDEN, np.float32)
+    inputs = rng.standard_normal((LSTM_INPUTS, 1, lstm.CHUNK), dtype=np.float32)  # one step
+    acts = np.zeros((4 * HIDDEN, 1, lstm.CHUNK), np.float32)
+    bias = np.zeros(4 * HIDDEN, np.float32)
     timers[lstm_loop_name()] = _timed(lambda: gate_sums(w, inputs, acts, bias, LSTM_LOOP_CALLS))
     a = np.ones(COPY_MB * 2**20 // 4, np.float32)
     b = np.empty_like(a)

@@ -102,6 +102,19 @@ def _gather(X, rows, start, inputs):
                 inputs[c, t, b] = 0
 
 
+@numba.njit(inline="always", **_JIT)
+def _gate_sums(w, bias, inputs, acts, taps, t):
+    """acts[:, t] = bias + w @ inputs[:, t] over the chunk's lanes, ``ROWS`` gates per register
+    tile (``tap_sums``); ``taps``: each input's offset in ``inputs.flat`` at step 0."""
+    G, K = w.shape
+    step = inputs.shape[1] * CHUNK
+    w_flat, x_flat, acts_flat = w.reshape(-1), inputs.reshape(-1), acts.reshape(-1)
+    for g in range(0, G, ROWS):
+        at = g * step + t * CHUNK
+        tap_sums(w_flat, g * K, K, 1, x_flat, t * CHUNK, taps, K, acts_flat, at, step, bias, g,
+                 CHUNK, PLAIN, acts_flat)  # fmt: skip
+
+
 @numba.njit(**_JIT)
 def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
     """Run the LSTM over one gathered chunk. ``w`` (4H, C + H) is ``[weight_ih | weight_hh]``,
@@ -123,13 +136,9 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
     for j in range(H):
         for b in range(CHUNK):
             inputs[C + j, 0, b] = 0
-    w_flat, x_flat, acts_flat = w.reshape(-1), inputs.reshape(-1), acts.reshape(-1)
-    taps = np.arange(K) * step  # input k of step t: x_flat[t * CHUNK + taps[k] + lane]
+    taps = np.arange(K) * step  # input k of step t: inputs.flat[t * CHUNK + taps[k] + lane]
     for t in range(T):
-        for g in range(0, G, ROWS):
-            at = g * step + t * CHUNK
-            tap_sums(w_flat, g * K, K, 1, x_flat, t * CHUNK, taps, K, acts_flat, at, step, bias, g,
-                     CHUNK, PLAIN, acts_flat)  # fmt: skip
+        _gate_sums(w, bias, inputs, acts, taps, t)
         for j in range(H):
             for b in range(CHUNK):
                 i = _HALF * _tanh(_HALF * acts[j, t, b]) + _HALF
