@@ -207,8 +207,8 @@ def bound_timers() -> dict[str, Timer]:
         args = (rows, src, taps, wts, np.zeros(4, np.float32), LOOP_CALLS)
         timers[loop_name(lanes)] = _timed(lambda args=args: loop(*args))
     w = rng.standard_normal((4 * HIDDEN, LSTM_INPUTS), dtype=np.float32)
-    inputs = rng.standard_normal((LSTM_INPUTS, 1, lstm.CHUNK), dtype=np.float32)  # one step
-    acts = np.zeros((4 * HIDDEN, 1, lstm.CHUNK), np.float32)
+    inputs = rng.standard_normal((1, LSTM_INPUTS, lstm.CHUNK), dtype=np.float32)  # one step
+    acts = np.zeros((1, 4 * HIDDEN, lstm.CHUNK), np.float32)
     bias = np.zeros(4 * HIDDEN, np.float32)
     timers[lstm_loop_name()] = _timed(lambda: gate_sums(w, inputs, acts, bias, LSTM_LOOP_CALLS))
     a = np.ones(COPY_MB * 2**20 // 4, np.float32)

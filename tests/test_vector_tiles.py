@@ -1,4 +1,4 @@
-"""The register tiles against numpy: sums, masks, dot products, transposes; the vector width."""
+"""The register tiles against numpy: sums, masks, transposes, tanh; the vector width."""
 
 import json
 import os
@@ -25,6 +25,11 @@ def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
     for r in range(0, w.shape[0], vt.ROWS):
         vt.tap_sums(flat_w, r * w.shape[1], w.shape[1], 1, flat_x, 0, taps, count, flat_out,
                     r * out_step, out_step, bias, r, lanes, mode, flat_gate)  # fmt: skip
+
+
+@numba.njit
+def _tanh_lanes(x, at, count, scale, shift):
+    vt.tanh_lanes(x.reshape(-1), at, count, np.float32(scale), np.float32(shift))
 
 
 @numba.njit
@@ -60,6 +65,15 @@ def test_tap_sums_match_numpy_on_every_lane_and_leave_the_rest(count):
     assert np.isnan(out[:, lanes:]).all()
 
 
+@pytest.mark.parametrize("extra", range(vt.VECTORS))
+def test_tap_sums_cover_every_width_of_the_last_tile(extra):
+    """Lanes past the whole tiles go as one narrower tile, of 1 to VECTORS - 1 vectors."""
+    w, x, order, bias = _case(lanes=vt.TILE + extra * vt.WIDTH)
+    expected, out = _sums(w, x, order, bias, 21, x.shape[1])
+    _tap_sums(w, x, order * x.shape[1], 21, out, x.shape[1], bias, x.shape[1], vt.PLAIN, out)
+    np.testing.assert_allclose(out, expected, rtol=1e-5, atol=1e-5)
+
+
 def test_tap_sums_relu_and_gated_masks_keep_nans():
     w, x, order, bias = _case()
     lanes = x.shape[1]
@@ -80,17 +94,20 @@ def test_tap_sums_relu_and_gated_masks_keep_nans():
 
 
 def test_tap_sums_are_the_same_at_every_vector_width():
-    """Each lane is summed in one order (bias, then one fma per tap) at any width: a child
-    process compiled for 4-float vectors gives the same bits as this one."""
+    """Each lane is summed in one order (bias, then one fma per tap), and each float's tanh
+    computed by the same operations, at any width: a child process compiled for 4-float vectors
+    gives the same bits as this one."""
     w, x, order, bias = _case(rows=4, taps=42, lanes=64)
     out = np.empty((4, 64), np.float32)
     _tap_sums(w, x, order * 64, 42, out, 64, bias, 64, vt.PLAIN, out)
+    _tanh_lanes(out, 0, out.size, 0.5, 0.5)
     code = (
         "import json, numpy as np, test_vector_tiles as t\n"
         "from tactile_exp.models import vector_tiles as vt\n"
         "w, x, order, bias = t._case(rows=4, taps=42, lanes=64)\n"
         "out = np.empty((4, 64), np.float32)\n"
         "t._tap_sums(w, x, order * 64, 42, out, 64, bias, 64, vt.PLAIN, out)\n"
+        "t._tanh_lanes(out, 0, out.size, 0.5, 0.5)\n"
         "print(json.dumps([vt.WIDTH, out.view(np.uint32).tolist()]))\n"
     )
     env = {
@@ -104,6 +121,23 @@ def test_tap_sums_are_the_same_at_every_vector_width():
     width, bits = json.loads(child.stdout)
     assert width == 4
     np.testing.assert_array_equal(np.array(bits, np.uint32), out.view(np.uint32))
+
+
+def test_tanh_lanes_is_tanh_and_the_sigmoid_within_the_approximations_error():
+    x = np.linspace(-12, 12, 50 * vt.WIDTH, dtype=np.float32)
+    x[7] = np.nan
+    tanh, sigmoid = np.full(x.size + 2 * vt.WIDTH, 5.0, np.float32), np.empty_like(x)
+    tanh[vt.WIDTH : -vt.WIDTH], sigmoid[:] = x, x
+    _tanh_lanes(tanh, vt.WIDTH, x.size, 1.0, 0.0)
+    _tanh_lanes(sigmoid, 0, x.size, 0.5, 0.5)
+    exact = x.astype(np.float64)
+    got = tanh[vt.WIDTH : -vt.WIDTH]
+    assert np.isnan(got[7]) and np.isnan(sigmoid[7])
+    finite = ~np.isnan(x)
+    np.testing.assert_allclose(got[finite], np.tanh(exact)[finite], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(sigmoid[finite], (1 / (1 + np.exp(-exact)))[finite], atol=1e-6)
+    assert (tanh[: vt.WIDTH] == 5).all() and (tanh[-vt.WIDTH :] == 5).all()  # the rest untouched
+    assert abs(got[-1] - 1) < 3e-7 and abs(got[0] + 1) < 3e-7  # clamped: saturated, no overflow
 
 
 def test_transpose_tile_writes_the_rows_as_columns():

@@ -14,7 +14,9 @@ every shape against torch).
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
   with the ReLU or its backward applied before the one store;
-- ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout).
+- ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
+- ``tanh_lanes``: tanh (or, scaled, the sigmoid) of a block of floats in place, a whole vector at
+  a time (numba's loops ran it at half the vector width).
 
 The vector width follows the CPU numba compiles for: 16 float32 lanes with AVX-512, 8 with
 AVX2, else 4. ``tap_sums`` sums each lane in the same order at any width (the bias, then one
@@ -81,7 +83,8 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
     ``o = out_at + r * out_step + m``: ``out[o] = f(bias[bias_at + r]
     + sum_{q < count} w[w_at + r * w_row + q * w_col] * x[x_at + taps[q] + m])``,
     indices into the flat arrays (``taps``: int64 offsets of the input rows). The sum runs
-    q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width. ``f`` by
+    q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width. Lanes past the
+    last whole tile go as one narrower tile. ``f`` by
     ``mode`` (``PLAIN``, ``RELU``, ``GATED``): v; the ReLU v * (v > 0); or v * (gate[o] > 0),
     a ReLU's backward (``gate``: the ReLU's output, laid out as ``out``). ``gate[o]`` is read in
     every mode, so pass ``out`` itself when not GATED. The product form keeps a NaN a NaN."""
@@ -158,8 +161,10 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
         tiled = builder.sub(m_n, builder.srem(m_n, const(TILE)))
         with cgutils.for_range_slice(builder, const(0), tiled, const(TILE)) as (m, _):
             tile(m, VECTORS)
-        with cgutils.for_range_slice(builder, tiled, m_n, const(WIDTH)) as (m, _):
-            tile(m, 1)  # the lanes past the last whole tile, a vector at a time
+        left = builder.sdiv(builder.sub(m_n, tiled), const(WIDTH))
+        for vectors in range(1, VECTORS):  # the lanes past the last whole tile: a narrower tile
+            with builder.if_then(builder.icmp_signed("==", left, const(vectors))):
+                tile(tiled, vectors)
         return context.get_dummy_value()
 
     return sig, codegen
@@ -204,6 +209,65 @@ def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: A
             offset = builder.mul(builder.add(t0, ir.Constant(t0.type, j)), o_s)
             target = builder.bitcast(builder.gep(out_p, [offset]), vec.as_pointer())
             builder.store(tile[j], target, align=4)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+# Eigen's float tanh: x * P(x^2) / Q(x^2) on [-CLAMP, CLAMP] (max error ~4e-7 over the real line;
+# tanh is 1 - 2e-7 at CLAMP), P's and Q's coefficients from the highest degree down.
+TANH_CLAMP = 7.90531110763549805
+TANH_P = (-2.76076847742355e-16, 2.00018790482477e-13, -8.60467152213735e-11,
+          5.12229709037114e-08, 1.48572235717979e-05, 6.37261928875436e-04,
+          4.89352455891786e-03)  # fmt: skip
+TANH_Q = (1.19825839466702e-06, 1.18534705686654e-04, 2.26843463243900e-03, 4.89352518554385e-03)
+
+
+@intrinsic
+def tanh_lanes(typingctx, x, at, count, scale, shift):  # noqa: ARG001
+    """``x[at + m] = scale * tanh(scale * x[at + m]) + shift`` for m < ``count`` (a multiple of
+    ``WIDTH``), tanh by Eigen's rational approximation, vectorisable where libm's is not:
+    scale 1, shift 0 is tanh; 1/2, 1/2 the sigmoid. NaN stays NaN."""
+    _check("tanh_lanes", x=x)
+    f32 = types.float32
+    sig = types.void(x, types.intp, types.intp, f32, f32)
+
+    def codegen(context, builder, signature, args):
+        x_v, at_v, n, scale_v, shift_v = args
+        ftype, i32 = ir.FloatType(), ir.IntType(32)
+        vec = ir.VectorType(ftype, WIDTH)
+        fma = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{WIDTH}f32"
+        )
+        undef = ir.Constant(vec, ir.Undefined)
+        first = ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH)
+
+        def splat(value):
+            return builder.shuffle_vector(
+                builder.insert_element(undef, value, ir.Constant(i32, 0)), undef, first
+            )
+
+        def const(value):
+            return ir.Constant(vec, [value] * WIDTH)
+
+        def poly(coefficients, x2):
+            value = const(coefficients[0])
+            for c in coefficients[1:]:
+                value = builder.call(fma, [value, x2, const(c)])
+            return value
+
+        scale, shift = splat(scale_v), splat(shift_v)
+        base = builder.gep(_data(context, builder, signature.args[0], x_v), [at_v])
+        zero, step = ir.Constant(n.type, 0), ir.Constant(n.type, WIDTH)
+        with cgutils.for_range_slice(builder, zero, n, step) as (m, _):
+            where = builder.bitcast(builder.gep(base, [m]), vec.as_pointer())
+            v = builder.fmul(builder.load(where, align=4), scale)
+            low, high = const(-TANH_CLAMP), const(TANH_CLAMP)
+            v = builder.select(builder.fcmp_ordered("<", v, low), low, v)
+            v = builder.select(builder.fcmp_ordered(">", v, high), high, v)
+            x2 = builder.fmul(v, v)
+            t = builder.fdiv(builder.fmul(v, poly(TANH_P, x2)), poly(TANH_Q, x2))
+            builder.store(builder.call(fma, [scale, t, shift]), where, align=4)
         return context.get_dummy_value()
 
     return sig, codegen
