@@ -185,6 +185,24 @@ def test_training_scores_read_the_batch_rows_in_place_like_a_copied_batch():
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
 
 
+@pytest.mark.parametrize("parts", [[(0, 3)], [(0, 1), (1, 3)], [(0, 2), (2, 3)]])
+def test_to_layout_fills_every_block_whatever_the_split(parts):
+    """Rows 37 of a batch padded to 48 lanes: whole tiles, the last instance one value at a
+    time, zero padding, and 21 steps (16 in tiles); each task's blocks alone, in any split."""
+    from tactile_exp.models.grouped_conv_numba import LANES, to_layout
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((60, 2 * 3, 21), dtype=np.float32)  # 3 groups of 2 channels
+    rows = rng.permutation(60)[:37]
+    out = np.full((3, 2, 21, 3 * LANES), np.nan, np.float32)
+    for start, stop in parts:
+        to_layout(x, rows, 3, out, start, stop)
+    want = np.zeros_like(out)
+    for c in range(6):
+        want[c % 3, c // 3, :, :37] = x[rows, c, :].T
+    np.testing.assert_array_equal(out, want)
+
+
 def test_warm_up_compiles_every_signature_a_training_step_and_scoring_use():
     """``warm_up`` (the job's compile ahead) must leave nothing for the job to compile: in a
     fresh process, after it, a HapticCNN's fit, features and scores add no signature."""
