@@ -16,7 +16,7 @@ every shape against torch).
   with the ReLU or its backward applied before the one store;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
 - ``tanh_lanes``: tanh (or, scaled, the sigmoid) of a block of floats in place, a whole vector at
-  a time (numba's loops ran it at half the vector width).
+  a time (numba's loops use 256-bit vectors on AVX-512 CPUs, half the width).
 
 The vector width follows the CPU numba compiles for: 16 float32 lanes with AVX-512, 8 with
 AVX2, else 4. ``tap_sums`` sums each lane in the same order at any width (the bias, then one
@@ -83,9 +83,9 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
     ``o = out_at + r * out_step + m``: ``out[o] = f(bias[bias_at + r]
     + sum_{q < count} w[w_at + r * w_row + q * w_col] * x[x_at + taps[q] + m])``,
     indices into the flat arrays (``taps``: int64 offsets of the input rows). The sum runs
-    q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width. Lanes past the
-    last whole tile go as one narrower tile. ``f`` by
-    ``mode`` (``PLAIN``, ``RELU``, ``GATED``): v; the ReLU v * (v > 0); or v * (gate[o] > 0),
+    q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width; lanes past
+    the last whole tile go as one narrower tile. ``f`` by ``mode`` (``PLAIN``, ``RELU``,
+    ``GATED``): v; the ReLU v * (v > 0); or v * (gate[o] > 0),
     a ReLU's backward (``gate``: the ReLU's output, laid out as ``out``). ``gate[o]`` is read in
     every mode, so pass ``out`` itself when not GATED. The product form keeps a NaN a NaN."""
     _check("tap_sums", w=w, x=x, out=out, bias=bias, gate=gate)
