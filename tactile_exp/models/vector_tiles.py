@@ -76,6 +76,24 @@ def _data(context, builder, ty, value):
     return context.make_array(ty)(context, builder, value).data
 
 
+_VEC = ir.VectorType(ir.FloatType(), WIDTH)  # the vector type of every tile
+
+
+def _fma(builder):
+    """``llvm.fma`` on vectors: a * b + c with one rounding per lane."""
+    signature = ir.FunctionType(_VEC, [_VEC, _VEC, _VEC])
+    return cgutils.get_or_insert_function(builder.module, signature, f"llvm.fma.v{WIDTH}f32")
+
+
+def _splat(builder, value):
+    """A vector of ``WIDTH`` copies of the float ``value``."""
+    i32, undef = ir.IntType(32), ir.Constant(_VEC, ir.Undefined)
+    first = ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH)
+    return builder.shuffle_vector(
+        builder.insert_element(undef, value, ir.Constant(i32, 0)), undef, first
+    )
+
+
 @intrinsic
 def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at, out_step, bias,
              bias_at, lanes, mode, gate):  # fmt: skip  # noqa: ARG001
@@ -105,31 +123,19 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
         relu, gated = (
             builder.icmp_signed("==", mode, ir.Constant(mode.type, f)) for f in (RELU, GATED)
         )
-        f32, i32 = ir.FloatType(), ir.IntType(32)
-        vec = ir.VectorType(f32, WIDTH)
-        fma = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{WIDTH}f32"
-        )
-        undef = ir.Constant(vec, ir.Undefined)
-        zero = ir.Constant(vec, [0.0] * WIDTH)
-        first = ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH)
+        fma, zero = _fma(builder), ir.Constant(_VEC, [0.0] * WIDTH)
 
         def const(n):
             return ir.Constant(q_n.type, n)
 
-        def splat(value):
-            return builder.shuffle_vector(
-                builder.insert_element(undef, value, ir.Constant(i32, 0)), undef, first
-            )
-
         def at(base, offset):  # the vector of WIDTH floats at base + offset (floats)
-            return builder.bitcast(builder.gep(base, [offset]), vec.as_pointer())
+            return builder.bitcast(builder.gep(base, [offset]), _VEC.as_pointer())
 
-        sums = [cgutils.alloca_once(builder, vec) for _ in range(ROWS * VECTORS)]
+        sums = [cgutils.alloca_once(builder, _VEC) for _ in range(ROWS * VECTORS)]
 
         def tile(m, vectors):  # ROWS x vectors sums in registers over every tap, then stored
             for r in range(ROWS):
-                start = splat(builder.load(builder.gep(b_p, [const(r)])))
+                start = _splat(builder, builder.load(builder.gep(b_p, [const(r)])))
                 for v in range(vectors):
                     builder.store(start, sums[r * VECTORS + v])
             with cgutils.for_range(builder, q_n) as loop:
@@ -141,7 +147,7 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
                 ]
                 for r in range(ROWS):
                     at_w = builder.add(builder.mul(const(r), w_r), builder.mul(q, w_c))
-                    weight = splat(builder.load(builder.gep(w_p, [at_w])))
+                    weight = _splat(builder, builder.load(builder.gep(w_p, [at_w])))
                     for v in range(vectors):
                         slot = sums[r * VECTORS + v]
                         builder.store(builder.call(fma, [weight, xs[v], builder.load(slot)]), slot)
@@ -154,7 +160,7 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
                     positive = builder.fcmp_ordered(
                         ">", builder.select(relu, value, gate_value), zero
                     )
-                    masked = builder.fmul(value, builder.uitofp(positive, vec))
+                    masked = builder.fmul(value, builder.uitofp(positive, _VEC))
                     value = builder.select(builder.or_(relu, gated), masked, value)
                     builder.store(value, at(o_p, offset), align=4)
 
@@ -184,15 +190,14 @@ def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: A
 
     def codegen(context, builder, signature, args):
         src_v, starts_v, t0, out_v, out_at, o_s = args
-        f32, i32 = ir.FloatType(), ir.IntType(32)
-        vec = ir.VectorType(f32, WIDTH)
+        i32 = ir.IntType(32)
         src_p = _data(context, builder, signature.args[0], src_v)
         starts_p = _data(context, builder, signature.args[1], starts_v)
         tile = []
         for row in range(WIDTH):
             begin = builder.load(builder.gep(starts_p, [ir.Constant(t0.type, row)]))
             first = builder.gep(src_p, [builder.add(begin, t0)])
-            tile.append(builder.load(builder.bitcast(first, vec.as_pointer()), align=4))
+            tile.append(builder.load(builder.bitcast(first, _VEC.as_pointer()), align=4))
         d = WIDTH // 2
         while d:  # swap the off-diagonal d x d blocks of every 2d x 2d block
             low = [lane + WIDTH - d if lane & d else lane for lane in range(WIDTH)]
@@ -207,7 +212,7 @@ def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: A
         out_p = builder.gep(_data(context, builder, signature.args[3], out_v), [out_at])
         for j in range(WIDTH):
             offset = builder.mul(builder.add(t0, ir.Constant(t0.type, j)), o_s)
-            target = builder.bitcast(builder.gep(out_p, [offset]), vec.as_pointer())
+            target = builder.bitcast(builder.gep(out_p, [offset]), _VEC.as_pointer())
             builder.store(tile[j], target, align=4)
         return context.get_dummy_value()
 
@@ -234,21 +239,10 @@ def tanh_lanes(typingctx, x, at, count, scale, shift):  # noqa: ARG001
 
     def codegen(context, builder, signature, args):
         x_v, at_v, n, scale_v, shift_v = args
-        ftype, i32 = ir.FloatType(), ir.IntType(32)
-        vec = ir.VectorType(ftype, WIDTH)
-        fma = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(vec, [vec, vec, vec]), f"llvm.fma.v{WIDTH}f32"
-        )
-        undef = ir.Constant(vec, ir.Undefined)
-        first = ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH)
-
-        def splat(value):
-            return builder.shuffle_vector(
-                builder.insert_element(undef, value, ir.Constant(i32, 0)), undef, first
-            )
+        fma = _fma(builder)
 
         def const(value):
-            return ir.Constant(vec, [value] * WIDTH)
+            return ir.Constant(_VEC, [value] * WIDTH)
 
         def poly(coefficients, x2):
             value = const(coefficients[0])
@@ -256,11 +250,11 @@ def tanh_lanes(typingctx, x, at, count, scale, shift):  # noqa: ARG001
                 value = builder.call(fma, [value, x2, const(c)])
             return value
 
-        scale, shift = splat(scale_v), splat(shift_v)
+        scale, shift = _splat(builder, scale_v), _splat(builder, shift_v)
         base = builder.gep(_data(context, builder, signature.args[0], x_v), [at_v])
         zero, step = ir.Constant(n.type, 0), ir.Constant(n.type, WIDTH)
         with cgutils.for_range_slice(builder, zero, n, step) as (m, _):
-            where = builder.bitcast(builder.gep(base, [m]), vec.as_pointer())
+            where = builder.bitcast(builder.gep(base, [m]), _VEC.as_pointer())
             v = builder.fmul(builder.load(where, align=4), scale)
             low, high = const(-TANH_CLAMP), const(TANH_CLAMP)
             v = builder.select(builder.fcmp_ordered("<", v, low), low, v)
