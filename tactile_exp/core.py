@@ -141,7 +141,7 @@ def new_pipeline(settings: Settings, label: str = "") -> AdjectivePipeline:
 
 
 def sides(settings: Settings, dataset: Any, split: Split) -> dict[str, Trials]:
-    """Training, test and (held out of training, issue 13) validation trials of ``split``."""
+    """Training, test and (held out of training) validation trials of ``split``."""
     fit_split, held = validation_split(
         split, fraction=settings.validation_fraction, seed=settings.seed
     )

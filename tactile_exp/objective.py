@@ -1,4 +1,4 @@
-"""What a job returns to Hydra (issue 28): a metric of the held-out validation objects only.
+"""What a job returns to Hydra: a metric of the held-out validation objects only.
 
 An optimising sweeper (``search=...``) selects on whatever the job returns, so the return value is
 computed from the per-adjective validation metrics alone (``validation.fraction`` held-out

@@ -109,7 +109,7 @@ def job_run(tracker: Tracker, settings: Settings) -> Iterator[str]:
         "sweep_id": settings.sweep_id,
         "overrides": " ".join(settings.overrides)[:5000],  # what the report calls a variant
         "device": device_name(settings.device),  # what device=auto picked here
-        **settings.study_tags,  # search.study, search.role, search.trial (issue 28)
+        **settings.study_tags,  # search.study, search.role, search.trial
     }
     with tracker.run(settings.run_name, params, tags) as parent_id:
         log.info(
@@ -219,7 +219,7 @@ def record_summary(
     held_out = {
         a: stats.HeldOut(r.test.objects, r.test.y, r.test.scores) for a, r in results.items()
     }
-    ci = stats.mean_interval([held_out])  # over test objects (issue 27)
+    ci = stats.mean_interval([held_out])  # over test objects
     logged |= side_means(results) | {"mean_auc_ci_low": ci.low, "mean_auc_ci_high": ci.high}
     tracker.log_metrics(run_id, logged)
     lines = ["adjective,auc,n_test_units,n_test_positive_units,n_train_objects,n_test_objects"]

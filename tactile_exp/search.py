@@ -1,4 +1,4 @@
-"""Hyperparameter search on validation objects (issue 28): the Optuna study behind the
+"""Hyperparameter search on validation objects: the Optuna study behind the
 ``study`` sweeper (``hydra_plugins/tactile_exp_study``), its summary run, and
 ``python -m tactile_exp.search best STUDY``.
 

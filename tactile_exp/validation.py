@@ -1,4 +1,4 @@
-"""Object-grouped validation inside an adjective's training objects (issue 13; not in the paper).
+"""Object-grouped validation inside an adjective's training objects (not in the paper).
 
 The paper has no validation set. To tell over-fitting from a weak model in the logs, a few
 training objects are held out, stratified by label, and left out of the final training: the

@@ -1,6 +1,6 @@
 """The named grids: `sweep=table1` is every table1_* file and takes seed/split lists; `sweep=smoke`
 runs every row end to end, and the report built from it matches the runs. A sweep survives its
-invalid cells and failed jobs (issue 33, ``tactile_exp.app.sweep``): every job's config is
+invalid cells and failed jobs (``tactile_exp.app.sweep``): every job's config is
 checked before the first starts, invalid cells are listed and skipped (or nothing runs), a job
 that fails while training leaves its runs FAILED and the jobs after it run, and one line sums it
 up; SIGTERM to the launcher stops its workers and closes the runs killed ones left RUNNING."""
@@ -132,7 +132,7 @@ def test_smoke_sweep_and_report(cache_dir, mlflow_uri, tmp_path):
     assert "report/table1_summary.md" in listed
 
 
-# Issue 33's grid: model=haptic_cnn takes the haptic modality only, so its first cell is invalid.
+# The grid: model=haptic_cnn takes the haptic modality only, so its first cell is invalid.
 GRID = ["model=haptic_cnn,linear", "modality=visual,haptic", "schedule=tiny", "adjectives=[hard]"]
 INVALID_REASON = (
     "modality: model=haptic_cnn takes (channels, time) signals, modality=visual gives feature "
@@ -497,7 +497,6 @@ def test_a_terminated_sweep_closes_the_runs_its_killed_workers_left_running(
     assert client.get_run(done.info.run_id).info.status == "FINISHED"
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 TERMINATE = """
 import os, subprocess, sys
 from multiprocessing import resource_tracker

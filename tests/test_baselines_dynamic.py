@@ -392,7 +392,6 @@ def test_hmm_em_rejects_symbols_outside_the_alphabet():
         dyn.fit_categorical_hmm(np.array([[0, 1, 3]]), 2, 3, seed=0)
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 @pytest.fixture
 def small_grid(monkeypatch):
     """A grid of 4 candidates, registered for one test (the real "small" grid is left alone)."""

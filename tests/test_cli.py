@@ -1,4 +1,4 @@
-# The tests of tactile_exp/__main__.py (issue 26: one test file per module), named for what a
+# The tests of tactile_exp/__main__.py (one test file per module), named for what a
 # user calls it: the command line, run as a subprocess the way a user runs it.
 """The command line works the way Hydra users expect."""
 
@@ -49,7 +49,6 @@ def test_info_defaults_tree():
     assert "experiment: null" in _run("--info", "defaults-tree")
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 def test_config_error_is_one_line_and_exit_2_before_any_run(tmp_path, mlflow_uri):
     """The CLI: no traceback, exit 2, and no MLflow run for a typo found only in the data."""
     import os

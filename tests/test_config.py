@@ -375,7 +375,6 @@ def test_run_name_short_forms():
     assert s.axes["schedule.lr"] == "0.001" and "cache_dir" not in s.axes
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 def test_seed_is_checked_the_same_for_every_row(compose_config):
     for row in ("table1_i_haptic_cnn_1trial", "table1_o_random", "table1_a_haptic_static_1trial"):
         with pytest.raises(ConfigError, match="^seed: "):

@@ -1,6 +1,6 @@
-# Cross-cutting, so not tests/test_<module>.py (issue 26): hypothesis drives config values
+# Cross-cutting, so not tests/test_<module>.py: hypothesis drives config values
 # through settings_from_config and the engine's open_data/classify, where a crash would show.
-"""Config fuzzing (issue 10): every numeric or list value either runs on tiny data or stops
+"""Config fuzzing: every numeric or list value either runs on tiny data or stops
 before any run with a one-line ``ConfigError`` naming the key; never a crash deep in training."""
 
 from __future__ import annotations

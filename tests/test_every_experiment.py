@@ -1,4 +1,4 @@
-# Cross-cutting, so not tests/test_<module>.py (issue 26): every experiment file through config,
+# Cross-cutting, so not tests/test_<module>.py: every experiment file through config,
 # data, modality, model, store and tracking at once; the per-module files test each part alone.
 """Slow: every experiment file (every Table I row) runs end to end on tiny data."""
 

@@ -261,7 +261,7 @@ def test_sigterm_marks_the_runs_failed(cache_dir, mlflow_uri):
 
 
 def test_children_log_train_and_validation_auc_without_test_objects(tiny_config, mlflow_uri):
-    """Issue 13: every child logs train_auc and, when its held-out training objects hold both
+    """Every child logs train_auc and, when its held-out training objects hold both
     classes, val_auc; those objects are left out of training and are never test objects."""
     overrides = ["seed=5", "validation.fraction=0.15"]
     settings = settings_from_config(tiny_config(overrides, adjectives="[hard,smooth]"))
@@ -288,7 +288,6 @@ def test_children_log_train_and_validation_auc_without_test_objects(tiny_config,
     )
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 FAST = ["model=random", "combine_instances=separate"]  # a job with no training to speak of
 # 5 objects x 3 trials: absorbent 2 positive objects, squishy 3, cool none.
 FIVE_OBJECTS = (101, 116, 214, 316, 501)

@@ -1,4 +1,4 @@
-# Cross-cutting, so not tests/test_<module>.py (issue 26): the extension contract spans the
+# Cross-cutting, so not tests/test_<module>.py: the extension contract spans the
 # registries, conf/, the engine and the Table I sweep; proved through all of them at once.
 """The extension contract: a new model is one module + one YAML, a new Table I row is one
 experiment file, and the Table I sweep picks the row up; proved in a temporary config dir."""

@@ -1,4 +1,4 @@
-# Cross-cutting, so not tests/test_<module>.py (issue 26): the CUDA device path through models,
+# Cross-cutting, so not tests/test_<module>.py: the CUDA device path through models,
 # train and store, kept apart because it skips without a GPU and is run by hand on one.
 """The GPU path (``device=auto`` on a CUDA machine): same models, same numbers as on CPU.
 

@@ -1,4 +1,4 @@
-"""No import cycles among tactile_exp's modules (data flows one way: STYLE.md, issue 26).
+"""No import cycles among tactile_exp's modules (data flows one way: docs/development.md).
 
 Every import statement counts, wherever it stands: a deferred import inside a function still
 ties the two modules together (``config.check_components`` importing ``modalities`` while

@@ -1,6 +1,6 @@
-# Cross-cutting, so not tests/test_<module>.py (issue 26): real job and sweep processes killed
+# Cross-cutting, so not tests/test_<module>.py: real job and sweep processes killed
 # mid-run, then rerun: the engine, tracking, workers and the sweep together, in one process tree.
-"""Killed jobs and terminated sweeps (issue 10): nothing stays RUNNING, a rerun finishes the
+"""Killed jobs and terminated sweeps: nothing stays RUNNING, a rerun finishes the
 job with the AUCs of an uninterrupted run, and SIGTERM to a parallel sweep stops its workers."""
 
 from __future__ import annotations

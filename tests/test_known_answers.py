@@ -1,4 +1,4 @@
-# Cross-cutting, so not tests/test_<module>.py (issue 26): whole jobs on data whose AUC is
+# Cross-cutting, so not tests/test_<module>.py: whole jobs on data whose AUC is
 # known, so a fault anywhere between the file and the logged AUC shows as a wrong number.
 """End-to-end jobs on data whose answer is known: labels written into the signals give an AUC
 near 1, labels shuffled across objects give an AUC near chance.

@@ -282,7 +282,6 @@ def test_defaults_are_the_authors_protocol_and_classes_are_balanced():
     assert (decisions[y == 1] > 0).mean() >= 0.5  # unweighted: every trial scores negative
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 def test_svm_cross_validation_never_splits_an_object(monkeypatch):
     """C is chosen on folds that hold out whole objects (groups = the instances' object ids)."""
     rng = np.random.default_rng(0)

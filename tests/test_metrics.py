@@ -1,5 +1,5 @@
 """The metrics registry: values against scikit-learn and hand counts, and a metric added in this
-module reaching every child run and the report without touching an engine file (issue 26)."""
+module reaching every child run and the report without touching an engine file."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 26: a lab's own sensor, added in a temporary folder without touching engine files, runs
+"""A lab's own sensor, added in a temporary folder without touching engine files, runs
 end to end: the folder layout (6 channels at 50 Hz, 12 objects, 5 labels), ``modality=signals``
 with the linear model and with the haptic ConvNet, MLflow runs, then predict on one object."""
 

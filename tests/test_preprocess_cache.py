@@ -51,7 +51,6 @@ def test_load_refuses_pickles_and_names_missing_arrays(tmp_path) -> None:
         load_arrays(path, ("x",))
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 class _Unwritable:
     """An array-like that fails when numpy converts it: a crash in the middle of a cache write."""
 

@@ -463,7 +463,6 @@ def test_trial_signals_default_to_subsampled_pac():
     np.testing.assert_array_equal(x[0, :, 1], trial.fingers[0].pdc)
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 def _tiny_file(path, seed: int):
     from tactile_exp.data.synthetic import SyntheticSpec, generate
 

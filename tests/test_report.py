@@ -269,7 +269,7 @@ def test_fig6_maps_are_the_stored_convnet_on_the_job_test_trials(tiny_config, tm
     assert data.missing == ["compressible"] and len(data.signals) == 32
     assert [m.adjective for m in data.maps] == ["metallic", "metallic"]
     assert data.maps[0].unit.score >= data.maps[1].unit.score  # best, then worst positive
-    # The parent run carries the interval of its mean AUC, as the report computes it (issue 27).
+    # The parent run carries the interval of its mean AUC, as the report computes it.
     metrics = tracker.client.get_run(job.run_id).data.metrics
     evidence = heldout.load(tracker, runs.collect(tracker)[0])
     assert (metrics["mean_auc_ci_low"], metrics["mean_auc_ci_high"]) == pytest.approx(
@@ -322,7 +322,7 @@ def test_runs_table_lists_a_job_and_its_children(table3_tracker, mlflow_uri, cap
     assert [line.split(" | ")[0] for line in lines[3:]] == ["| └ adj=hard", "| └ adj=soft"]
 
 
-# Issue 27/32: held-out scores of 2-fold jobs (rows I, A; an ablation sweep) and one job of
+# Held-out scores of 2-fold jobs (rows I, A; an ablation sweep) and one job of
 # row G on other objects. 8 adjectives (Wilcoxon over 6 cannot pass Holm over 2 tests),
 # 16 objects (6 positive), 2 units each.
 FOLD_ADJ = ["absorbent", "compressible", "hard", "rough", "smooth", "soft", "squishy", "thick"]
@@ -346,7 +346,7 @@ def _fold_job(
         if params["choice.experiment"] != "None"
         else "haptic_cnn-concat"
     )
-    with tracker.run(f"{name}-s0", params, tags) as job:  # the sweep's names alike (issue 32)
+    with tracker.run(f"{name}-s0", params, tags) as job:  # the sweep's names alike
         for adjective in FOLD_ADJ:
             lines = ["unit,object_id,label,score"]
             ys, ss = [], []
@@ -464,7 +464,7 @@ def test_an_auc_on_few_test_objects_is_flagged(folds_tracker):
 
 
 def test_report_of_another_metric_recomputes_it_from_the_pooled_scores(folds_tracker, tmp_path):
-    """--metric f1 (issue 26): the runs' f1.<adjective>, the pooled out-of-fold F1 of the
+    """--metric f1: the runs' f1.<adjective>, the pooled out-of-fold F1 of the
     scores with object-bootstrap intervals, and the claims compared on F1."""
     groups = runs.collect(folds_tracker, metric="f1")
     i = next(g for g in groups if g.row == "I")

@@ -1,4 +1,4 @@
-"""Search on validation objects (issue 28): what a job returns to Hydra is its validation
+"""Search on validation objects: what a job returns to Hydra is its validation
 objective, never the test AUC; a search without validation objects is refused before any run; an
 interrupted study continues to its number of trials; trials are tagged in MLflow."""
 

@@ -316,7 +316,6 @@ def test_folds_of_one_seed_share_a_row_and_keep_their_own_models(compose_config)
     assert settings_from_config(compose_config([])).split_key == "published"
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 @pytest.fixture(scope="module")
 def sixty_objects(tmp_path_factory: pytest.TempPathFactory) -> PHAC2:
     path = tmp_path_factory.mktemp("sixty") / "labels.h5"

@@ -752,7 +752,7 @@ def test_runs_view_opens_the_runs_table_with_its_columns(mlflow_uri):
     CHROMIUM is None, reason="no chromium on PATH (Debian: apt-get install chromium)"
 )
 def test_the_real_ui_opens_the_link_on_the_runs_of_a_sweep(cache_dir, mlflow_uri, tmp_path):
-    """A 2-job sweep differing only in the loss (one name, twice, before issue 32), then the
+    """A 2-job sweep differing only in the loss (one name, twice), then the
     real ``mlflow ui`` in headless Chromium: the link each job printed opens the runs table
     (not the GenAI Overview) on the two jobs, by name, with mean_auc and the swept axis."""
     args = [*TINY_DATA, f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}"]
@@ -786,7 +786,6 @@ def test_the_real_ui_opens_the_link_on_the_runs_of_a_sweep(cache_dir, mlflow_uri
     assert "Detect Issues" in plain and "Model training" in plain and "matching runs" not in plain
 
 
-# moved from test_behaviour.py / test_reliability.py (issue 26)
 def _all_runs(uri: str):
     client = MlflowClient(uri)
     ids = [e.experiment_id for e in client.search_experiments()]

@@ -284,7 +284,7 @@ def random_split(dataset: DataSet, adjective: str, seed: int = 0) -> Split:
 def folds_split(
     dataset: DataSet, adjective: str, seed: int = 0, folds: int = 5, fold: int = 0
 ) -> Split:
-    """Object-grouped, class-stratified K-fold (ours, issue 27): fold ``fold`` of ``folds`` is
+    """Object-grouped, class-stratified K-fold (ours): fold ``fold`` of ``folds`` is
     the test side. Over ``fold = 0..folds-1`` of one seed every object is tested exactly once.
 
     Each class's objects are shuffled (seeded by ``seed`` and the adjective) and dealt to the

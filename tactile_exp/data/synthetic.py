@@ -89,8 +89,8 @@ touch (0.636, CV 0.551); touch-only absorbent/squishy/springy/compressible by si
 (touch 0.647). The views now differ: 45 % of these features' variance lies within objects
 (version 4: 10 %), 34 % of the pretrained trunk's (10.5 %). Rows K and L: README.
 
-Generator version 4 = version 3's photographs (what sight can tell) + version 3's dynamics
-(issue 13), developed side by side; the two sections below were measured on each change
+Generator version 4 = version 3's photographs (what sight can tell) + version 3's dynamics,
+developed side by side; the two sections below were measured on each change
 alone (the other part at version 2). Re-measured on version 4 with ``bench_difficulty.py``:
 haptic E1 0.774 (CV 0.744), visual E1 0.693 (CV 0.709), thick/thin by sight 0.889 vs touch
 0.636: the same figures as each change alone, since the visual properties are drawn from
@@ -124,7 +124,7 @@ Haptic dynamics. Difficulty, measured on the full default file (seed 0, publishe
 ``bench_difficulty``: per-trial mean/std features per EP and finger, StandardScaler +
 LogisticRegression on the train split, ROC AUC on its test split (``PYTHONPATH=$PWD
 .venv/bin/python bench/bench_difficulty.py --cache-dir DIR``). Generator version 2 -> 3
-(3: dynamics carry the physics, issue 13):
+(3: dynamics carry the physics):
 
 - haptic: mean AUC 0.849 -> 0.774 over the 24 adjectives (0.829 -> 0.751 over the 21 with a
   visual score). Version 3: weakest springy 0.18, smooth 0.33, thick 0.45, bumpy 0.54; strongest

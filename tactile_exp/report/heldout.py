@@ -17,7 +17,7 @@ from tactile_exp.report.scores import ReportError, read_scores
 from tactile_exp.tracking import Tracker
 
 # An AUC over fewer positive (or negative) test objects than this moves in steps of at least a
-# third per object: a label, not a conclusion (issue 32).
+# third per object: a label, not a conclusion.
 FEW_OBJECTS = 3
 
 

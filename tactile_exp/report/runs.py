@@ -38,7 +38,7 @@ NEUTRAL_OVERRIDES = (
     "hydra",
 )
 HAPTIC = ("haptic", "haptic_features")
-# Runs logged before jobs tagged their data set's labels (``data.labels``, issue 26) ran on
+# Runs logged before jobs tagged their data set's labels (``data.labels``) ran on
 # PHAC-2, whose 24 adjectives are in alphabetical order: the order and count assumed for them.
 UNTAGGED_LABELS = 24
 
