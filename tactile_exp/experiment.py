@@ -14,9 +14,16 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from tactile_exp import metrics, recording
+from tactile_exp import metrics, recording, store
 from tactile_exp.config import Settings
-from tactile_exp.core import AdjectiveResult, kernels, load, open_data
+from tactile_exp.core import (
+    AdjectiveResult,
+    adjective_key,
+    kernels,
+    load,
+    open_data,
+    stores_model,
+)
 from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.splits import object_counts
@@ -113,6 +120,7 @@ def run(settings: Settings) -> JobResult:
                 shown_value,
                 result.sizes["seconds"],
             )
+        results = {a: results[a] for a in splits}  # the adjectives' order, whichever ran first
         means = recording.record_summary(tracker, parent_id, settings, dataset, results)
         if not trial:
             key = headline.key
@@ -134,7 +142,7 @@ def _adjectives(
     n = len(splits)
     processes = min(settings.workers, n)
     if processes == 1:
-        for i, adjective in enumerate(splits, start=1):
+        for i, adjective in enumerate(_in_turn(settings, tracker, dataset, splits), start=1):
             log.info("[%d/%d] %s", i, n, adjective)
             yield recording.record_adjective(
                 settings, tracker, parent_id, dataset, splits[adjective]
@@ -150,6 +158,28 @@ def _adjectives(
         error = "a worker was stopped before it ended this run (the job failed or was terminated)"
         tracker.end_runs_of(pool.pids, error=error)
         raise
+
+
+def _in_turn(
+    settings: Settings, tracker: recording.Tracker, dataset: Any, splits: Mapping[str, Split]
+) -> Iterator[str]:
+    """The adjectives in order, each looked at just before its turn; one whose model another
+    live job is training at that moment (``store.training_elsewhere``) is put off until the
+    others are done, then waited for as usual. Jobs side by side that need the same models
+    (rows H and I) thus train different ones instead of one job idling while the other trains."""
+    if not (settings.tracking.reuse and stores_model(settings)):
+        yield from splits
+        return
+    put_off = []
+    for adjective in splits:
+        key = adjective_key(settings, dataset, settings.modality, settings.model, adjective)
+        holder = store.training_elsewhere(tracker, key, lease=settings.tracking.claim_lease)
+        if holder is None:
+            yield adjective
+        else:
+            log.info("  %s: run %s trains its model; taken after the others", adjective, holder)
+            put_off.append(adjective)
+    yield from put_off
 
 
 _WORKER: dict[str, Any] = {}  # what a worker process opened once: see _open_in_worker

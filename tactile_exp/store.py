@@ -7,7 +7,9 @@ finds either. The files are ``artifacts``' folders.
 
 Jobs side by side (Hydra's joblib or submitit launcher) train each model once: the RUNNING run
 that trains a key is its claim, and a job that needs the key while an older live run claims it
-waits for that run's model (``await_trained``) instead of training it again.
+waits for that run's model (``await_trained``) instead of training it again; a job puts such an
+adjective off until its others are done (``training_elsewhere``), and so trains the models that
+no job has started yet in the meantime.
 """
 
 from __future__ import annotations
@@ -166,6 +168,17 @@ def await_trained(
             )
         termination.check()
         time.sleep(poll)
+
+
+def training_elsewhere(tracker: Tracker, key: str, *, lease: float) -> str | None:
+    """The live run that is training the model of ``key`` right now: the oldest live claim while
+    no run has finished it (None when it is trained or unclaimed). A job whose next adjective's
+    model is being trained elsewhere takes its other adjectives first (``experiment``), so two
+    jobs that need the same models share their training instead of one waiting."""
+    claim, _ = _oldest_live_claim(tracker, key, lease)  # claims first: see await_trained
+    if claim is None or find_trained(tracker, key) is not None:
+        return None
+    return claim.info.run_id
 
 
 def reusable(

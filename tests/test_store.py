@@ -662,6 +662,61 @@ def test_two_jobs_side_by_side_train_a_shared_model_once(
         assert _scores(mlflow_uri, concurrent) == _scores(mlflow_uri, reference), name
 
 
+@pytest.mark.job
+@pytest.mark.slow  # two tiny jobs
+def test_an_adjective_trained_elsewhere_is_put_off_and_the_others_trained_meanwhile(
+    tiny_config, mlflow_uri, caplog
+):
+    two = "[hard,soft]"
+    reference = _children(mlflow_uri, run(settings_from_config(tiny_config(REPEAT, two))).run_id)
+    key = reference["hard"].data.tags["training_key"]
+
+    # This test holds hard's claim, as a job side by side that trains it would: the job takes
+    # soft first, then waits for hard; the claim is released (without a model) once it does.
+    tracker = Tracker(mlflow_uri, "put_off")
+    held = tracker.client.create_run(
+        tracker.experiment_id, tags={"training_key": key, **process_tags()}
+    ).info.run_id
+    seen: dict[str, str] = {}
+
+    def release_when_waited_for() -> None:
+        deadline = time.monotonic() + 120
+        while len(tracker.claims(key)) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)  # the job's own run for hard is its second claim: its turn came
+        soft = tracker.client.search_runs(
+            [tracker.experiment_id], "tags.adjective = 'soft' and tags.run_level = 'child'"
+        )
+        seen["soft"] = ",".join(r.info.status for r in soft)
+        tracker.client.set_terminated(held, "FAILED")
+
+    releaser = threading.Thread(target=release_when_waited_for)
+    releaser.start()
+    with caplog.at_level("INFO", logger="tactile_exp"):
+        job = run(settings_from_config(tiny_config([*REPEAT, "tracking.experiment=put_off"], two)))
+    releaser.join()
+
+    assert seen["soft"] == "FINISHED"  # trained while hard's model was being trained elsewhere
+    assert f"hard: run {held} trains its model; taken after the others" in caplog.text
+    assert f"training key {key}: waiting for run {held}" in caplog.text
+    assert list(job.results) == ["hard", "soft"]  # the job's order, whichever ran first
+    children = {
+        a: tracker.client.get_run(r.info.run_id)
+        for a, r in _children_in(tracker, job.run_id).items()
+    }
+    assert children["soft"].info.start_time < children["hard"].info.start_time
+    assert "reused_from" not in children["hard"].data.tags  # released without a model: trained
+    for adjective, ref in reference.items():  # results equal the job's run in the usual order
+        assert _scores(mlflow_uri, children[adjective]) == _scores(mlflow_uri, ref), adjective
+
+
+def _children_in(tracker: Tracker, parent_id: str) -> dict[str, object]:
+    runs = tracker.client.search_runs(
+        [tracker.experiment_id],
+        f"tags.mlflow.parentRunId = '{parent_id}' and tags.run_level = 'child'",
+    )
+    return {r.data.tags["adjective"]: r for r in runs}
+
+
 def _parent_combine(tracker: Tracker, child) -> str:
     parent = tracker.client.get_run(child.data.tags["mlflow.parentRunId"])
     return parent.data.params["combine"]
