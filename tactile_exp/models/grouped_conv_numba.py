@@ -30,9 +30,9 @@ once-transposed training set was slower than ``to_layout``; ``to_layout`` channe
 all the batch's instances (9.3 against 8.3 ms a batch, each call on another batch than the last:
 on the same batch again it had looked 2x faster, from rows left in cache); software prefetches of
 the next rows, in ``to_layout`` (1.1-1.3x slower) and in the weight gradients (1.03-1.28x faster
-alone, ~4% of a step); a step as 2 to 8 smaller batches (1.14-1.75x slower); conv2's and conv3's weight and input
-gradients in one walk through time, so that each layer's input is read once (no faster: 42.6
-against 42.0 ms a step; results bit-identical).
+alone, ~4% of a step); a step as 2 to 8 smaller batches (1.14-1.75x slower); conv2's and
+conv3's weight and input gradients in one walk through time, so that each layer's input is read
+once (no faster: 42.6 against 42.0 ms a step; results bit-identical).
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
