@@ -687,6 +687,9 @@ def test_an_adjective_trained_elsewhere_is_put_off_and_the_others_trained_meanwh
             [tracker.experiment_id], "tags.adjective = 'soft' and tags.run_level = 'child'"
         )
         seen["soft"] = ",".join(r.info.status for r in soft)
+        waiting = f"training key {key}: waiting for run {held}"
+        while waiting not in caplog.text and time.monotonic() < deadline:
+            time.sleep(0.05)  # released once the job waits for it, not before
         tracker.client.set_terminated(held, "FAILED")
 
     releaser = threading.Thread(target=release_when_waited_for)
@@ -697,7 +700,7 @@ def test_an_adjective_trained_elsewhere_is_put_off_and_the_others_trained_meanwh
 
     assert seen["soft"] == "FINISHED"  # trained while hard's model was being trained elsewhere
     assert f"hard: run {held} trains its model; taken after the others" in caplog.text
-    assert f"training key {key}: waiting for run {held}" in caplog.text
+    assert f"training key {key}: waiting for run {held}" in caplog.text  # not released earlier
     assert list(job.results) == ["hard", "soft"]  # the job's order, whichever ran first
     children = {
         a: tracker.client.get_run(r.info.run_id)
