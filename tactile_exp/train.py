@@ -1,7 +1,8 @@
 """The SGD loop shared by every trained model (T3), device resolution and seeding.
 
-Kept free of the model registry (losses arrive as callables) so models can import it without an
-import cycle; the two-stage schedule that uses it lives in ``models/sgd.py`` (``SGDModel``).
+Kept free of the model registry (a batch's loss arrives as a callable) so models can import it
+without an import cycle; the two-stage schedule that uses it lives in ``models/sgd.py``
+(``SGDModel``).
 """
 
 from __future__ import annotations
@@ -12,8 +13,6 @@ from collections.abc import Callable, Collection
 import numpy as np
 import torch
 from torch import nn
-
-Loss = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (scores, y01) -> mean loss
 
 
 def resolve_device(device: str) -> torch.device:
@@ -79,12 +78,11 @@ def validate_losses(*, loss: str, pretrain_loss: str | None, known_losses: Colle
 
 
 def sgd_epochs(
-    forward: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    objective: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor],
     params: list[nn.Parameter],
     X: torch.Tensor,
     y: torch.Tensor,
     *,
-    loss: Loss,
     epochs: int,
     batch_size: int,
     lr: float,
@@ -94,8 +92,9 @@ def sgd_epochs(
 ) -> list[float]:
     """Minibatch SGD with momentum over shuffled ``X``; returns the mean loss of each epoch.
 
-    ``forward(X, index)`` gives the scores of the rows ``index`` of ``X``: a model may read
-    them in place rather than from a copied batch (the compiled haptic ConvNet does)."""
+    ``objective(X, y, index)`` gives the mean loss of the rows ``index`` of ``X``: a model may
+    read them in place rather than from a copied batch, and compute the loss with its scores
+    (the compiled haptic ConvNet does both)."""
     optimiser = torch.optim.SGD(params, lr=lr, momentum=momentum)
     n = len(X)
     curve = []
@@ -104,7 +103,7 @@ def sgd_epochs(
         total = torch.zeros((), device=X.device)
         for start in range(0, n, batch_size):
             index = order[start : start + batch_size]
-            value = loss(forward(X, index), y[index])
+            value = objective(X, y, index)
             optimiser.zero_grad(set_to_none=True)
             value.backward()
             optimiser.step()

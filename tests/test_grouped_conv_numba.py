@@ -26,12 +26,15 @@ SHAPES = [
 ]
 
 
-def _forward_and_grads(net: GroupedTemporalConvNet, x: torch.Tensor, impl: str):
+def _forward_and_grads(
+    net: GroupedTemporalConvNet, x: torch.Tensor, impl: str, weights: torch.Tensor | None = None
+):
     net.impl = impl
     net.zero_grad()
     out = net(x)
     # A non-uniform upstream gradient, so every output position is weighted differently.
-    (out * torch.linspace(-1.0, 1.0, out.shape[1])).sum().backward()
+    weights = torch.linspace(-1.0, 1.0, out.shape[1]) if weights is None else weights
+    (out * weights).sum().backward()
     return out.detach(), [p.grad.clone() for p in net.parameters()]
 
 
@@ -61,59 +64,21 @@ def test_compiled_forward_and_gradients_equal_torch(
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4, msg=name)
 
 
-def _scores_and_grads(net: GroupedTemporalConvNet, head: torch.nn.Linear, x, y, impl: str):
-    net.impl = impl
-    net.zero_grad()
-    head.zero_grad()
-    scores = net.scores(x, head)
-    (scores * y).sum().backward()
-    return scores.detach(), [p.grad.clone() for p in [*net.parameters(), *head.parameters()]]
-
-
-@pytest.mark.parametrize(
-    ("n", "channels", "steps", "groups", "kernels", "widths", "strides"), SHAPES
-)
-def test_compiled_scores_and_gradients_equal_torch(
-    n, channels, steps, groups, kernels, widths, strides
-):
-    """The training step's fused path (conv stack + classification layer in the layout)."""
-    torch.manual_seed(n + 1)
-    net = GroupedTemporalConvNet(
-        channels, steps, groups=groups, kernel_sizes=kernels, widths=widths, strides=strides
-    )
-    head = torch.nn.Linear(net.n_features, 1)
-    with torch.no_grad():
-        for bias in [*net.biases, head.bias]:
-            bias.uniform_(-0.1, 0.1)
-    x, y = torch.randn(n, channels, steps), torch.randn(n)
-    scores_c, grads_c = _scores_and_grads(net, head, x, y, "compiled")
-    scores_t, grads_t = _scores_and_grads(net, head, x, y, "torch")
-    assert scores_c.shape == (n,)
-    torch.testing.assert_close(scores_c, scores_t, rtol=1e-5, atol=1e-5)
-    names = [name for name, _ in net.named_parameters()] + ["head.weight", "head.bias"]
-    for name, g_c, g_t in zip(names, grads_c, grads_t, strict=True):
-        assert g_t.abs().max() > 0, name
-        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4, msg=name)
-
-
 def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
     """Layout arrays are reused across steps (``scratch``): two forwards in flight, each
     backward run afterwards in reverse order, still give each batch torch's gradients."""
     torch.manual_seed(3)
     net = GroupedTemporalConvNet(32, 150)
-    head = torch.nn.Linear(net.n_features, 1)
-    batches = [(torch.randn(40, 32, 150), torch.randn(40)) for _ in range(2)]
-    expected = [_scores_and_grads(net, head, x, y, "torch")[1] for x, y in batches]
+    batches = [(torch.randn(40, 32, 150), torch.randn(40, net.n_features)) for _ in range(2)]
+    expected = [_forward_and_grads(net, x, "torch", y)[1] for x, y in batches]
     net.impl = "compiled"
     with torch.no_grad():  # a forward without backward frees its arrays for reuse at once
         net(batches[0][0])
-    pending = [(net.scores(x, head) * y).sum() for x, y in batches]
+    pending = [(net(x) * y).sum() for x, y in batches]
     for value, want in zip(pending[::-1], expected[::-1], strict=True):
         net.zero_grad()
-        head.zero_grad()
         value.backward()
-        got = [p.grad for p in [*net.parameters(), *head.parameters()]]
-        for g_c, g_t in zip(got, want, strict=True):
+        for g_c, g_t in zip([p.grad for p in net.parameters()], want, strict=True):
             torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
 
 
@@ -165,26 +130,6 @@ def test_huge_page_buffers_are_private_aligned_and_never_handed_out_while_a_view
     assert scratch(1024, 1024).ctypes.data == address
 
 
-def test_training_scores_read_the_batch_rows_in_place_like_a_copied_batch():
-    """SGD steps pass the whole input and the batch's row index (no ``X[index]`` copy): scores
-    and every gradient equal torch's on the copied rows, in the index's order."""
-    torch.manual_seed(5)
-    net = GroupedTemporalConvNet(64, 30, kernel_sizes=(5, 3, 3))
-    head = torch.nn.Linear(net.n_features, 1)
-    X, rows = torch.randn(50, 64, 30), torch.tensor([41, 3, 17, 3, 49, 0, 22])
-    y = torch.randn(len(rows))
-    want_scores, want = _scores_and_grads(net, head, X[rows], y, "torch")
-    net.impl = "compiled"
-    net.zero_grad()
-    head.zero_grad()
-    scores = net.scores(X, head, rows=rows)
-    (scores * y).sum().backward()
-    torch.testing.assert_close(scores.detach(), want_scores, rtol=1e-5, atol=1e-5)
-    got = [p.grad for p in [*net.parameters(), *head.parameters()]]
-    for g_c, g_t in zip(got, want, strict=True):
-        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
-
-
 @pytest.mark.parametrize("parts", [[(0, 3)], [(0, 1), (1, 3)], [(0, 2), (2, 3)]])
 def test_to_layout_fills_every_block_whatever_the_split(parts):
     """Rows 37 of a batch padded to 48 lanes: whole tiles, the last instance one value at a
@@ -209,14 +154,15 @@ def test_warm_up_compiles_every_signature_a_training_step_and_scoring_use():
     code = """
 import numpy as np
 from tactile_exp.data.layout import Instances
-from tactile_exp.models import MODELS, grouped_conv_numba as kernels, linear_sgd
+from tactile_exp.models import MODELS, convnet_tiles, grouped_conv_numba as kernels, linear_sgd
 from tactile_exp.models.schedule import Schedule
 
 def signatures():
-    return {name: len(f.signatures) for module in (kernels, linear_sgd)
+    return {name: len(f.signatures) for module in (kernels, convnet_tiles, linear_sgd)
             for name, f in vars(module).items() if hasattr(f, "signatures")}
 
 kernels.warm_up()
+convnet_tiles.warm_up()
 linear_sgd.warm_up()
 before = signatures()
 rng = np.random.default_rng(0)
@@ -228,10 +174,10 @@ head = model.head()
 head.fit(Instances(model.transform(X), y, np.arange(40), np.arange(40)))
 head.decision_function(model.transform(X[:5]))
 entry = ("stack_forward", "stack_backward", "to_layout", "from_layout", "into_layout",
-         "_epoch", "_gram_epoch")  # called from Python; the others compile inside them
+         "_tiles", "_epoch", "_gram_epoch")  # called from Python; the others compile inside them
 print(before == signatures(), *(before[name] for name in entry))
 """
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout.split()
-    assert out == ["True"] + ["1"] * 7  # the entry points compiled by warm_up, nothing after it
+    assert out == ["True"] + ["1"] * 8  # the entry points compiled by warm_up, nothing after it

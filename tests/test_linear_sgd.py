@@ -20,11 +20,10 @@ def _train(impl: str, X, y, *, loss: str, gram: bool | None = None, **schedule):
     generator = torch.Generator().manual_seed(5)
     if impl == "torch":
         curve = sgd_epochs(
-            lambda F, index: layer(F[index]).squeeze(1),
+            lambda F, y, index: LOSSES[loss](layer(F[index]).squeeze(1), y[index]),
             list(layer.parameters()),
             X,
             y,
-            loss=LOSSES[loss],
             generator=generator,
             **schedule,
         )

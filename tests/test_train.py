@@ -68,11 +68,10 @@ def test_sgd_epochs_lowers_the_loss_and_reports_each_epoch():
     layer = torch.nn.Linear(5, 1)
     reported = []
     curve = sgd_epochs(
-        lambda X, index: layer(X[index]).squeeze(1),
+        lambda X, y, index: LOSSES["logistic"](layer(X[index]).squeeze(1), y[index]),
         list(layer.parameters()),
         X,
         y,
-        loss=LOSSES["logistic"],
         epochs=15,
         batch_size=64,
         lr=0.1,
@@ -94,11 +93,10 @@ def test_sgd_epochs_batch_larger_than_data_is_one_full_batch():
     before = loss(layer(X).squeeze(1), y)
     gw, gb = torch.autograd.grad(before, [layer.weight, layer.bias])
     curve = sgd_epochs(
-        lambda X, index: layer(X[index]).squeeze(1),
+        lambda X, y, index: loss(layer(X[index]).squeeze(1), y[index]),
         list(layer.parameters()),
         X,
         y,
-        loss=loss,
         epochs=1,
         batch_size=1000,
         lr=0.5,

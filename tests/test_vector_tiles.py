@@ -28,6 +28,13 @@ def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
 
 
 @numba.njit
+def _tap_dots(d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc, acc_at, acc_row,
+              lanes):  # fmt: skip
+    vt.tap_dots(d.reshape(-1), d_at, d_row, d_step, x.reshape(-1), x_at, taps, count, x_step,
+                steps, acc.reshape(-1), acc_at, acc_row, lanes)  # fmt: skip
+
+
+@numba.njit
 def _tanh_lanes(x, at, count, scale, shift):
     vt.tanh_lanes(x.reshape(-1), at, count, np.float32(scale), np.float32(shift))
 
@@ -123,6 +130,31 @@ def test_tap_sums_are_the_same_at_every_vector_width():
     np.testing.assert_array_equal(np.array(bits, np.uint32), out.view(np.uint32))
 
 
+@pytest.mark.parametrize("count", range(1, vt.DOT_TAPS + 1))
+def test_tap_dots_add_each_rows_dot_products_with_each_taps_rows(count):
+    """Four gradient rows (every 3rd step of a (rows, steps, lanes) block) against the input
+    rows of ``count`` taps (stride 2 in steps), over 2 vectors of lanes of 3: added to what the
+    accumulator holds, nothing else written."""
+    rng = np.random.default_rng(count)
+    lanes, width, steps = 2 * vt.WIDTH, 3 * vt.WIDTH, 7
+    d = rng.standard_normal((vt.ROWS, 3 * steps, width), dtype=np.float32)
+    x = rng.standard_normal((2 * steps + 9, width), dtype=np.float32)
+    taps = np.array([5, 0, 8, 2, 1, 3][:count], np.int64) * width  # the taps' first rows
+    acc = rng.standard_normal((vt.ROWS + 1, 9), dtype=np.float32)
+    before = acc.copy()
+    _tap_dots(d, 0, d.shape[1] * width, 3 * width, x, 0, taps, count, 2 * width, steps, acc,
+              9 + 1, 9, lanes)  # fmt: skip
+    expected = before.astype(np.float64)
+    for r in range(vt.ROWS):
+        for q in range(count):
+            rows = x[taps[q] // width + 2 * np.arange(steps), :lanes].astype(np.float64)
+            expected[1 + r, 1 + q] += (d[r, 3 * np.arange(steps), :lanes] * rows).sum()
+    np.testing.assert_allclose(acc, expected, rtol=1e-5, atol=1e-5)
+    untouched = np.ones_like(acc, bool)
+    untouched[1:, 1 : 1 + count] = False
+    np.testing.assert_array_equal(acc[untouched], before[untouched])
+
+
 def test_tanh_lanes_is_tanh_and_the_sigmoid_within_the_approximations_error():
     x = np.linspace(-12, 12, 50 * vt.WIDTH, dtype=np.float32)
     x[7] = np.nan
@@ -158,6 +190,8 @@ def test_tiles_refuse_arrays_they_cannot_address():
         _tap_sums(w.astype(np.float64), x, order, 1, out, x.shape[1], bias, vt.WIDTH, vt.PLAIN, out)
     with pytest.raises(TypingError, match="taps must be an int64 array"):
         _tap_sums(w, x, order.astype(np.int32), 1, out, x.shape[1], bias, vt.WIDTH, vt.PLAIN, out)
+    with pytest.raises(TypingError, match="tap_dots: taps must be an int64 array"):
+        _tap_dots(w, 0, 1, 1, x, 0, order.astype(np.int32), 1, 1, 1, out, 0, 1, vt.WIDTH)
 
 
 @pytest.mark.parametrize(

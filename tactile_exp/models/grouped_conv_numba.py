@@ -5,9 +5,9 @@ GFLOP/s on CPU (bench/bench_haptic_cnn.py). Here activations live as (groups, ch
 with the batch innermost and contiguous, so every filter tap is one vector FMA over the batch. The
 batch axis is padded to a multiple of ``LANES`` with zero gradients in the padding, so the kernels
 never handle a tail. Forward and backward of the whole three-layer stack run inside one
-``torch.autograd.Function``: one transpose into the layout at entry, one out of it at exit. The
-training step (``GroupedConvHead``) also runs the one-output classification layer in the layout, so
-neither conv3's features nor their gradient are transposed (a step's CPU time -19%, measured). A
+``torch.autograd.Function``: one transpose into the layout at entry, one out of it at exit. It
+gives the features a fitted net scores with (``transform``, ``decision_function``) and trains
+with a loss the tiled training step does not compute (``convnet_tiles``: the usual path). A
 task runs every layer of a range of signal groups (``stack_forward``, ``stack_backward``), the
 backward's inner gradients in per-task buffers. The convolutions' inner loops are
 register tiles (``vector_tiles``): an output step's taps feed ``ROWS`` output channels whose
@@ -330,12 +330,9 @@ def _conv_grad_input(grad, w, stride, y, grad_x):  # pragma: no cover (compiled)
 
 
 @numba.njit(**_JIT)
-def stack_forward(
-    x, w1, b1, w2, b2, w3, b3, strides, a1, a2, a3, head_w, partial, start, stop
-):  # pragma: no cover
+def stack_forward(x, w1, b1, w2, b2, w3, b3, strides, a1, a2, a3, start, stop):  # pragma: no cover
     """conv1..conv3 + ReLU of groups ``start`` to ``stop`` (x: (groups, c_in, T, n_pad) -> a1,
-    a2, a3), and, when ``head_w`` has rows, each group's share of the classification layer:
-    partial[g, m] = sum_r head_w[g, r] a3[g].flat[r, m].
+    a2, a3).
 
     A group runs all layers, so a layer's output is read by the next while still in
     cache (a group's activations are ~3 MB at batch 1000), not fetched back from memory.
@@ -346,44 +343,22 @@ def stack_forward(
         _conv_relu(x[g], w1[g], b1[g], strides[0], a1[g])
         _conv_relu(a1[g], w2[g], b2[g], strides[1], a2[g])
         _conv_relu(a2[g], w3[g], b3[g], strides[2], a3[g])
-        if head_w.shape[0]:
-            h, out = a3[g].reshape(-1, a3.shape[3]), partial[g]
-            out[:] = 0.0
-            for r in range(h.shape[0]):
-                wr, src = head_w[g, r], h[r]
-                for m in range(out.shape[0]):
-                    out[m] += wr * src[m]
 
 
 @numba.njit(**_JIT)
 def stack_backward(
-    x, a1, a2, a3, w1, w2, w3, strides, head_w, grad_scores, grad3, work, grads, slot, start, stop
+    x, a1, a2, a3, w1, w2, w3, strides, grad3, work, grads, slot, start, stop
 ):  # pragma: no cover (compiled)
-    """Every parameter's gradient of groups ``start`` to ``stop``, each group running all layers
-    backwards.
-
-    conv3's gradient comes from the classification layer (``head_w`` has rows: grad3[g].flat[r,
-    m] = head_w[g, r] grad_scores[m], masked by conv3's ReLU, and head_w's gradient goes to
-    grads[6]) or is given in ``grad3``. ``work[.][slot]`` is this task's pair of gradient buffers
-    (conv2's and conv1's output gradients), reused from group to group while in cache.
-    ``grads`` = (w1, b1, w2, b2, w3, b3, head_w) gradients, per group.
+    """Every parameter's gradient of groups ``start`` to ``stop`` from conv3's output gradient
+    ``grad3``, each group running all layers backwards. ``work[.][slot]`` is this task's pair of
+    gradient buffers (conv2's and conv1's output gradients), reused from group to group while in
+    cache. ``grads`` = (w1, b1, w2, b2, w3, b3) gradients, per group.
     """
-    gw1, gb1, gw2, gb2, gw3, gb3, gwh = grads
+    gw1, gb1, gw2, gb2, gw3, gb3 = grads
     work2, work1 = work
     for g in range(start, stop):
         d3 = grad3[g]
-        if head_w.shape[0]:
-            h, d = a3[g].reshape(-1, a3.shape[3]), d3.reshape(-1, a3.shape[3])
-            for r in range(h.shape[0]):
-                wr, src, dst = head_w[g, r], h[r], d[r]
-                total = np.float32(0.0)
-                for m in range(src.shape[0]):
-                    v = src[m]
-                    total += v * grad_scores[m]
-                    dst[m] = wr * grad_scores[m] * np.float32(v > 0)
-                gwh[g, r] = total
-        else:
-            _mask(d3, a3[g])
+        _mask(d3, a3[g])
         d2, d1 = work2[slot], work1[slot]
         _grad_weight_bias(d3, a2[g], strides[2], gw3[g], gb3[g])
         _conv_grad_input(d3, w3[g], strides[2], a2[g], d2)
@@ -481,10 +456,9 @@ def _forward(
     params: Sequence[torch.Tensor],
     groups: int,
     strides: tuple[int, int, int],
-    head_weight: torch.Tensor | None,
-) -> tuple[list[np.ndarray], np.ndarray]:
+) -> list[np.ndarray]:
     """The input rows ``rows`` and each layer's ReLU output in the layout (groups, channels,
-    time, n_pad), and each group's share of the head's scores (groups, n_pad) (none: 0 rows)."""
+    time, n_pad)."""
     if x.requires_grad:
         raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
     announce_compile(__name__)
@@ -502,18 +476,11 @@ def _forward(
             n_pad,
         )
         acts.append(h)
-    if head_weight is None:
-        head_w, partial = np.empty((0, 0), np.float32), np.empty((0, 0), np.float32)
-    else:
-        head_w, partial = head_weight.detach().numpy().reshape(groups, -1), scratch(groups, n_pad)
     per_group = [_per_group(p.detach().numpy(), groups) for p in params]
     _in_parallel(
-        lambda _, a, b: stack_forward(
-            acts[0], *per_group, strides, *acts[1:], head_w, partial, a, b
-        ),
-        groups,
+        lambda _, a, b: stack_forward(acts[0], *per_group, strides, *acts[1:], a, b), groups
     )
-    return acts, partial
+    return acts
 
 
 def _backward(
@@ -522,12 +489,8 @@ def _backward(
     weights: Sequence[torch.Tensor],
     groups: int,
     strides: tuple[int, int, int],
-    head_weight: torch.Tensor | None = None,
-    grad_scores: np.ndarray | None = None,
 ) -> list[torch.Tensor]:
-    """Gradients of (w1, b1, w2, b2, w3, b3) and, with a head, of its weight (last). conv3's
-    gradient is ``grad3`` or, with a head, computed from ``grad_scores`` into ``grad3``."""
-    n_pad = acts[0].shape[3]
+    """Gradients of (w1, b1, w2, b2, w3, b3) from conv3's output gradient ``grad3``."""
     threads = numba.get_num_threads()
     work = tuple(scratch(threads, *a.shape[1:]) for a in (acts[2], acts[1]))
     grads = []  # in parameter order and shape; the kernel writes them through per-group views
@@ -535,17 +498,8 @@ def _backward(
         grads += [np.empty(weight.shape, np.float32), np.empty(weight.shape[0], np.float32)]
     w = [_per_group(weight.detach().numpy(), groups) for weight in weights]
     gw = [_per_group(g, groups) for g in grads]
-    if head_weight is None:
-        head_w, gwh = np.empty((0, 0), np.float32), np.empty((0, 0), np.float32)
-        grad_scores = np.empty(n_pad, np.float32)
-    else:
-        head_w = head_weight.detach().numpy().reshape(groups, -1)
-        gwh = np.empty_like(head_w)
-        grads.append(gwh)
     _in_parallel(
-        lambda slot, a, b: stack_backward(
-            *acts, *w, strides, head_w, grad_scores, grad3, work, (*gw, gwh), slot, a, b
-        ),
+        lambda slot, a, b: stack_backward(*acts, *w, strides, grad3, work, tuple(gw), slot, a, b),
         groups,
     )
     return [torch.from_numpy(g) for g in grads]
@@ -556,7 +510,7 @@ class GroupedConvStack(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, x, groups: int, strides: Sequence[int], *params: torch.Tensor):
-        acts, _ = _forward(x, torch.arange(len(x)), params, groups, tuple(strides), None)
+        acts = _forward(x, torch.arange(len(x)), params, groups, tuple(strides))
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         result = np.empty((len(x), h.shape[0]), np.float32)
         _in_parallel(lambda _, a, b: from_layout(h, len(x), result, a, b), -(-len(h) // LANES))
@@ -577,41 +531,6 @@ class GroupedConvStack(torch.autograd.Function):
         return (None, None, None, *grads)
 
 
-class GroupedConvHead(torch.autograd.Function):
-    """The conv stack and a linear classification layer (1 output) on its flattened conv3, for
-    the rows ``rows`` of (N, C, T) input -> scores (len(rows),). Training runs through this one:
-    the batch is read in place (``X[index]`` would first copy it: 19 MB per step of the default
-    net), and conv3 never leaves the layout: no transpose of the features out, nor of their
-    gradient in."""
-
-    @staticmethod
-    def forward(ctx, x, rows, groups, strides, head_weight, head_bias, *params: torch.Tensor):
-        acts, partial = _forward(x, rows, params, groups, tuple(strides), head_weight)
-        scores = partial.sum(axis=0, dtype=np.float32)[: len(rows)] + head_bias.item()
-        ctx.acts, ctx.groups, ctx.strides = acts, groups, tuple(strides)
-        ctx.save_for_backward(head_weight, *params[0::2])
-        return torch.from_numpy(scores)
-
-    @staticmethod
-    @once_differentiable
-    def backward(ctx, grad_scores):
-        acts = ctx.acts
-        del ctx.acts
-        head_weight, *weights = ctx.saved_tensors
-        padded = np.zeros(acts[0].shape[3], np.float32)  # zero gradient in the padding columns
-        padded[: len(grad_scores)] = grad_scores.numpy()
-        grad3 = scratch(*acts[-1].shape)
-        *grads, grad_head = _backward(
-            acts, grad3, weights, ctx.groups, ctx.strides, head_weight, padded
-        )
-        grad_head_bias = torch.from_numpy(padded.sum(dtype=np.float32, keepdims=True))
-        return (None, None, None, None, grad_head.view(1, -1), grad_head_bias, *grads)
-
-
-def _interleaved(weights: Sequence[torch.Tensor], biases: Sequence[torch.Tensor]) -> list:
-    return [p for pair in zip(weights, biases, strict=True) for p in pair]
-
-
 def grouped_conv_stack(
     x: torch.Tensor,
     weights: Sequence[torch.Tensor],
@@ -621,40 +540,17 @@ def grouped_conv_stack(
     strides: Sequence[int],
 ) -> torch.Tensor:
     """The compiled three-layer grouped conv + ReLU stack; same result as ``F.conv1d`` + relu."""
-    params = _interleaved(weights, biases)
+    params = [p for pair in zip(weights, biases, strict=True) for p in pair]
     return GroupedConvStack.apply(x.contiguous(), groups, tuple(strides), *params)
-
-
-def grouped_conv_head(
-    x: torch.Tensor,
-    weights: Sequence[torch.Tensor],
-    biases: Sequence[torch.Tensor],
-    head: torch.nn.Linear,
-    *,
-    groups: int,
-    strides: Sequence[int],
-    rows: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """Scores of ``head`` (one output) on the compiled stack's flattened conv3 for the rows
-    ``rows`` of ``x`` (None: all); same result as
-    ``head(grouped_conv_stack(x[rows], ...)).squeeze(1)``."""
-    params = _interleaved(weights, biases)
-    rows = torch.arange(len(x)) if rows is None else rows.to(torch.int64)
-    return GroupedConvHead.apply(
-        x.contiguous(), rows, groups, tuple(strides), head.weight, head.bias, *params
-    )
 
 
 def warm_up() -> None:
     """Compile every kernel of this module (into numba's cache) on a toy batch, with the types a
-    job's calls have: the fused training step, the stack's forward and its backward."""
+    job's calls have: the stack's forward and its backward."""
     torch.manual_seed(0)
     groups, strides = 2, (2, 2, 2)
     x = torch.randn(3, 2 * groups, 40)
     weights = [torch.randn(4 * groups, c_in, 5, requires_grad=True) for c_in in (2, 4, 4)]
     biases = [torch.zeros(4 * groups, requires_grad=True) for _ in weights]
     out = grouped_conv_stack(x, weights, biases, groups=groups, strides=strides)
-    head = torch.nn.Linear(out.shape[1], 1)
     out.sum().backward()
-    scores = grouped_conv_head(x, weights, biases, head, groups=groups, strides=strides)
-    scores.sum().backward()

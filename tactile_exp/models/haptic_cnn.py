@@ -6,8 +6,8 @@ layers through numba kernels over a batch-innermost layout (``grouped_conv_numba
 magnitude faster on CPU; ``impl="torch"`` runs the plain ``F.conv1d(groups=...)``; ``impl="auto"``
 (default) picks compiled on CPU and torch on GPU (the kernels are CPU only). Both agree to float
 rounding (tests; ``bench/bench_haptic_cnn.py`` measures the speed). Training goes through
-``GroupedTemporalConvNet.scores``, which compiled runs the classification layer inside the kernels'
-layout too (``HapticCNN._train_scores``).
+``GroupedTemporalConvNet.batch_loss``, which compiled runs the whole step, the classification layer
+and the loss included, in tiles of instances that stay in cache (``convnet_tiles``).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from tactile_exp.data.layout import InstanceSpec
+from tactile_exp.models.losses import LOSSES
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import IMPLS, SGDModel
@@ -93,25 +94,29 @@ class GroupedTemporalConvNet(nn.Module):
             self.impl == "auto" and x.device.type == "cpu" and not x.requires_grad
         )
 
-    def scores(
-        self, x: torch.Tensor, head: nn.Linear, *, rows: torch.Tensor | None = None
+    def batch_loss(
+        self, x: torch.Tensor, y: torch.Tensor, head: nn.Linear, loss: str, rows: torch.Tensor
     ) -> torch.Tensor:
-        """``head(self(x[rows])).squeeze(1)`` for a one-output ``head`` (``rows`` None: all):
-        the training step's forward. Compiled, one fused autograd Function reads the rows in
-        place (no copied batch) and keeps conv3 inside the kernels' tasks."""
-        if head.out_features != 1 or not self._compiled(x):
-            return head(self(x if rows is None else x[rows])).squeeze(1)
-        from tactile_exp.models.grouped_conv_numba import grouped_conv_head  # numba: lazy
+        """``LOSSES[loss](head(self(x[rows])).squeeze(1), y[rows])``: the training step's loss.
+        Compiled, for a one-output ``head`` and a loss the tiled step computes, one pass
+        computes it and its gradients a tile of instances at a time in cache, reading the rows
+        in place (``convnet_tiles``)."""
+        if head.out_features == 1 and self._compiled(x):
+            from tactile_exp.models import convnet_tiles  # numba: lazy
 
-        return grouped_conv_head(
-            x.float(),
-            self.weights,
-            self.biases,
-            head,
-            groups=self.groups,
-            strides=self.strides,
-            rows=rows,
-        )
+            if loss in convnet_tiles.LOSSES:
+                return convnet_tiles.tiled_loss(
+                    x.float(),
+                    rows,
+                    y,
+                    self.weights,
+                    self.biases,
+                    head,
+                    loss=loss,
+                    groups=self.groups,
+                    strides=self.strides,
+                )
+        return LOSSES[loss](head(self(x[rows])).squeeze(1), y[rows])
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self._compiled(x):
@@ -143,7 +148,7 @@ class HapticCNN(SGDModel):
     """
 
     accepts = ("signals",)  # (n, channels, time): groups must divide channels (check_input)
-    body_kernels = ("tactile_exp.models.grouped_conv_numba",)
+    body_kernels = ("tactile_exp.models.grouped_conv_numba", "tactile_exp.models.convnet_tiles")
     # Fitted: conv3's (channels, time), the map each row of ``transform`` flattens (Fig. 6)
     conv3_shape_: tuple[int, int] | None = None
 
@@ -210,7 +215,7 @@ class HapticCNN(SGDModel):
         self.conv3_shape_ = net.out_shape
         return net, net.n_features
 
-    def _train_scores(
-        self, body: nn.Module, classifier: nn.Linear
-    ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
-        return lambda X, index: body.scores(X, classifier, rows=index)
+    def _train_objective(
+        self, body: nn.Module, classifier: nn.Linear, loss: str
+    ) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
+        return lambda X, y, index: body.batch_loss(X, y, classifier, loss, index)

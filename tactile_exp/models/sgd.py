@@ -139,6 +139,14 @@ class SGDModel(Model):
         overrides it."""
         return lambda X, index: classifier(body(X[index])).squeeze(1)
 
+    def _train_objective(
+        self, body: nn.Module, classifier: nn.Linear, loss: str
+    ) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
+        """Stage 1's mean loss of a batch, (X, y, batch's row index) -> loss: ``loss`` on
+        ``_train_scores``; a body that computes the loss with its scores overrides it."""
+        scores, loss_fn = self._train_scores(body, classifier), LOSSES[loss]
+        return lambda X, y, index: loss_fn(scores(X, index), y[index])
+
     def _tensor(self, X: np.ndarray) -> torch.Tensor:
         if self.body_ is None or self.classifier_ is None:
             raise RuntimeError(f"{type(self).__name__} is not fitted; call fit first")
@@ -221,11 +229,10 @@ class SGDModel(Model):
             )
         else:
             train_loss = sgd_epochs(
-                self._train_scores(body_, classifier_),
+                self._train_objective(body_, classifier_, stage1_loss),
                 [*body_.parameters(), *classifier_.parameters()],
                 Xt,
                 yt,
-                loss=LOSSES[stage1_loss],
                 epochs=schedule.epochs,
                 report=report,
                 **common,
@@ -267,12 +274,12 @@ class SGDModel(Model):
 
             if self.impl == "compiled" or loss in linear_sgd.LOSSES:
                 return linear_sgd.linear_sgd_epochs(self.classifier_, F, y, loss=loss, **schedule)
+        loss_fn, layer = LOSSES[loss], self.classifier_
         return sgd_epochs(
-            lambda features, index: self.classifier_(features[index]).squeeze(1),
+            lambda features, y, index: loss_fn(layer(features[index]).squeeze(1), y[index]),
             list(self.classifier_.parameters()),
             F,
             y,
-            loss=LOSSES[loss],
             **schedule,
         )
 

@@ -265,3 +265,99 @@ def tanh_lanes(typingctx, x, at, count, scale, shift):  # noqa: ARG001
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+DOT_TAPS = 5  # taps per tap_dots call: ROWS x DOT_TAPS running sums in registers
+
+
+def _hsum(builder, vector):
+    """The sum of a vector's lanes as a fixed tree: halves added until one lane is left."""
+    i32, width = ir.IntType(32), WIDTH
+    while width > 1:
+        width //= 2
+        halves = [
+            builder.shuffle_vector(
+                vector, vector, ir.Constant(ir.VectorType(i32, width), list(range(k, k + width)))
+            )
+            for k in (0, width)
+        ]
+        vector = builder.fadd(*halves)
+    return builder.extract_element(vector, ir.Constant(i32, 0))
+
+
+@intrinsic
+def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc,
+             acc_at, acc_row, lanes):  # fmt: skip  # noqa: ARG001
+    """For the ``ROWS`` rows r and the taps q < ``count`` (at most ``DOT_TAPS``):
+    ``acc[acc_at + r * acc_row + q] += sum_m sum_{s < steps} d[d_at + r * d_row + s * d_step
+    + m] * x[x_at + taps[q] + s * x_step + m]`` over the lanes m < ``lanes`` (a multiple of
+    ``WIDTH``): a convolution's weight gradient, its output-gradient rows against the input rows
+    of each tap. Each vector of lanes sums over the steps in registers (one ``fma`` per term,
+    steps in order), the vectors are added in order, then their lanes in a fixed tree: the same
+    result at any thread count."""
+    _check("tap_dots", d=d, x=x, acc=acc)
+    if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
+        raise TypingError(f"tap_dots: taps must be an int64 array, got {taps}")
+    i = types.intp
+    sig = types.void(d, i, i, i, x, i, taps, i, i, i, acc, i, i, i)
+
+    def codegen(context, builder, signature, args):
+        d_p, x_p = (
+            builder.gep(_data(context, builder, signature.args[n], args[n]), [args[n + 1]])
+            for n in (0, 4)
+        )
+        acc_p = builder.gep(_data(context, builder, signature.args[10], args[10]), [args[11]])
+        taps_p = _data(context, builder, signature.args[6], args[6])
+        d_r, d_s, q_n, x_s, s_n, a_r, m_n = (args[n] for n in (2, 3, 7, 8, 9, 12, 13))
+        fma, zero = _fma(builder), ir.Constant(_VEC, [0.0] * WIDTH)
+
+        def const(n):
+            return ir.Constant(q_n.type, n)
+
+        def at(base, offset):
+            return builder.bitcast(builder.gep(base, [offset]), _VEC.as_pointer())
+
+        sums = [cgutils.alloca_once(builder, _VEC) for _ in range(ROWS * DOT_TAPS)]
+        totals = [cgutils.alloca_once(builder, _VEC) for _ in range(ROWS * DOT_TAPS)]
+
+        def body(taps_n):
+            offsets = [builder.load(builder.gep(taps_p, [const(q)])) for q in range(taps_n)]
+            used = [r * DOT_TAPS + q for r in range(ROWS) for q in range(taps_n)]
+            for slot in used:
+                builder.store(zero, totals[slot])
+            with cgutils.for_range_slice(builder, const(0), m_n, const(WIDTH)) as (m, _):
+                for slot in used:
+                    builder.store(zero, sums[slot])
+                with cgutils.for_range(builder, s_n) as loop:
+                    s = loop.index
+                    ds = [
+                        builder.load(
+                            at(d_p, builder.add(builder.add(builder.mul(const(r), d_r),
+                                                            builder.mul(s, d_s)), m)),
+                            align=4,
+                        )
+                        for r in range(ROWS)
+                    ]  # fmt: skip
+                    row = builder.add(builder.mul(s, x_s), m)
+                    for q in range(taps_n):
+                        xv = builder.load(at(x_p, builder.add(offsets[q], row)), align=4)
+                        for r in range(ROWS):
+                            slot = sums[r * DOT_TAPS + q]
+                            builder.store(builder.call(fma, [ds[r], xv, builder.load(slot)]), slot)
+                for r in range(ROWS):
+                    for q in range(taps_n):
+                        slot = totals[r * DOT_TAPS + q]
+                        part = builder.load(sums[r * DOT_TAPS + q])
+                        builder.store(builder.fadd(builder.load(slot), part), slot)
+            for r in range(ROWS):
+                for q in range(taps_n):
+                    where = builder.gep(acc_p, [builder.add(builder.mul(const(r), a_r), const(q))])
+                    total = _hsum(builder, builder.load(totals[r * DOT_TAPS + q]))
+                    builder.store(builder.fadd(builder.load(where), total), where)
+
+        for taps_n in range(1, DOT_TAPS + 1):
+            with builder.if_then(builder.icmp_signed("==", q_n, const(taps_n))):
+                body(taps_n)
+        return context.get_dummy_value()
+
+    return sig, codegen

@@ -1,0 +1,384 @@
+"""The haptic ConvNet's training step, compiled (numba), a tile of instances at a time in cache.
+
+At batch 1000 a layer's activations are 10-40 MB: a step that runs each layer over the whole
+batch writes them to memory in the forward and reads them back in the backward, and the
+step is bound by memory bandwidth (``grouped_conv_numba``'s layout, bench/bench_roofline.py).
+Here a step runs forward, loss and backward for ``TILE_LANES`` instances at once: their input
+gathered from the training set (rows read in place), every layer of every signal group, the
+classification layer, each instance's loss and its gradient, and back through all layers, with
+the tile's activations (~6 MB) in cache. Nothing of a tile outlives it but its share of the
+gradients. The loss is computed inside (``LOSSES``: the registered losses this step computes);
+a step with another loss runs through autograd (``grouped_conv_numba``).
+
+Layout per tile: (groups, channels, time, lanes), the tile's instances innermost and
+contiguous as in ``grouped_conv_numba``, with ``pad`` zero rows before and after each channel's
+time axis, so every output step of a convolution reads all its taps (zeros at the edges add
+exactly 0) and each layer's taps are one fixed offset table. Output channels are padded to a
+multiple of ``ROWS`` with zero weights (``tap_sums`` computes ``ROWS`` rows at a time); their
+gradients are dropped. The forward and the input gradients sum their taps in the order
+``grouped_conv_numba`` does, so they match it bit for bit; the weight gradients sum each tile
+over its steps and lanes (``tap_dots``), then the tiles in order: results do not depend on the
+thread count, and differ from the whole-batch kernels by float rounding.
+
+Measured against the whole-batch kernels through autograd (one thread, batch 1000 of 5,300
+instances, fresh batch per call, interleaved in one process: bench/bench_roofline.py): a step
+1.35x faster at 64 lanes; 16 lanes (a tile in L2) was no faster than the whole batch, 32 slower
+than 64, 128 as fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from torch.autograd.function import once_differentiable
+
+from tactile_exp.models.grouped_conv_numba import _in_parallel, conv_out_len
+from tactile_exp.models.linear_sgd import _loss_slope
+from tactile_exp.models.numba_setup import announce_compile, numba
+from tactile_exp.models.vector_tiles import (
+    DOT_TAPS,
+    GATED,
+    RELU,
+    ROWS,
+    WIDTH,
+    tap_dots,
+    tap_sums,
+    transpose_tile,
+)
+
+TILE_LANES = 64  # instances per tile: see the module docstring for 16, 32 and 128
+LOSSES = ("logistic", "hinge")  # the registered losses the step computes inside
+# Reassociation lets the reductions over lanes vectorise; no nnan/ninf, so NaNs propagate.
+_JIT = dict(nogil=True, cache=True, fastmath={"reassoc", "contract", "nsz", "arcp"},
+            error_model="numpy")  # fmt: skip
+
+
+@numba.njit(**_JIT)
+def _gather(X, rows, m0, n, groups, pad, a0):  # pragma: no cover (compiled)
+    """a0[c % groups, c // groups, pad + t, m] = X[rows[m0 + m], c, t] for the tile's ``n``
+    instances (zeros in the lanes past them), in ``WIDTH`` x ``WIDTH`` register transposes."""
+    channels, steps = X.shape[1], X.shape[2]
+    lanes, tp, c_in = a0.shape[3], a0.shape[2], a0.shape[1]
+    flat_x, flat0 = X.reshape(-1), a0.reshape(-1)
+    tiled = steps - steps % WIDTH
+    starts = np.empty(WIDTH, np.int64)
+    for c in range(channels):
+        base = (((c % groups) * c_in + c // groups) * tp + pad) * lanes
+        for l0 in range(0, lanes, WIDTH):
+            first = 0
+            if l0 + WIDTH <= n:
+                for w in range(WIDTH):
+                    starts[w] = (rows[m0 + l0 + w] * channels + c) * steps
+                for t in range(0, tiled, WIDTH):
+                    transpose_tile(flat_x, starts, t, flat0, base + l0, lanes)
+                first = tiled
+            for t in range(first, steps):
+                for m in range(l0, l0 + WIDTH):
+                    flat0[base + t * lanes + m] = (
+                        X[rows[m0 + m], c, t] if m < n else np.float32(0.0)
+                    )
+
+
+@numba.njit(**_JIT)
+def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, bwts, jtaps,
+           acts, grads, hinge, gws, gbs, ghw, ghb, losses, partial, gs, zeros, start,
+           stop):  # fmt: skip  # pragma: no cover (compiled)
+    """Tiles ``start`` to ``stop`` of the batch ``rows``: each tile's summed loss into
+    ``losses[tile]`` and its share of every gradient into ``gws``, ``gbs``, ``ghw``, ``ghb``
+    (indexed by tile). ``geo[layer]``: kernel, stride, left padding, input and output channels
+    (padded), input and output steps. ``acts``, ``grads``, ``partial``, ``gs``: this task's
+    buffers (``acts``' and ``grads``' padding rows zero)."""
+    lanes, n_batch = acts[0].shape[3], len(rows)
+    scale = np.float32(1.0) / np.float32(n_batch)  # the mean's gradient
+    c3, t3 = geo[2, 4], geo[2, 6]
+    for tile in range(start, stop):
+        m0 = tile * lanes
+        n = min(lanes, n_batch - m0)
+        _gather(X, rows, m0, n, groups, pad, acts[0])
+        for g in range(groups):
+            for layer in range(3):
+                k, s, left, cin, cout = (
+                    geo[layer, 0],
+                    geo[layer, 1],
+                    geo[layer, 2],
+                    geo[layer, 3],
+                    geo[layer, 4],
+                )
+                a_in, a_out = acts[layer][g], acts[layer + 1][g]
+                tpo = a_out.shape[1]
+                fin, fout = a_in.reshape(-1), a_out.reshape(-1)
+                wf, bf, at_w = ws[layer].reshape(-1), bs[layer].reshape(-1), g * cout * cin * k
+                for t in range(geo[layer, 6]):
+                    for e in range(0, cout, ROWS):
+                        tap_sums(wf, at_w + e * cin * k, cin * k, 1, fin,
+                                 (pad - left + t * s) * lanes, ftaps[layer], cin * k, fout,
+                                 (e * tpo + pad + t) * lanes, tpo * lanes, bf, g * cout + e,
+                                 lanes, RELU, fout)  # fmt: skip
+            part, a3 = partial[g], acts[3][g]
+            part[:] = 0.0
+            for e in range(c3):
+                for t in range(t3):
+                    w, row = hw[g, e, t], a3[e, pad + t]
+                    for m in range(lanes):
+                        part[m] += w * row[m]
+        total = np.float32(0.0)
+        gs[:] = 0.0
+        for m in range(n):
+            score = partial[0, m]
+            for g in range(1, groups):  # the groups' shares in order, then the bias
+                score += partial[g, m]
+            f = sign[rows[m0 + m]]
+            loss, slope = _loss_slope(f * (score + hb), hinge, np.float32(1.0))
+            total += loss
+            gs[m] = f * slope * scale
+        losses[tile], ghb[tile] = total, gs.sum()
+        for g in range(groups):
+            a3, d3 = acts[3][g], grads[2]
+            for e in range(c3):
+                for t in range(t3):
+                    w, src, dst = hw[g, e, t], a3[e, pad + t], d3[e, pad + t]
+                    acc = np.float32(0.0)
+                    for m in range(lanes):
+                        v = src[m]
+                        acc += v * gs[m]
+                        dst[m] = w * gs[m] * np.float32(v > 0)  # ReLU's backward: see _JIT
+                    ghw[tile, g, e, t] = acc
+            for layer in range(2, -1, -1):
+                k, s, left, cin, cout = (
+                    geo[layer, 0],
+                    geo[layer, 1],
+                    geo[layer, 2],
+                    geo[layer, 3],
+                    geo[layer, 4],
+                )
+                a_in, d_out = acts[layer][g], grads[layer]
+                tpi, tpo, steps = a_in.shape[1], d_out.shape[1], geo[layer, 6]
+                fin, fd, gw = a_in.reshape(-1), d_out.reshape(-1), gws[layer][tile, g].reshape(-1)
+                gw[:] = 0.0
+                for e in range(0, cout, ROWS):
+                    for i in range(cin):
+                        for j in range(0, k, DOT_TAPS):
+                            tap_dots(fd, (e * tpo + pad) * lanes, tpo * lanes, lanes, fin,
+                                     (i * tpi + pad - left) * lanes, jtaps[j:],
+                                     min(DOT_TAPS, k - j), s * lanes, steps, gw,
+                                     (e * cin + i) * k + j, cin * k, lanes)  # fmt: skip
+                for e in range(cout):
+                    gbs[layer][tile, g, e] = d_out[e, pad : pad + steps].sum()
+                if layer == 0:  # the input needs no gradient
+                    continue
+                fdin, bw = grads[layer - 1].reshape(-1), bwts[layer].reshape(-1)
+                most = bwts[layer].shape[3]
+                for si in range(geo[layer, 5]):  # each input step from the taps that reach it
+                    phase, u = si % s, si // s
+                    for i in range(0, cin, ROWS):
+                        tap_sums(bw, ((g * s + phase) * cin + i) * most, most, 1, fd,
+                                 (pad + u) * lanes, btaps[layer][phase], bcount[layer][phase],
+                                 fdin, (i * tpi + pad + si) * lanes, tpi * lanes, zeros, 0,
+                                 lanes, GATED, fin)  # fmt: skip
+
+
+# (role, shape, padding) -> its buffer; role: the task and which activation or gradient it holds
+_BUFFERS: dict[tuple[tuple[int, int], tuple[int, ...], int], np.ndarray] = {}
+
+
+def _buffer(role: tuple[int, int], shape: tuple[int, ...], pad: int) -> np.ndarray:
+    """The zeroed buffer of ``shape`` for ``role``, kept from step to step: the kernels never
+    write its ``pad`` rows at either end of time, so they stay zero."""
+    if (role, shape, pad) not in _BUFFERS:
+        _BUFFERS[role, shape, pad] = np.zeros(shape, np.float32)
+    return _BUFFERS[role, shape, pad]
+
+
+def _ceil(n: int, multiple: int) -> int:
+    return -(-n // multiple) * multiple
+
+
+class _Plan:
+    """One step's arguments to ``_tiles`` for the given weights: shapes, padded weights and the
+    offset tables of every layer's taps."""
+
+    def __init__(
+        self,
+        channels: int,
+        steps: int,
+        weights: Sequence[np.ndarray],
+        biases: Sequence[np.ndarray],
+        head: np.ndarray,
+        groups: int,
+        strides: Sequence[int],
+    ) -> None:
+        lanes = TILE_LANES
+        kernels = [w.shape[2] for w in weights]
+        self.pad = pad = max(kernels)  # >= every layer's padding on either side
+        lengths, c_in, self.geo = [steps], channels // groups, np.zeros((3, 7), np.int64)
+        ins, outs = [], []
+        for layer, (w, stride) in enumerate(zip(weights, strides, strict=True)):
+            k = w.shape[2]
+            lengths.append(conv_out_len(lengths[-1], k, stride))
+            ins.append(c_in if layer == 0 else outs[-1])
+            outs.append(_ceil(w.shape[0] // groups, ROWS))
+            self.geo[layer] = (k, stride, k // 2, ins[-1], outs[-1], lengths[-2], lengths[-1])
+        rows = [t + 2 * pad for t in lengths]
+        self.shapes = [(groups, c, t, lanes) for c, t in zip([c_in, *outs], rows, strict=True)]
+        self.ws, self.bs, self.ftaps, self.btaps, self.bcount, self.bwts = [], [], [], [], [], []
+        for layer, (w, b, stride) in enumerate(zip(weights, biases, strides, strict=True)):
+            k, cout, cin = w.shape[2], w.shape[0] // groups, w.shape[1]
+            w = w.reshape(groups, cout, cin, k)
+            padded = np.zeros((groups, outs[layer], ins[layer], k), np.float32)
+            padded[:, :cout, :cin] = w
+            self.ws.append(padded)
+            self.bs.append(np.zeros((groups, outs[layer]), np.float32))
+            self.bs[-1][:, :cout] = b.reshape(groups, cout)
+            taps = [(i * rows[layer] + j) * lanes for i in range(ins[layer]) for j in range(k)]
+            self.ftaps.append(np.array(taps, np.int64))
+            # The input gradient at step u * stride + phase: the output rows t = u + delta that
+            # read it, in the order grouped_conv_numba sums them (tap j, then channel o).
+            taps = np.zeros((stride, cout * k), np.int64)
+            count = np.zeros(stride, np.int64)
+            wts = np.zeros((groups, stride, ins[layer], cout * k), np.float32)
+            for phase in range(stride):
+                reaching = [j for j in range(k) if (phase + k // 2 - j) % stride == 0]
+                for q, (j, o) in enumerate((j, o) for j in reaching for o in range(cout)):
+                    delta = (phase + k // 2 - j) // stride
+                    taps[phase, q] = (o * rows[layer + 1] + delta) * lanes
+                    wts[:, phase, :cin, q] = w[:, o, :, j]
+                count[phase] = len(reaching) * cout
+            self.btaps.append(taps)
+            self.bcount.append(count)
+            self.bwts.append(wts)
+        c3 = weights[2].shape[0] // groups
+        self.hw = np.zeros((groups, outs[2], lengths[3]), np.float32)
+        self.hw[:, :c3] = head.reshape(groups, c3, lengths[3])
+        self.jtaps = np.arange(pad, dtype=np.int64) * lanes
+        self.sizes = [(w.shape[0] // groups, w.shape[1]) for w in weights]
+
+
+def train_step(
+    X: np.ndarray,
+    rows: np.ndarray,
+    sign: np.ndarray,
+    weights: Sequence[np.ndarray],
+    biases: Sequence[np.ndarray],
+    head_weight: np.ndarray,
+    head_bias: float,
+    *,
+    groups: int,
+    strides: Sequence[int],
+    loss: str,
+) -> tuple[float, list[np.ndarray]]:
+    """The mean ``loss`` of the rows ``rows`` of ``X`` (n, C, T) with labels ``sign`` (+-1 per
+    row of ``X``) and its gradients: (w1, b1, w2, b2, w3, b3, head weight, head bias), shaped
+    as the parameters."""
+    if loss not in LOSSES:
+        raise ValueError(f"the tiled ConvNet step computes {', '.join(LOSSES)}, not {loss!r}")
+    plan = _Plan(X.shape[1], X.shape[2], weights, biases, head_weight, groups, strides)
+    tiles = -(-len(rows) // TILE_LANES)
+    threads = numba.get_num_threads()
+    acts, grads = [], []
+    for slot in range(threads):
+        acts.append(tuple(_buffer((slot, k), s, plan.pad) for k, s in enumerate(plan.shapes)))
+        grads.append(
+            tuple(_buffer((slot, 4 + k), s[1:], plan.pad) for k, s in enumerate(plan.shapes[1:]))
+        )
+    gws = tuple(np.empty((tiles, *w.shape), np.float32) for w in plan.ws)
+    gbs = tuple(np.empty((tiles, *b.shape), np.float32) for b in plan.bs)
+    ghw, ghb = np.empty((tiles, *plan.hw.shape), np.float32), np.empty(tiles, np.float32)
+    losses = np.empty(tiles, np.float32)
+    partial = [np.empty((groups, TILE_LANES), np.float32) for _ in range(threads)]
+    gs = [np.empty(TILE_LANES, np.float32) for _ in range(threads)]
+    zeros = np.zeros(ROWS, np.float32)
+    announce_compile(__name__)
+
+    def task(slot: int, start: int, stop: int) -> None:
+        _tiles(X, rows, sign, groups, plan.pad, plan.geo, tuple(plan.ws), tuple(plan.bs),
+               plan.hw, np.float32(head_bias), tuple(plan.ftaps), tuple(plan.btaps),
+               tuple(plan.bcount), tuple(plan.bwts), plan.jtaps, acts[slot], grads[slot],
+               loss == "hinge", gws, gbs, ghw, ghb, losses, partial[slot], gs[slot], zeros,
+               start, stop)  # fmt: skip
+
+    _in_parallel(task, tiles)
+    out = []
+    for (cout, cin), gw, gb in zip(plan.sizes, gws, gbs, strict=True):
+        k = gw.shape[4]
+        out.append(np.ascontiguousarray(gw.sum(axis=0)[:, :cout, :cin]).reshape(-1, cin, k))
+        out.append(np.ascontiguousarray(gb.sum(axis=0)[:, :cout]).reshape(-1))
+    c3 = plan.sizes[2][0]
+    out.append(np.ascontiguousarray(ghw.sum(axis=0)[:, :c3]).reshape(1, -1))
+    out.append(ghb.sum(keepdims=True))
+    return float(losses.sum(dtype=np.float64)) / len(rows), out
+
+
+class TiledStep(torch.autograd.Function):
+    """The mean loss of a batch, its gradients computed with it by ``train_step`` and handed to
+    autograd (scaled by the loss's incoming gradient) in the backward."""
+
+    @staticmethod
+    def forward(ctx, X, rows, y, loss, groups, strides, head_weight, head_bias, *params):
+        sign = (2.0 * y - 1.0).numpy()
+        value, grads = train_step(
+            X.numpy(),
+            rows.numpy(),
+            sign,
+            [p.detach().numpy() for p in params[0::2]],
+            [p.detach().numpy() for p in params[1::2]],
+            head_weight.detach().numpy(),
+            float(head_bias),
+            groups=groups,
+            strides=strides,
+            loss=loss,
+        )
+        ctx.grads = [torch.from_numpy(g) for g in grads]
+        return torch.tensor(value, dtype=torch.float32)
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, grad):
+        *convs, grad_head, grad_bias = (g * grad for g in ctx.grads)
+        del ctx.grads
+        return (None,) * 6 + (grad_head, grad_bias, *convs)
+
+
+def tiled_loss(
+    X: torch.Tensor,
+    rows: torch.Tensor,
+    y: torch.Tensor,
+    weights: Sequence[torch.Tensor],
+    biases: Sequence[torch.Tensor],
+    head: torch.nn.Linear,
+    *,
+    loss: str,
+    groups: int,
+    strides: Sequence[int],
+) -> torch.Tensor:
+    """``LOSSES[loss](head(grouped_conv_stack(X[rows])).squeeze(1), y[rows])`` for float32 CPU
+    ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, with its gradient: one
+    compiled pass per step (the rows read in place)."""
+    if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(X):
+        raise IndexError(f"tiled ConvNet step: rows must lie in [0, {len(X)}), the rows of X")
+    params = [p for pair in zip(weights, biases, strict=True) for p in pair]
+    return TiledStep.apply(
+        X.contiguous(),
+        rows.to(torch.int64).contiguous(),
+        y.to(torch.float32),
+        loss,
+        groups,
+        tuple(strides),
+        head.weight,
+        head.bias,
+        *params,
+    )
+
+
+def warm_up() -> None:
+    """Compile the step (into numba's cache) on a toy batch with the types a job's calls have,
+    both losses."""
+    torch.manual_seed(0)
+    groups, x = 2, torch.randn(3, 4, 40)
+    weights = [torch.randn(4 * groups, c_in, 5, requires_grad=True) for c_in in (2, 4, 4)]
+    biases = [torch.zeros(4 * groups, requires_grad=True) for _ in weights]
+    head = torch.nn.Linear(4 * groups * 5, 1)
+    for loss in LOSSES:
+        tiled_loss(x, torch.arange(3), torch.tensor([0.0, 1.0, 1.0]), weights, biases, head,
+                   loss=loss, groups=groups, strides=(2, 2, 2)).backward()  # fmt: skip

@@ -1,0 +1,157 @@
+"""The tiled training step equals torch's ConvNet, classification layer and loss, with gradients.
+
+The first call in a run compiles the step (~20 s) into the session's ``NUMBA_CACHE_DIR``
+(conftest); every later test reuses it.
+"""
+
+import numpy as np
+import pytest
+import torch
+from numba import config as numba_config
+from numba import get_num_threads, set_num_threads
+
+from tactile_exp.models import convnet_tiles
+from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
+from tactile_exp.models.losses import LOSSES
+
+# (instances, batch, channels, steps, groups, kernel_sizes, widths, strides)
+SHAPES = [
+    (300, 150, 32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2)),  # the default net, 2 full tiles + 22
+    (9, 1, 32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2)),  # a batch of one
+    (20, 7, 64, 41, 32, (3, 9, 5), (1, 8, 4), (3, 1, 2)),  # kernel 9 > DOT_TAPS, widths 1 and 8
+    (80, 70, 6, 20, 1, (9, 3, 5), (8, 1, 4), (1, 3, 2)),  # one group of 6 channels
+    (17, 17, 32, 23, 32, (9, 5, 3), (8, 3, 1), (2, 3, 1)),  # widths 3 and 1: padded to 4
+    (5, 5, 32, 4, 32, (3, 3, 3), (4, 4, 4), (3, 3, 3)),  # lengths 4 -> 2 -> 1 -> 1
+]
+
+
+def _net(channels, steps, groups, kernels, widths, strides, seed):
+    torch.manual_seed(seed)
+    net = GroupedTemporalConvNet(
+        channels, steps, groups=groups, kernel_sizes=kernels, widths=widths, strides=strides
+    )
+    head = torch.nn.Linear(net.n_features, 1)
+    with torch.no_grad():  # non-zero biases, so the bias path and the ReLU mask both matter
+        for bias in [*net.biases, head.bias]:
+            bias.uniform_(-0.1, 0.1)
+    return net, head
+
+
+def _loss_and_grads(net, head, X, y, rows, loss, impl):
+    net.impl = impl
+    net.zero_grad()
+    head.zero_grad()
+    value = net.batch_loss(X, y, head, loss, rows)
+    value.backward()
+    return value.item(), [p.grad.clone() for p in [*net.parameters(), *head.parameters()]]
+
+
+@pytest.mark.parametrize("loss", convnet_tiles.LOSSES)
+@pytest.mark.parametrize(
+    ("n", "batch", "channels", "steps", "groups", "kernels", "widths", "strides"), SHAPES
+)
+def test_tiled_loss_and_gradients_equal_torch(
+    loss, n, batch, channels, steps, groups, kernels, widths, strides
+):
+    """Every parameter's gradient, the rows read in place (a repeated row included), against
+    torch's convolutions, classification layer and loss on the copied rows."""
+    net, head = _net(channels, steps, groups, kernels, widths, strides, seed=n)
+    X, y = torch.randn(n, channels, steps), (torch.rand(n) > 0.5).float()
+    rows = torch.randperm(n)[:batch]
+    rows[-1] = rows[0]
+    got, grads_c = _loss_and_grads(net, head, X, y, rows, loss, "compiled")
+    want, grads_t = _loss_and_grads(net, head, X, y, rows, loss, "torch")
+    assert got == pytest.approx(want, rel=1e-5, abs=1e-6)
+    names = [name for name, _ in net.named_parameters()] + ["head.weight", "head.bias"]
+    for name, g_c, g_t in zip(names, grads_c, grads_t, strict=True):
+        assert g_t.abs().max() > 0, name
+        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-5, msg=name)
+
+
+def test_the_loss_is_the_registered_one_and_its_gradient_that_of_the_mean():
+    """Margins far past softplus's threshold and inside hinge's zero: the value is the mean of
+    the registered loss, and scaling the loss scales every gradient (autograd's chain)."""
+    net, head = _net(32, 40, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2), seed=1)
+    with torch.no_grad():
+        head.weight.mul_(40.0)
+    X, y = torch.randn(100, 32, 40), (torch.rand(100) > 0.5).float()
+    rows = torch.arange(100)
+    for loss in convnet_tiles.LOSSES:
+        net.impl = "compiled"
+        value = net.batch_loss(X, y, head, loss, rows)
+        scores = head(net(X)).squeeze(1)
+        assert value.item() == pytest.approx(LOSSES[loss](scores, y).item(), rel=1e-5)
+        assert (scores.abs() > 20).any()  # softplus's linear branch is taken
+        net.zero_grad()
+        head.zero_grad()
+        (3.0 * net.batch_loss(X, y, head, loss, rows)).backward()
+        tripled = head.weight.grad.clone()
+        head.zero_grad()
+        net.batch_loss(X, y, head, loss, rows).backward()
+        torch.testing.assert_close(tripled, 3.0 * head.weight.grad)
+
+
+@pytest.mark.skipif(numba_config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")
+def test_results_do_not_depend_on_the_thread_count():
+    """Each tile's share of the gradients is summed on its own, the tiles in order: one thread
+    and two give the same bits."""
+    net, head = _net(32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2), seed=2)
+    X, y = torch.randn(400, 32, 150), (torch.rand(400) > 0.5).float()
+    rows = torch.randperm(400)[:333]
+    threads = get_num_threads()
+    try:
+        set_num_threads(1)
+        one = _loss_and_grads(net, head, X, y, rows, "logistic", "compiled")
+        set_num_threads(2)
+        two = _loss_and_grads(net, head, X, y, rows, "logistic", "compiled")
+    finally:
+        set_num_threads(threads)
+    assert one[0] == two[0]
+    for a, b in zip(one[1], two[1], strict=True):
+        assert torch.equal(a, b)
+
+
+def test_other_losses_train_through_the_compiled_stack_and_autograd():
+    """A registered loss the step does not compute: the conv stack's kernels with torch's
+    classification layer and loss, the same gradients as torch's convolutions."""
+    net, head = _net(32, 30, 32, (5, 3, 3), (4, 4, 4), (2, 2, 2), seed=3)
+    X, y = torch.randn(50, 32, 30), (torch.rand(50) > 0.5).float()
+    rows = torch.randperm(50)[:20]
+    hinge = LOSSES["hinge"]
+    with LOSSES.temporary(squared_hinge=lambda s, y: hinge(s, y) ** 2):
+        got, grads_c = _loss_and_grads(net, head, X, y, rows, "squared_hinge", "compiled")
+        want, grads_t = _loss_and_grads(net, head, X, y, rows, "squared_hinge", "torch")
+    assert got == pytest.approx(want, rel=1e-5)
+    for g_c, g_t in zip(grads_c, grads_t, strict=True):
+        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-5)
+
+
+def test_rows_outside_the_input_are_refused():
+    net, head = _net(32, 30, 32, (5, 3, 3), (4, 4, 4), (2, 2, 2), seed=4)
+    X, y = torch.randn(10, 32, 30), torch.zeros(10)
+    with pytest.raises(IndexError, match=r"rows must lie in \[0, 10\)"):
+        convnet_tiles.tiled_loss(
+            X, torch.tensor([3, 10]), y, net.weights, net.biases, head,
+            loss="logistic", groups=32, strides=(2, 2, 2),
+        )  # fmt: skip
+
+
+def test_a_tiles_padding_rows_stay_zero_across_steps():
+    """The kernels never write the padding of the kept buffers: after steps on other data
+    (NaN-free), the next step still equals torch's."""
+    net, head = _net(32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2), seed=5)
+    convnet_tiles._BUFFERS.clear()  # only this net's buffers below
+    for seed in range(2):
+        torch.manual_seed(seed)
+        X, y = 5 * torch.randn(70, 32, 150), (torch.rand(70) > 0.5).float()
+        rows = torch.arange(70)
+        got, grads_c = _loss_and_grads(net, head, X, y, rows, "hinge", "compiled")
+    want, grads_t = _loss_and_grads(net, head, X, y, rows, "hinge", "torch")
+    assert got == pytest.approx(want, rel=1e-5)
+    for g_c, g_t in zip(grads_c, grads_t, strict=True):
+        torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-5)
+    pad = 5  # the largest kernel: every time axis's padding on each side
+    kept = list(convnet_tiles._BUFFERS.values())
+    assert kept and np.isfinite(got)
+    for buffer in kept:  # time is the second axis from the end
+        assert not buffer[..., :pad, :].any() and not buffer[..., -pad:, :].any()
