@@ -4,10 +4,10 @@ Everything is measured in one run, the two implementations interleaved, so the r
 on a shared machine. Prints:
 1. the first-use compile time (a fresh numba cache in a subprocess) and the cached load time;
 2. training throughput (forward, backward, SGD step; default architecture, batch 1000) of both
-   through the same step as ``HapticCNN`` (``net.scores``: compiled, the conv stack and the
-   classification layer are one fused Function), in wall and CPU time per step, and the ratio;
-3. each compiled layer kernel's GFLOP/s at batch 1000, the whole fused forward + backward's
-   (one task per signal group runs every layer), beside torch's dense matmul (sgemm) rate;
+   through the same step as ``HapticCNN`` (``net.batch_loss``: compiled, the whole step, loss
+   included, in tiles of instances in cache), in wall and CPU time per step, and the ratio;
+3. each whole-batch layer kernel's GFLOP/s at batch 1000 (the stack that scores), the tiled
+   training step's, beside torch's dense matmul (sgemm) rate;
 4. each implementation's full epoch on full-size tensors (5,300 x 32 x 150, the paper's training
    set for one adjective) and the Table I row I estimate it implies: 24 adjectives x (200 epochs
    + 100 fine-tuning epochs + the T4 head on combined units) + setup, measured, not assumed, plus
@@ -43,7 +43,6 @@ from sklearn.metrics import roc_auc_score
 from tactile_exp.data.layout import Instances
 from tactile_exp.models import grouped_conv_numba as kernels
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet, HapticCNN
-from tactile_exp.models.losses import LOSSES
 from tactile_exp.models.schedule import Schedule
 
 N_TRAIN, CHANNELS, STEPS, BATCH = 5300, 32, 150, 1000
@@ -61,9 +60,9 @@ def sgd_step(impl: str) -> Callable[[], None]:
     optimiser = torch.optim.SGD([*net.parameters(), *head.parameters()], lr=0.01, momentum=0.9)
     X, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
 
-    def step() -> None:  # HapticCNN's stage 1 step: net.scores (compiled: fused with the head)
+    def step() -> None:  # HapticCNN's stage 1 step (compiled: in tiles, the loss included)
         rows = torch.randperm(N_TRAIN)[:BATCH]
-        loss = LOSSES["logistic"](net.scores(X, head, rows=rows), y[rows])
+        loss = net.batch_loss(X, y, head, "logistic", rows)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
@@ -175,15 +174,15 @@ def kernel_rates(repeats: int) -> None:
         c_in, length = 4, t_out
     net_gflop = sum(layer_gflop)
     step_gflop = 3 * net_gflop - layer_gflop[0]  # forward, weight grads, input grads but conv1's
-    x = torch.randn(N_TRAIN, CHANNELS, STEPS)
+    x, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
     net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
     head = torch.nn.Linear(net.n_features, 1)
 
-    def fused() -> None:
-        net.scores(x, head, rows=torch.randperm(N_TRAIN)[:BATCH]).sum().backward()
+    def tiled() -> None:
+        net.batch_loss(x, y, head, "logistic", torch.randperm(N_TRAIN)[:BATCH]).backward()
 
-    whole = best_time(fused, (), repeats)
-    print(f"   {'whole stack + head, fwd + bwd':32s} {rate(step_gflop, whole)}")
+    whole = best_time(tiled, (), repeats)
+    print(f"   {'tiled training step, fwd + bwd':32s} {rate(step_gflop, whole)}")
     x, net = torch.randn(BATCH, CHANNELS, STEPS), GroupedTemporalConvNet(CHANNELS, STEPS)
     net.impl = "torch"
     with torch.no_grad():
@@ -195,12 +194,15 @@ def kernel_rates(repeats: int) -> None:
 
 
 def compile_time(figures: dict[str, float]) -> float:
-    """Seconds for the first compiled forward + backward with an empty numba cache (fresh
-    process), then with the cache that run left."""
+    """Seconds for the first compiled forward + backward (the scoring stack's and the tiled
+    training step's) with an empty numba cache (fresh process), then with the cache that run
+    left."""
     code = (
         "import time, torch; from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet; "
         "net = GroupedTemporalConvNet(32, 20); x = torch.randn(3, 32, 20); "
+        "head = torch.nn.Linear(net.n_features, 1); y = torch.tensor([0.0, 1.0, 1.0]); "
         "start = time.perf_counter(); net(x).sum().backward(); "
+        "net.batch_loss(x, y, head, 'logistic', torch.arange(3)).backward(); "
         "print(time.perf_counter() - start)"
     )
     with tempfile.TemporaryDirectory() as cache:

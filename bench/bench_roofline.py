@@ -10,10 +10,11 @@ of them alike; best of ``--repeats``):
   batched over the 32 groups; the LSTM's input projection over a chunk's time steps; its
   recurrence per step): the rate BLAS itself reaches at those shapes, per core;
 - the haptic ConvNet at the paper's size (32 signals x 150 steps, kernels 5, widths 4, strides
-  2, batches of 1000 of a 5,300-instance training set, rows read in place; each call takes the
-  next batch of one shuffled epoch, as training does, so no call finds its batch in cache):
-  forward (conv stack + classification layer), backward (all gradients) and the two together,
-  and each layer's weight-gradient kernel alone over all groups;
+  2, batches of 1000 of a 5,300-instance training set; each call takes the next batch of one
+  shuffled epoch, as training does, so no call finds its batch in cache): the forward that
+  scores (the whole-batch conv stack + classification layer, no gradient) and the training step,
+  forward + backward (``batch_loss``: in tiles of instances, the loss included; a ``--before``
+  revision without it runs its own training step);
 - the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): forward and backward through
   ``lstm_last_hidden``.
 
@@ -22,21 +23,21 @@ of them alike; best of ``--repeats``):
   each ConvNet pass against the lowest: the conv kernels' inner loop (``_combine``: 4 rows x 20
   taps, conv2's, one register tile) on rows that stay in L1 (256 lanes) and at the batch's 1008
   lanes (rows in L2), one thread; and memory: a 64 MB copy's bytes per second times the pass's
-  FLOPs per byte of the traffic it cannot avoid when every layer's output is kept for the
-  backward (forward: read the batch, write the layout's input and the three activations;
-  backward: read those four, write and read conv3's gradient);
+  FLOPs per byte of the traffic it cannot avoid (the scoring forward: read the batch, write the
+  layout's input and the three activations; the training step: read the batch once, every
+  activation of a tile staying in cache);
 - what the LSTM's kernels permit: their gate sums' inner loop (``tap_sums`` over the 42 inputs,
   four gates a tile) for all 40 gates of one step, on a chunk's rows in L1, one thread: each
   LSTM pass is held against the lower of it and sgemm (a chunk's working set stays in cache, so
   memory sets no lower bound);
 
 FLOPs are counted from the shapes, 2 per multiply-add, only the arithmetic a pass needs: forward
-convolutions and the head; backward the weight gradients of every layer, the input gradients of
-conv2 and conv3 (conv1's input needs none) and the head's; LSTM forward 2 x 4H(C + H) per step
-and instance, backward 2 x 4H(C + H) (weight gradient) + 2 x 4H x H (the state's gradient).
-Nonlinearities, layout changes and any pass a kernel runs again (a backward that recomputes the
-forward) are not counted: they are the kernels' overhead, so a rate here is the useful arithmetic
-per second.
+convolutions and the head; the training step adds the weight gradients of every layer, the input
+gradients of conv2 and conv3 (conv1's input needs none) and the head's; LSTM forward 2 x 4H(C + H)
+per step and instance, backward 2 x 4H(C + H) (weight gradient) + 2 x 4H x H (the state's
+gradient). Nonlinearities, layout changes and any pass a kernel runs again (a backward that
+recomputes the forward) are not counted: they are the kernels' overhead, so a rate here is the
+useful arithmetic per second.
 
 ``--before REV`` also times the package at git revision ``REV`` (exported once per commit under
 the cache folder, with its own numba cache) in a child process, interleaved item by item with
@@ -114,11 +115,7 @@ def conv_gflop() -> dict[str, float]:
     head = 2 * GROUPS * WIDTH * conv_layers()[-1][2] * BATCH / 1e9
     forward = sum(convs) + head
     backward = sum(convs) + sum(convs[1:]) + 2 * head
-    flops = {"convnet forward": forward, "convnet backward": backward}
-    flops["convnet forward+backward"] = forward + backward
-    for layer, gflop in enumerate(convs, 1):
-        flops[f"convnet conv{layer} weight gradient"] = gflop
-    return flops
+    return {"convnet forward": forward, "convnet forward+backward": forward + backward}
 
 
 def lstm_gflop() -> dict[str, float]:
@@ -137,12 +134,7 @@ def conv_gbytes() -> dict[str, float]:
     sizes = [GROUPS * CHANNELS // GROUPS * STEPS * BATCH * 4 / 1e9]  # the layout's input
     sizes += [GROUPS * WIDTH * t_out * BATCH * 4 / 1e9 for _, _, t_out in conv_layers()]
     forward = sizes[0] + sum(sizes)  # the batch read, the four layout arrays written
-    backward = sum(sizes) + 2 * sizes[-1]
-    return {
-        "convnet forward": forward,
-        "convnet backward": backward,
-        "convnet forward+backward": forward + backward,
-    }
+    return {"convnet forward": forward, "convnet forward+backward": sizes[0]}
 
 
 LOOP_TAPS, LOOP_LANES = WIDTH * KERNEL, (256, 1008)  # conv2's taps per output row; lanes
@@ -267,12 +259,12 @@ def blas_timers() -> dict[str, Timer]:
 
 def kernel_timers() -> dict[str, Timer]:
     """Timers of the compiled passes of the ``tactile_exp`` this process imports."""
-    from tactile_exp.models import grouped_conv_numba as conv
     from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
+    from tactile_exp.models.losses import LOSSES
     from tactile_exp.models.lstm_kernels import lstm_last_hidden
 
     torch.manual_seed(0)
-    X = torch.randn(N_TRAIN, CHANNELS, STEPS)
+    X, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
     epoch = itertools.cycle(torch.randperm(N_TRAIN).split(BATCH)[: N_TRAIN // BATCH])
 
     def batch() -> torch.Tensor:
@@ -281,17 +273,18 @@ def kernel_timers() -> dict[str, Timer]:
     net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
     head = torch.nn.Linear(net.n_features, 1)
     lstm = torch.nn.LSTM(CHANNELS, HIDDEN, batch_first=True)
-    g_scores, g_hidden = torch.randn(BATCH), torch.randn(BATCH, HIDDEN)
+    g_hidden = torch.randn(BATCH, HIDDEN)
 
-    def conv_forward() -> torch.Tensor:
-        return net.scores(X, head, rows=batch())
-
-    def conv_backward() -> tuple[float, float]:
-        scores = conv_forward()
-        return _timed(lambda: scores.backward(g_scores))()
+    def conv_forward() -> None:
+        with torch.no_grad():
+            head(net(X[batch()]))
 
     def conv_both() -> None:
-        conv_forward().backward(g_scores)
+        rows = batch()
+        if hasattr(net, "batch_loss"):
+            net.batch_loss(X, y, head, "logistic", rows).backward()
+        else:  # a --before revision from before the tiled step: its training step
+            LOSSES["logistic"](net.scores(X, head, rows=rows), y[rows]).backward()
 
     def lstm_backward() -> tuple[float, float]:
         hidden = lstm_last_hidden(X, lstm, batch())
@@ -302,35 +295,11 @@ def kernel_timers() -> dict[str, Timer]:
 
     timers: dict[str, Timer] = {
         "convnet forward": _timed(conv_forward),
-        "convnet backward": conv_backward,
         "convnet forward+backward": _timed(conv_both),
         "lstm forward": _timed(lambda: lstm_last_hidden(X, lstm, batch())),
         "lstm backward": lstm_backward,
         "lstm forward+backward": _timed(lstm_both),
     }
-    timers.update(weight_gradient_timers(conv))
-    return timers
-
-
-def weight_gradient_timers(conv) -> dict[str, Timer]:
-    """Each layer's weight-gradient kernel over all groups, in the layout at batch 1000."""
-    numba = conv.numba
-
-    @numba.njit(parallel=True)
-    def wgrad(grad, x, stride, grad_w, grad_b):
-        for g in numba.prange(x.shape[0]):
-            conv._grad_weight_bias(grad[g], x[g], stride, grad_w[g], grad_b[g])
-
-    n_pad = -(-BATCH // conv.LANES) * conv.LANES
-    rng = np.random.default_rng(0)
-    timers = {}
-    for layer, (c_in, t_in, t_out) in enumerate(conv_layers(), 1):
-        x = rng.standard_normal((GROUPS, c_in, t_in, n_pad), dtype=np.float32)
-        grad = rng.standard_normal((GROUPS, WIDTH, t_out, n_pad), dtype=np.float32)
-        grad_w = np.empty((GROUPS, WIDTH, c_in, KERNEL), np.float32)
-        grad_b = np.empty((GROUPS, WIDTH), np.float32)
-        args = (grad, x, STRIDE, grad_w, grad_b)
-        timers[f"convnet conv{layer} weight gradient"] = _timed(lambda args=args: wgrad(*args))
     return timers
 
 

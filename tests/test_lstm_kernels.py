@@ -14,7 +14,8 @@ from torch import nn
 
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_lstm import LSTMBody
-from tactile_exp.models.lstm_kernels import CHUNK, lstm_last_hidden
+from tactile_exp.models.losses import LOSSES
+from tactile_exp.models.lstm_kernels import CHUNK, lstm_last_hidden, lstm_loss
 from tactile_exp.models.schedule import Schedule
 
 
@@ -90,6 +91,56 @@ def test_results_do_not_depend_on_the_thread_count():
         assert torch.equal(a, b)
 
 
+def _step(impl, loss, rows, n=400, channels=32, steps=150, hidden=10, width=10):
+    """The training step's loss and the gradients of every parameter (LSTM, FC, output layer)
+    at the model's init, the rows ``rows`` of ``n`` instances."""
+    torch.manual_seed(0)
+    body = LSTMBody(channels, hidden, width, impl="compiled")
+    out = nn.Linear(width, 1)
+    x, y = torch.randn(n, channels, steps), (torch.rand(n) > 0.5).float()
+    if impl == "compiled":
+        value = lstm_loss(x, rows, y, body.lstm, body.fc, out, loss=loss)
+    else:
+        h = body.lstm(x[rows].transpose(1, 2))[1][0][-1]
+        value = LOSSES[loss](out(body.fc(h).relu()).squeeze(1), y[rows])
+    value.backward()
+    return value.item(), [p.grad.clone() for p in [*body.parameters(), *out.parameters()]]
+
+
+@pytest.mark.parametrize("loss", ["logistic", "hinge"])
+@pytest.mark.parametrize("sizes", [dict(), dict(n=30, channels=5, steps=2, hidden=3, width=4)])
+def test_the_training_step_equals_torch(loss, sizes):
+    """Loss and every gradient of LSTM -> FC + ReLU -> FC(1) -> loss against torch on the
+    copied rows: several chunks and a partial one, rows out of order, one repeated."""
+    n = sizes.get("n", 400)
+    rows = torch.randperm(n, generator=torch.Generator().manual_seed(1))[: min(n, 2 * CHUNK + 22)]
+    rows[-1] = rows[0]
+    got, grads = _step("compiled", loss, rows, **sizes)
+    want, wanted = _step("torch", loss, rows, **sizes)
+    assert got == pytest.approx(want, rel=1e-5)
+    names = ["w_ih", "w_hh", "b_ih", "b_hh", "fc.weight", "fc.bias", "out.weight", "out.bias"]
+    for name, a, b in zip(names, grads, wanted, strict=True):
+        scale = float(b.abs().max())
+        assert scale > 0, name
+        assert float((a - b).abs().max()) <= 2e-5 * scale, name
+
+
+@pytest.mark.skipif(numba_config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")
+def test_the_training_step_does_not_depend_on_the_thread_count():
+    rows = torch.arange(3 * CHUNK + 5)
+    threads = get_num_threads()
+    try:
+        set_num_threads(1)
+        one = _step("compiled", "logistic", rows)
+        set_num_threads(2)
+        two = _step("compiled", "logistic", rows)
+    finally:
+        set_num_threads(threads)
+    assert one[0] == two[0]
+    for a, b in zip(one[1], two[1], strict=True):
+        assert torch.equal(a, b)
+
+
 def test_short_training_matches_torch_impl():
     train, test = easy_case(120, steps=30, seed=1), easy_case(60, steps=30, seed=2)
     schedule = Schedule(epochs=6, finetune_epochs=3, batch_size=40, lr=0.05)
@@ -120,11 +171,18 @@ def test_impl_choice():
         lstm_last_hidden(torch.zeros(2, 4, 3), nn.LSTM(4, 2, batch_first=True), torch.tensor([2]))
     with pytest.raises(ValueError, match="float32 CPU"):
         lstm_last_hidden(torch.zeros(2, 4, 3, dtype=torch.float64), nn.LSTM(4, 2, batch_first=True))
+    layers = (nn.LSTM(4, 2, batch_first=True), nn.Linear(2, 3), nn.Linear(3, 1))
+    x, y = torch.zeros(2, 4, 3), torch.zeros(2)
+    with pytest.raises(IndexError, match="rows must lie in"):
+        lstm_loss(x, torch.tensor([2]), y, *layers, loss="hinge")
+    with pytest.raises(ValueError, match="computes logistic, hinge, not 'squared'"):
+        lstm_loss(x, torch.tensor([1]), y, *layers, loss="squared")
 
 
 def test_warm_up_compiles_every_signature_training_and_scoring_use():
     """``warm_up`` (the job's compile ahead) must leave nothing for the job to compile: in a
-    fresh process, after it, a HapticLSTM's fit and scores add no signature."""
+    fresh process, after it, a HapticLSTM's fit (its training step) and scores add no
+    signature."""
     code = """
 import numpy as np
 from tactile_exp.data.layout import Instances
@@ -143,9 +201,9 @@ schedule = dict(epochs=1, finetune_epochs=1, batch_size=16)
 model = MODELS.build("haptic_lstm", schedule=schedule)
 model.fit(Instances(X, y, np.arange(70), np.arange(70)))
 model.decision_function(X[:5])
-print(before == signatures(), before["_forward"], before["_backward"])
+print(before == signatures(), before["_forward"], before["_backward"], before["_train"])
 """
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout.split()
-    assert out == ["True", "1", "1"]  # the entry points compiled by warm_up, nothing after it
+    assert out == ["True", "1", "1", "1"]  # the entry points compiled by warm_up, nothing after it

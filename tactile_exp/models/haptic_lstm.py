@@ -14,7 +14,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from tactile_exp.models.lstm_kernels import lstm_last_hidden
+from tactile_exp.models.lstm_kernels import LOSSES as LSTM_LOSSES
+from tactile_exp.models.lstm_kernels import lstm_last_hidden, lstm_loss
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import SGDModel
@@ -100,6 +101,18 @@ class HapticLSTM(SGDModel):
         self, body: nn.Module, classifier: nn.Linear
     ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
         return lambda X, index: classifier(body(X, index)).squeeze(1)
+
+    def _train_objective(
+        self, body: nn.Module, classifier: nn.Linear, loss: str
+    ) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
+        """Compiled, with a loss the step computes: one pass per batch through the recurrence,
+        both FC layers and the loss, each chunk's forward kept in cache for its backward
+        (``lstm_kernels.lstm_loss``); otherwise the loss on ``_train_scores``."""
+        if body.impl == "compiled" and loss in LSTM_LOSSES:
+            return lambda X, y, index: lstm_loss(
+                X, index, y, body.lstm, body.fc, classifier, loss=loss
+            )
+        return super()._train_objective(body, classifier, loss)
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         impl = self.impl

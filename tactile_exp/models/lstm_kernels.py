@@ -8,14 +8,18 @@ inside one numba loop, with the chunk as the innermost, contiguous axis and time
 reads and writes is one contiguous block of each array. The forward runs step by step, each step's
 input projection, recurrence and cell update on data in L1. The backward sums the weight gradient
 step by step as it goes (a step's inputs times its gate gradients, ~20 KB, in L1), not over the
-whole chunk at the end (~3 MB of operands). Chunks run in parallel on numba's threads. The forward
-pass keeps nothing: backward recomputes a chunk's forward in cache. Keeping every chunk's
-activations for the backward instead (~63 MB a batch of 1,000) made a training step 1.25x faster
-alone, but in the Table I grid, two jobs side by side on two cores, the LSTM job gained ~3% and the
-ConvNet job beside it lost ~5% (rows G and H against the grid before, scaled by the machine's speed
-on rows A to F, which neither version touches): writing and re-reading them takes the memory
-bandwidth the other job needs. Each chunk's weight gradient is summed on its own and the chunks' in
-a fixed order, so results do not depend on the thread count.
+whole chunk at the end (~3 MB of operands). Chunks run in parallel on numba's threads. A training
+step runs a chunk at a time through everything (``lstm_loss``: the recurrence, both FC layers, each
+instance's loss and back through all of it), so the backward reads the chunk's forward from cache:
+nothing outlives the chunk and nothing runs twice. Through autograd (``lstm_last_hidden``: scoring,
+and training with a loss the step does not compute) the forward keeps nothing and the backward
+recomputes a chunk's forward in cache. Keeping every chunk's activations for that backward instead
+(~63 MB a batch of 1,000) made a training step 1.25x faster alone, but in the Table I grid, two
+jobs side by side on two cores, the LSTM job gained ~3% and the ConvNet job beside it lost ~5%
+(rows G and H against the grid before, scaled by the machine's speed on rows A to F, which neither
+version touches): writing and re-reading them takes the memory bandwidth the other job needs.
+Each chunk's gradients are summed on their own and the chunks' in a fixed order, so results do
+not depend on the thread count.
 The inner loops are explicit vectors (``vector_tiles``): the gate sums (forward), the states'
 gradient and the weight gradient (backward) are register tiles (``tap_sums``: four gates' sums over
 all 42 inputs, or four inputs' over a step's 64 lanes for all gates, stay in registers), the
@@ -41,6 +45,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from tactile_exp.models.linear_sgd import _loss_slope
 from tactile_exp.models.numba_setup import announce_compile, numba
 from tactile_exp.models.vector_tiles import (
     PLAIN,
@@ -288,6 +293,83 @@ def _backward(X, rows, w, bias, dh_last, d_wt, dx, parts):
                             dx[start + b, ch, t] = s
 
 
+@numba.njit(parallel=True, **_JIT)
+def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_out, losses,
+           parts):  # fmt: skip
+    """One training step of LSTM -> FC(F) + ReLU -> FC(1) -> loss, a chunk at a time: its
+    forward, the two layers, each instance's loss (``sign``: +-1 per row of ``X``; the mean over
+    the batch) and back through all of it, the chunk's activations still in cache (no forward
+    run again). Per chunk: ``d_wt`` as ``_backward``'s, ``d_fc`` (F, H + 1) the FC layer's weight
+    and bias gradients, ``d_out`` (F + 1) the output layer's, ``losses`` its summed loss."""
+    G, K = w.shape
+    H = G // 4
+    T = X.shape[2]
+    n_chunks, K_pad, G_pad = d_wt.shape
+    F = fc_w.shape[0]
+    scale = _ONE / np.float32(len(rows))  # the mean's gradient
+    for p in numba.prange(parts):
+        inputs = np.zeros((T, K_pad, CHUNK), np.float32)
+        inputs[:, K] = 1  # the bias's "input": its gradient is the gate gradients' sum
+        acts = np.empty((T, G, CHUNK), np.float32)
+        c_prev = np.empty((T, H, CHUNK), np.float32)
+        tanh_c = np.empty((T, H, CHUNK), np.float32)
+        d_gates = np.zeros((T, G_pad, CHUNK), np.float32)
+        h = np.empty((H, CHUNK), np.float32)
+        c = np.empty((H, CHUNK), np.float32)
+        z = np.empty((F, CHUNK), np.float32)  # FC pre-activations, then their gradients
+        a = np.empty((F, CHUNK), np.float32)  # after the ReLU
+        gs = np.empty(CHUNK, np.float32)
+        for chunk in range(p, n_chunks, parts):
+            start = chunk * CHUNK
+            n = min(CHUNK, len(rows) - start)
+            _gather(X, rows, start, inputs)
+            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
+            for f in range(F):
+                for b in range(CHUNK):
+                    z[f, b] = fc_b[f]
+                for j in range(H):
+                    weight = fc_w[f, j]
+                    for b in range(CHUNK):
+                        z[f, b] += weight * h[j, b]
+                for b in range(CHUNK):
+                    a[f, b] = z[f, b] * np.float32(z[f, b] > 0)
+            total = np.float32(0.0)
+            gs[:] = 0
+            for b in range(n):
+                score = out_b
+                for f in range(F):
+                    score += out_w[f] * a[f, b]
+                label = sign[rows[start + b]]
+                loss, slope = _loss_slope(label * score, hinge, _ONE)
+                total += loss
+                gs[b] = label * slope * scale
+            losses[chunk] = total
+            out = d_out[chunk]
+            out[F] = gs.sum()
+            for f in range(F):
+                acc = np.float32(0.0)
+                for b in range(CHUNK):
+                    acc += gs[b] * a[f, b]
+                    z[f, b] = out_w[f] * gs[b] * np.float32(z[f, b] > 0)  # the ReLU's backward
+                out[f] = acc
+            fc = d_fc[chunk]
+            for f in range(F):
+                fc[f, H] = z[f].sum()
+                for j in range(H):
+                    acc = np.float32(0.0)
+                    for b in range(CHUNK):
+                        acc += z[f, b] * h[j, b]
+                    fc[f, j] = acc
+            for j in range(H):  # h becomes d loss / d h_T
+                for b in range(CHUNK):
+                    h[j, b] = 0
+                for f in range(F):
+                    weight = fc_w[f, j]
+                    for b in range(CHUNK):
+                        h[j, b] += weight * z[f, b]
+            _chunk_backward(w, inputs, acts, c_prev, tanh_c, h, c, d_gates, d_wt[chunk])
+
+
 def _parts(n_rows: int) -> int:
     """Threads for ``n_rows`` instances: numba's, at most one per chunk (the kernels take it as
     an argument: calling ``numba.get_num_threads`` inside would keep them out of the cache)."""
@@ -349,11 +431,103 @@ def lstm_last_hidden(
     return LSTMLastHidden.apply(x, rows, *params)
 
 
+LOSSES = ("logistic", "hinge")  # the registered losses the training step computes inside
+
+
+class LSTMStep(torch.autograd.Function):
+    """The mean loss of a batch through LSTM -> FC + ReLU -> FC(1), its gradients computed with
+    it by ``_train`` and handed to autograd (scaled by the loss's incoming gradient) in the
+    backward."""
+
+    @staticmethod
+    def forward(ctx, x, rows, y, loss, w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w, out_b):  # type: ignore[override]
+        w = torch.cat([w_ih, w_hh], 1).detach().contiguous()
+        bias = (b_ih + b_hh).detach().contiguous()
+        G, K = w.shape
+        F, H = fc_w.shape
+        n_chunks = (len(rows) + CHUNK - 1) // CHUNK
+        d_wt = np.empty((n_chunks, -(-(K + 1) // ROWS) * ROWS, -(-G // WIDTH) * WIDTH), np.float32)
+        d_fc = np.empty((n_chunks, F, H + 1), np.float32)
+        d_out = np.empty((n_chunks, F + 1), np.float32)
+        losses = np.empty(n_chunks, np.float32)
+        _train(
+            x.detach().numpy(),
+            rows.numpy(),
+            (2.0 * y - 1.0).numpy(),
+            w.numpy(),
+            bias.numpy(),
+            fc_w.detach().numpy(),
+            fc_b.detach().numpy(),
+            out_w.detach().numpy().reshape(-1),
+            np.float32(out_b.item()),
+            loss == "hinge",
+            d_wt,
+            d_fc,
+            d_out,
+            losses,
+            _parts(len(rows)),
+        )
+        total, fc, out = d_wt.sum(0), d_fc.sum(0), d_out.sum(0)
+        d_w_all = torch.from_numpy(np.ascontiguousarray(total[:K, :G].T))
+        d_b_all = torch.from_numpy(total[K, :G].copy())
+        C = x.shape[1]
+        ctx.grads = [
+            d_w_all[:, :C],
+            d_w_all[:, C:],
+            d_b_all,
+            d_b_all,
+            torch.from_numpy(np.ascontiguousarray(fc[:, :H])),
+            torch.from_numpy(fc[:, H].copy()),
+            torch.from_numpy(out[:F].reshape(1, F).copy()),
+            torch.from_numpy(out[F:].copy()),
+        ]
+        return torch.tensor(float(losses.sum(dtype=np.float64)) / len(rows), dtype=torch.float32)
+
+    @staticmethod
+    def backward(ctx, grad):  # type: ignore[override]
+        grads = [g * grad for g in ctx.grads]
+        del ctx.grads
+        return (None, None, None, None, *grads)
+
+
+def lstm_loss(
+    x: torch.Tensor,
+    rows: torch.Tensor,
+    y: torch.Tensor,
+    lstm: torch.nn.LSTM,
+    fc: torch.nn.Linear,
+    out: torch.nn.Linear,
+    *,
+    loss: str,
+) -> torch.Tensor:
+    """``LOSSES[loss](out(fc(h_T).relu()).squeeze(1), y[rows])`` with h_T the last hidden state
+    of ``lstm`` over ``x[rows]`` (float32 CPU (n, C, T), 0/1 labels ``y``), to float rounding,
+    with its gradient: one compiled pass per step, each chunk's forward kept in cache for its
+    backward."""
+    if loss not in LOSSES:
+        raise ValueError(f"the compiled LSTM step computes {', '.join(LOSSES)}, not {loss!r}")
+    if x.device.type != "cpu" or x.dtype != torch.float32:
+        raise ValueError(f"compiled LSTM: expects float32 CPU input, got {x.dtype} on {x.device}")
+    rows = rows.to(torch.int64).contiguous()
+    if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(x):
+        raise IndexError(f"compiled LSTM: rows must lie in [0, {len(x)}), the rows of x")
+    params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
+    announce_compile(__name__)
+    return LSTMStep.apply(
+        x.contiguous(), rows, y.to(torch.float32), loss, *params, fc.weight, fc.bias,
+        out.weight, out.bias,
+    )  # fmt: skip
+
+
 def warm_up() -> None:
     """Compile every kernel of this module (into numba's cache) on a toy batch, with the types a
-    job's calls have: forward and backward, with and without the input's gradient."""
+    job's calls have: forward and backward, with and without the input's gradient, and the
+    training step with each loss."""
     torch.manual_seed(0)
     lstm = torch.nn.LSTM(3, 2, batch_first=True)
     x = torch.randn(5, 3, 4)
     lstm_last_hidden(x, lstm, torch.tensor([0, 2, 4])).sum().backward()
     lstm_last_hidden(x.requires_grad_(), lstm).sum().backward()
+    fc, out, y = torch.nn.Linear(2, 3), torch.nn.Linear(3, 1), torch.tensor([0.0, 1.0, 1.0])
+    for loss in LOSSES:
+        lstm_loss(x.detach(), torch.tensor([0, 2, 4]), y, lstm, fc, out, loss=loss).backward()
