@@ -75,23 +75,27 @@ def instances(n: int, channels: int, rng: np.random.Generator) -> Instances:
 
 @contextmanager
 def kernels(which: str) -> Iterator[None]:
-    """Train with the earlier kernels (the batch copied out of the training set and
-    torch's ops on all its threads, as the engine did then: those kernels' matrix products are
-    torch's) or with the package's own."""
+    """Train with the earlier kernels (the batch copied out of the training set, the FC layers
+    and the loss through autograd, and torch's ops on all its threads, as the engine did then:
+    those kernels' matrix products are torch's) or with the package's own."""
     if which == "now":
         yield
         return
+    model = haptic_lstm.HapticLSTM
     package, threads = haptic_lstm.lstm_last_hidden, sgd.SGDModel._torch_threads
+    objective = model._train_objective
 
     def before(x: torch.Tensor, lstm: torch.nn.LSTM, rows: torch.Tensor | None = None):
         return lstm_before.lstm_last_hidden(x if rows is None else x[rows], lstm)
 
     haptic_lstm.lstm_last_hidden = before
     sgd.SGDModel._torch_threads = lambda self: nullcontext()
+    model._train_objective = sgd.SGDModel._train_objective  # the loss on the scores, as then
     try:
         yield
     finally:
         haptic_lstm.lstm_last_hidden, sgd.SGDModel._torch_threads = package, threads
+        model._train_objective = objective
 
 
 def train(

@@ -37,9 +37,10 @@ GENERATE = (
     "default_file(default_cache_dir())\n"
 )
 COMPILE = (
-    "from tactile_exp.models import grouped_conv_numba, linear_sgd\n"
+    "from tactile_exp.models import convnet_tiles, grouped_conv_numba, linear_sgd\n"
     "linear_sgd.warm_up()\n"
     "grouped_conv_numba.warm_up()\n"
+    "convnet_tiles.warm_up()\n"
 )
 JOB = ["-m", "tactile_exp", "experiment=quick_table1_i"]
 

@@ -15,8 +15,9 @@ of them alike; best of ``--repeats``):
   scores (the whole-batch conv stack + classification layer, no gradient) and the training step,
   forward + backward (``batch_loss``: in tiles of instances, the loss included; a ``--before``
   revision without it runs its own training step);
-- the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): forward and backward through
-  ``lstm_last_hidden``.
+- the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): the forward that scores
+  (``lstm_last_hidden``) and the training step, forward + backward through the recurrence, both
+  FC layers and the loss (``lstm_loss``; a ``--before`` revision without it runs its own).
 
 - what the ConvNet's shapes permit (``attainable``): with 4 output channels per group no pass is
   a large matrix product, so beside sgemm the bench measures two ceilings of its own and holds
@@ -122,11 +123,7 @@ def lstm_gflop() -> dict[str, float]:
     per_step = 2 * 4 * HIDDEN * (CHANNELS + HIDDEN)
     forward = per_step * STEPS * BATCH / 1e9
     backward = (per_step + 2 * 4 * HIDDEN * HIDDEN) * STEPS * BATCH / 1e9
-    return {
-        "lstm forward": forward,
-        "lstm backward": backward,
-        "lstm forward+backward": forward + backward,
-    }
+    return {"lstm forward": forward, "lstm forward+backward": forward + backward}
 
 
 def conv_gbytes() -> dict[str, float]:
@@ -259,9 +256,10 @@ def blas_timers() -> dict[str, Timer]:
 
 def kernel_timers() -> dict[str, Timer]:
     """Timers of the compiled passes of the ``tactile_exp`` this process imports."""
+    from tactile_exp.models import lstm_kernels
     from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
+    from tactile_exp.models.haptic_lstm import LSTMBody
     from tactile_exp.models.losses import LOSSES
-    from tactile_exp.models.lstm_kernels import lstm_last_hidden
 
     torch.manual_seed(0)
     X, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
@@ -272,8 +270,7 @@ def kernel_timers() -> dict[str, Timer]:
 
     net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
     head = torch.nn.Linear(net.n_features, 1)
-    lstm = torch.nn.LSTM(CHANNELS, HIDDEN, batch_first=True)
-    g_hidden = torch.randn(BATCH, HIDDEN)
+    body, out = LSTMBody(CHANNELS, HIDDEN, impl="compiled"), torch.nn.Linear(HIDDEN, 1)
 
     def conv_forward() -> None:
         with torch.no_grad():
@@ -286,18 +283,21 @@ def kernel_timers() -> dict[str, Timer]:
         else:  # a --before revision from before the tiled step: its training step
             LOSSES["logistic"](net.scores(X, head, rows=rows), y[rows]).backward()
 
-    def lstm_backward() -> tuple[float, float]:
-        hidden = lstm_last_hidden(X, lstm, batch())
-        return _timed(lambda: hidden.backward(g_hidden))()
+    def lstm_forward() -> None:
+        with torch.no_grad():
+            lstm_kernels.lstm_last_hidden(X, body.lstm, batch())
 
     def lstm_both() -> None:
-        lstm_last_hidden(X, lstm, batch()).backward(g_hidden)
+        rows = batch()
+        if hasattr(lstm_kernels, "lstm_loss"):
+            lstm_kernels.lstm_loss(X, rows, y, body.lstm, body.fc, out, loss="logistic").backward()
+        else:  # a --before revision from before the fused step: its training step
+            LOSSES["logistic"](out(body(X, rows)).squeeze(1), y[rows]).backward()
 
     timers: dict[str, Timer] = {
         "convnet forward": _timed(conv_forward),
         "convnet forward+backward": _timed(conv_both),
-        "lstm forward": _timed(lambda: lstm_last_hidden(X, lstm, batch())),
-        "lstm backward": lstm_backward,
+        "lstm forward": _timed(lstm_forward),
         "lstm forward+backward": _timed(lstm_both),
     }
     return timers

@@ -94,7 +94,7 @@ def sgd_epochs(
 
     ``objective(X, y, index)`` gives the mean loss of the rows ``index`` of ``X``: a model may
     read them in place rather than from a copied batch, and compute the loss with its scores
-    (the compiled haptic ConvNet does both)."""
+    (the compiled haptic ConvNet and LSTM do both)."""
     optimiser = torch.optim.SGD(params, lr=lr, momentum=momentum)
     n = len(X)
     curve = []

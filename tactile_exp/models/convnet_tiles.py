@@ -1,14 +1,14 @@
 """The haptic ConvNet's training step, compiled (numba), a tile of instances at a time in cache.
 
-At batch 1000 a layer's activations are 10-40 MB: a step that runs each layer over the whole
-batch writes them to memory in the forward and reads them back in the backward, and the
-step is bound by memory bandwidth (``grouped_conv_numba``'s layout, bench/bench_roofline.py).
-Here a step runs forward, loss and backward for ``TILE_LANES`` instances at once: their input
-gathered from the training set (rows read in place), every layer of every signal group, the
-classification layer, each instance's loss and its gradient, and back through all layers, with
-the tile's activations (~6 MB) in cache. Nothing of a tile outlives it but its share of the
-gradients. The loss is computed inside (``LOSSES``: the registered losses this step computes);
-a step with another loss runs through autograd (``grouped_conv_numba``).
+At batch 1000 a layer's activations are 10-40 MB: a step that runs each layer over the whole batch
+writes them to memory in the forward and reads them back in the backward, and the step is bound by
+memory bandwidth (``grouped_conv_numba``'s layout, bench/bench_roofline.py). Here a step runs
+forward, loss and backward for ``TILE_LANES`` instances at once: their input gathered from the
+training set (rows read in place), every layer of every signal group, the classification layer,
+each instance's loss and its gradient, and back through all layers, with the tile's activations (~6
+MB at the paper's sizes) in the CPU's caches. Nothing of a tile outlives it but its share of the
+gradients. The loss is computed inside (``LOSSES``: the registered losses this step computes); a
+step with another loss runs through autograd (``grouped_conv_numba``).
 
 Layout per tile: (groups, channels, time, lanes), the tile's instances innermost and
 contiguous as in ``grouped_conv_numba``, with ``pad`` zero rows before and after each channel's
@@ -16,14 +16,14 @@ time axis, so every output step of a convolution reads all its taps (zeros at th
 exactly 0) and each layer's taps are one fixed offset table. Output channels are padded to a
 multiple of ``ROWS`` with zero weights (``tap_sums`` computes ``ROWS`` rows at a time); their
 gradients are dropped. The forward and the input gradients sum their taps in the order
-``grouped_conv_numba`` does, so they match it bit for bit; the weight gradients sum each tile
-over its steps and lanes (``tap_dots``), then the tiles in order: results do not depend on the
-thread count, and differ from the whole-batch kernels by float rounding.
+``grouped_conv_numba``'s kernels do; the weight gradients sum each tile over its steps and lanes
+(``tap_dots``), then the tiles in order: results do not depend on the thread count, and differ
+from the whole-batch kernels' by float rounding.
 
-Measured against the whole-batch kernels through autograd (one thread, batch 1000 of 5,300
-instances, fresh batch per call, interleaved in one process: bench/bench_roofline.py): a step
-1.35x faster at 64 lanes; 16 lanes (a tile in L2) was no faster than the whole batch, 32 slower
-than 64, 128 as fast.
+Measured against the whole-batch kernels through autograd, the training step at batch 1000 of 5,300
+instances: 1.38x faster (bench/bench_roofline.py --before, two threads, interleaved in one process,
+2026-11-27). Tile widths (one thread, interleaved): 16 lanes, a tile in L2, no faster than the
+whole batch; 32 slower than 64; 128 as fast as 64.
 """
 
 from __future__ import annotations

@@ -11,15 +11,16 @@ step by step as it goes (a step's inputs times its gate gradients, ~20 KB, in L1
 whole chunk at the end (~3 MB of operands). Chunks run in parallel on numba's threads. A training
 step runs a chunk at a time through everything (``lstm_loss``: the recurrence, both FC layers, each
 instance's loss and back through all of it), so the backward reads the chunk's forward from cache:
-nothing outlives the chunk and nothing runs twice. Through autograd (``lstm_last_hidden``: scoring,
+nothing outlives the chunk and nothing runs twice (1.71x faster than the autograd path below,
+bench/bench_roofline.py --before, two threads). Through autograd (``lstm_last_hidden``: scoring,
 and training with a loss the step does not compute) the forward keeps nothing and the backward
 recomputes a chunk's forward in cache. Keeping every chunk's activations for that backward instead
 (~63 MB a batch of 1,000) made a training step 1.25x faster alone, but in the Table I grid, two
 jobs side by side on two cores, the LSTM job gained ~3% and the ConvNet job beside it lost ~5%
 (rows G and H against the grid before, scaled by the machine's speed on rows A to F, which neither
-version touches): writing and re-reading them takes the memory bandwidth the other job needs.
-Each chunk's gradients are summed on their own and the chunks' in a fixed order, so results do
-not depend on the thread count.
+version touches): writing and re-reading them takes the memory bandwidth the other job needs. Each
+chunk's gradients are summed on their own and the chunks' in a fixed order, so results do not
+depend on the thread count.
 The inner loops are explicit vectors (``vector_tiles``): the gate sums (forward), the states'
 gradient and the weight gradient (backward) are register tiles (``tap_sums``: four gates' sums over
 all 42 inputs, or four inputs' over a step's 64 lanes for all gates, stay in registers), the

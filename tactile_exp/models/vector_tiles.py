@@ -14,6 +14,8 @@ every shape against torch).
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
   with the ReLU or its backward applied before the one store;
+- ``tap_dots``: a convolution's weight gradient, rows of gradients against each tap's input rows,
+  the products summed over steps in registers and over lanes at the end;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
 - ``tanh_lanes``: tanh (or, scaled, the sigmoid) of a block of floats in place, a whole vector at
   a time (numba's loops use 256-bit vectors on AVX-512 CPUs, half the width).
