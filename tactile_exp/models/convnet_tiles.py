@@ -81,6 +81,12 @@ def _gather(X, rows, m0, n, groups, pad, a0):  # pragma: no cover (compiled)
                     )
 
 
+@numba.njit(inline="always", **_JIT)
+def _shape(geo, layer):  # pragma: no cover (compiled)
+    """A layer's kernel, stride, left padding, input and output channels (``geo``'s row)."""
+    return geo[layer, 0], geo[layer, 1], geo[layer, 2], geo[layer, 3], geo[layer, 4]
+
+
 @numba.njit(**_JIT)
 def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, bwts, jtaps,
            acts, grads, hinge, gws, gbs, ghw, ghb, losses, partial, gs, zeros, start,
@@ -99,13 +105,7 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
         _gather(X, rows, m0, n, groups, pad, acts[0])
         for g in range(groups):
             for layer in range(3):
-                k, s, left, cin, cout = (
-                    geo[layer, 0],
-                    geo[layer, 1],
-                    geo[layer, 2],
-                    geo[layer, 3],
-                    geo[layer, 4],
-                )
+                k, s, left, cin, cout = _shape(geo, layer)
                 a_in, a_out = acts[layer][g], acts[layer + 1][g]
                 tpo = a_out.shape[1]
                 fin, fout = a_in.reshape(-1), a_out.reshape(-1)
@@ -146,13 +146,7 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
                         dst[m] = w * gs[m] * np.float32(v > 0)  # ReLU's backward: see _JIT
                     ghw[tile, g, e, t] = acc
             for layer in range(2, -1, -1):
-                k, s, left, cin, cout = (
-                    geo[layer, 0],
-                    geo[layer, 1],
-                    geo[layer, 2],
-                    geo[layer, 3],
-                    geo[layer, 4],
-                )
+                k, s, left, cin, cout = _shape(geo, layer)
                 a_in, d_out = acts[layer][g], grads[layer]
                 tpi, tpo, steps = a_in.shape[1], d_out.shape[1], geo[layer, 6]
                 fin, fd, gw = a_in.reshape(-1), d_out.reshape(-1), gws[layer][tile, g].reshape(-1)

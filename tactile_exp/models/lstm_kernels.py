@@ -255,6 +255,22 @@ def _forward(X, rows, w, bias, h_last, parts):
                     h_last[start + b, j] = h[j, b]
 
 
+@numba.njit(inline="always", **_JIT)
+def _backward_buffers(T, K, K_pad, G, G_pad):
+    """A thread's arrays for a chunk's forward and backward: inputs (with the bias's row of
+    ones: its gradient is the gate gradients' sum), activations, states and gate gradients."""
+    H = G // 4
+    inputs = np.zeros((T, K_pad, CHUNK), np.float32)
+    inputs[:, K] = 1
+    acts = np.empty((T, G, CHUNK), np.float32)
+    c_prev = np.empty((T, H, CHUNK), np.float32)
+    tanh_c = np.empty((T, H, CHUNK), np.float32)
+    d_gates = np.zeros((T, G_pad, CHUNK), np.float32)
+    h = np.empty((H, CHUNK), np.float32)
+    c = np.empty((H, CHUNK), np.float32)
+    return inputs, acts, c_prev, tanh_c, d_gates, h, c
+
+
 @numba.njit(parallel=True, **_JIT)
 def _backward(X, rows, w, bias, dh_last, d_wt, dx, parts):
     """Gradients of the loss through h_T: each chunk's weight and bias gradients, transposed, in
@@ -266,14 +282,7 @@ def _backward(X, rows, w, bias, dh_last, d_wt, dx, parts):
     T = X.shape[2]
     n_chunks, K_pad, G_pad = d_wt.shape
     for p in numba.prange(parts):
-        inputs = np.zeros((T, K_pad, CHUNK), np.float32)
-        inputs[:, K] = 1  # the bias's "input": its gradient is the gate gradients' sum
-        acts = np.empty((T, G, CHUNK), np.float32)
-        c_prev = np.empty((T, H, CHUNK), np.float32)
-        tanh_c = np.empty((T, H, CHUNK), np.float32)
-        d_gates = np.zeros((T, G_pad, CHUNK), np.float32)
-        h = np.empty((H, CHUNK), np.float32)
-        c = np.empty((H, CHUNK), np.float32)
+        inputs, acts, c_prev, tanh_c, d_gates, h, c = _backward_buffers(T, K, K_pad, G, G_pad)
         for chunk in range(p, n_chunks, parts):
             start = chunk * CHUNK
             n = min(CHUNK, len(rows) - start)
@@ -309,14 +318,7 @@ def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, 
     F = fc_w.shape[0]
     scale = _ONE / np.float32(len(rows))  # the mean's gradient
     for p in numba.prange(parts):
-        inputs = np.zeros((T, K_pad, CHUNK), np.float32)
-        inputs[:, K] = 1  # the bias's "input": its gradient is the gate gradients' sum
-        acts = np.empty((T, G, CHUNK), np.float32)
-        c_prev = np.empty((T, H, CHUNK), np.float32)
-        tanh_c = np.empty((T, H, CHUNK), np.float32)
-        d_gates = np.zeros((T, G_pad, CHUNK), np.float32)
-        h = np.empty((H, CHUNK), np.float32)
-        c = np.empty((H, CHUNK), np.float32)
+        inputs, acts, c_prev, tanh_c, d_gates, h, c = _backward_buffers(T, K, K_pad, G, G_pad)
         z = np.empty((F, CHUNK), np.float32)  # FC pre-activations, then their gradients
         a = np.empty((F, CHUNK), np.float32)  # after the ReLU
         gs = np.empty(CHUNK, np.float32)
