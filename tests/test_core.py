@@ -194,11 +194,14 @@ def test_a_new_cache_back_end_keeps_models_across_instances(row_i, tmp_path):
 @pytest.mark.parametrize(
     ("overrides", "expected"),
     [
-        (ROW_I, {"linear_sgd", "grouped_conv_numba"}),
+        (ROW_I, {"linear_sgd", "grouped_conv_numba", "convnet_tiles"}),
         ([*ROW_I, "model.impl=torch"], set()),
         (["experiment=table1_g_haptic_lstm"], {"linear_sgd", "lstm_kernels"}),
         (["experiment=table1_a_haptic_static_1trial"], set()),
-        (["experiment=table1_m_multimodal_i_l"], {"linear_sgd", "grouped_conv_numba"}),
+        (
+            ["experiment=table1_m_multimodal_i_l"],
+            {"linear_sgd", "grouped_conv_numba", "convnet_tiles"},
+        ),
     ],
     ids=["convnet", "convnet in torch", "lstm", "svm", "multimodal (its part's ConvNet)"],
 )

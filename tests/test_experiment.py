@@ -74,7 +74,10 @@ def test_a_job_compiles_its_kernels_ahead_before_it_preprocesses(tiny_config, mo
     )
     run(settings_from_config(tiny_config(["seed=12"], adjectives="[hard]")))
     names = [m.rsplit(".", 1)[-1] for m in calls[0]]
-    assert sorted(names) == ["grouped_conv_numba", "linear_sgd"] and calls[1] == "check"
+    assert (
+        sorted(names) == ["convnet_tiles", "grouped_conv_numba", "linear_sgd"]
+        and calls[1] == "check"
+    )
     calls.clear()
     run(settings_from_config(tiny_config(["model=random", "seed=12"], adjectives="[hard]")))
     assert calls == ["check"]
