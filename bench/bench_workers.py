@@ -25,10 +25,10 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 
 from tactile_exp.config import settings_from_config
+from tactile_exp.cores import cores
 from tactile_exp.data.layout import ADJECTIVES
 from tactile_exp.data.phac2 import default_cache_dir
 from tactile_exp.experiment import JobResult, run
-from tactile_exp.runtime.workers import cores
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

@@ -1,8 +1,8 @@
 """A job's adjectives side by side in worker processes (``workers`` > 1; ours, not the paper's).
 
-The compiled ConvNet kernels are memory-bound and gain little from a second thread: on 2 cores,
-a ConvNet job with two single-threaded workers takes ~0.78 of the time it takes in one process
-on two threads (``bench/bench_workers.py``). Each worker runs whole adjectives, its own MLflow
+On 2 cores, a ConvNet job with two single-threaded workers takes ~0.91 of the time it takes in
+one process on two threads (``bench/bench_workers.py``: row I cut to 6 adjectives x 120 epochs,
+2026-11-27). Each worker runs whole adjectives, its own MLflow
 runs included; the job's process only hands out adjectives and collects their results.
 
 Workers are spawned (never forked: torch and numba hold threads), take ``cores // workers``
