@@ -7,7 +7,7 @@ forward, loss and backward for ``TILE_LANES`` instances at once: their input gat
 training set (rows read in place), every layer of every signal group, the classification layer,
 each instance's loss and its gradient, and back through all layers, with the tile's activations (~6
 MB at the paper's sizes) in the CPU's caches. Nothing of a tile outlives it but its share of the
-gradients. The loss is computed inside (``LOSSES``: the registered losses this step computes); a
+gradients. The loss is computed inside (``linear_sgd.LOSSES``: the registered losses it computes); a
 step with another loss runs through autograd (``grouped_conv_numba``).
 
 Layout per tile: (groups, channels, time, lanes), the tile's instances innermost and
@@ -35,7 +35,7 @@ import torch
 from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.grouped_conv_numba import _in_parallel, conv_out_len
-from tactile_exp.models.linear_sgd import _loss_slope
+from tactile_exp.models.linear_sgd import LOSSES, loss_slope
 from tactile_exp.models.numba_setup import announce_compile, numba
 from tactile_exp.models.vector_tiles import (
     DOT_TAPS,
@@ -49,7 +49,6 @@ from tactile_exp.models.vector_tiles import (
 )
 
 TILE_LANES = 64  # instances per tile: see the module docstring for 16, 32 and 128
-LOSSES = ("logistic", "hinge")  # the registered losses the step computes inside
 # Reassociation lets the reductions over lanes vectorise; no nnan/ninf, so NaNs propagate.
 _JIT = dict(nogil=True, cache=True, fastmath={"reassoc", "contract", "nsz", "arcp"},
             error_model="numpy")  # fmt: skip
@@ -130,7 +129,7 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
             for g in range(1, groups):  # the groups' shares in order, then the bias
                 score += partial[g, m]
             f = sign[rows[m0 + m]]
-            loss, slope = _loss_slope(f * (score + hb), hinge, np.float32(1.0))
+            loss, slope = loss_slope(f * (score + hb), hinge, np.float32(1.0))
             total += loss
             gs[m] = f * slope * scale
         losses[tile], ghb[tile] = total, gs.sum()
@@ -346,8 +345,8 @@ def tiled_loss(
     groups: int,
     strides: Sequence[int],
 ) -> torch.Tensor:
-    """``LOSSES[loss](head(grouped_conv_stack(X[rows])).squeeze(1), y[rows])`` for float32 CPU
-    ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, with its gradient: one
+    """``losses.LOSSES[loss](head(grouped_conv_stack(X[rows])).squeeze(1), y[rows])`` for float32
+    CPU ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, with its gradient: one
     compiled pass per step (the rows read in place)."""
     if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(X):
         raise IndexError(f"tiled ConvNet step: rows must lie in [0, {len(X)}), the rows of X")

@@ -35,7 +35,7 @@ from torch import nn
 
 from tactile_exp.models.numba_setup import announce_compile, numba
 
-LOSSES = ("logistic", "hinge")  # the registered losses this loop computes (others: impl=torch)
+LOSSES = ("logistic", "hinge")  # the registered losses loss_slope computes (others: impl=torch)
 SOFTPLUS_THRESHOLD = 20.0  # torch's F.softplus: the identity above it
 GRAM_MAX_ROWS = 4096  # G as float32 in at most 64 MB
 # The Gram path from n / 8 epochs on: G's product costs about n / 25 row-path epochs (21 at the
@@ -47,7 +47,7 @@ FASTMATH = {"reassoc", "contract", "nsz"}
 
 
 @numba.njit(nogil=True, cache=True, fastmath=FASTMATH, error_model="numpy")
-def _loss_slope(m, hinge, one):
+def loss_slope(m, hinge, one):
     """The loss at margin ``m`` (label x score) and its derivative in ``m``, in ``one``'s type."""
     if hinge:
         slack = one - m
@@ -76,7 +76,7 @@ def _epoch(X, sign, order, w, b, vel_w, vel_b, lr, momentum, batch, hinge, grad)
             s = b[0]
             for j in range(d):
                 s += row[j] * w[j]
-            loss, slope = _loss_slope(sign[i] * s, hinge, np.float32(1.0))
+            loss, slope = loss_slope(sign[i] * s, hinge, np.float32(1.0))
             total += loss
             g = sign[i] * scale * slope
             if g == 0:
@@ -115,7 +115,7 @@ def _gram_epoch(G, p, sign, order, a, b, vel_a, vel_b, lr, momentum, batch, hing
             s = b[0] + p[i]
             for k in range(n):
                 s += G[i, k] * a[k]
-            loss, slope = _loss_slope(sign[i] * s, hinge, 1.0)
+            loss, slope = loss_slope(sign[i] * s, hinge, 1.0)
             total += loss
             coef[r] = sign[i] * scale * slope  # the gradient's coefficient on row i
             grad_b += coef[r]

@@ -1,4 +1,4 @@
-"""Compiled CPU kernels for the haptic LSTM's recurrence (``impl="compiled"``).
+"""Compiled CPU kernels for the haptic LSTM's recurrence and training step (``impl="compiled"``).
 
 ``nn.LSTM`` on CPU runs a few small library calls per time step on a (batch, 10) state, so at the
 paper's sizes (hidden 10, 150 steps) it is bound by per-call overhead, not arithmetic. Here a batch
@@ -46,7 +46,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from tactile_exp.models.linear_sgd import _loss_slope
+from tactile_exp.models.linear_sgd import LOSSES, loss_slope
 from tactile_exp.models.numba_setup import announce_compile, numba
 from tactile_exp.models.vector_tiles import (
     PLAIN,
@@ -343,7 +343,7 @@ def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, 
                 for f in range(F):
                     score += out_w[f] * a[f, b]
                 label = sign[rows[start + b]]
-                loss, slope = _loss_slope(label * score, hinge, _ONE)
+                loss, slope = loss_slope(label * score, hinge, _ONE)
                 total += loss
                 gs[b] = label * slope * scale
             losses[chunk] = total
@@ -434,9 +434,6 @@ def lstm_last_hidden(
     return LSTMLastHidden.apply(x, rows, *params)
 
 
-LOSSES = ("logistic", "hinge")  # the registered losses the training step computes inside
-
-
 class LSTMStep(torch.autograd.Function):
     """The mean loss of a batch through LSTM -> FC + ReLU -> FC(1), its gradients computed with
     it by ``_train`` and handed to autograd (scaled by the loss's incoming gradient) in the
@@ -503,7 +500,7 @@ def lstm_loss(
     *,
     loss: str,
 ) -> torch.Tensor:
-    """``LOSSES[loss](out(fc(h_T).relu()).squeeze(1), y[rows])`` with h_T the last hidden state
+    """``losses.LOSSES[loss](out(fc(h_T).relu()).squeeze(1), y[rows])``, h_T the last hidden state
     of ``lstm`` over ``x[rows]`` (float32 CPU (n, C, T), 0/1 labels ``y``), to float rounding,
     with its gradient: one compiled pass per step, each chunk's forward kept in cache for its
     backward."""
