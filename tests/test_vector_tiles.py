@@ -1,4 +1,5 @@
-"""The register tiles against numpy: sums, masks, transposes, tanh; the vector width."""
+"""The register tiles against numpy: sums, masks, transposes, tanh, elementwise lanes; the vector
+width."""
 
 import json
 import os
@@ -42,6 +43,37 @@ def _tanh_lanes(x, at, count, scale, shift):
 @numba.njit
 def _transpose(src, starts, t, out, out_at, out_step):
     vt.transpose_tile(src.reshape(-1), starts, t, out.reshape(-1), out_at, out_step)
+
+
+def _mix(a, b, c):
+    """A ``lanes`` body: every operation a Lanes has."""
+    s = a * b - c
+    return 1.0 - s, (a + 2.0).tanh(), (s * 1e-28).flush(1e-30), 3.0 * b + s
+
+
+_mix_lanes = vt.lanes(_mix, reads=3)
+
+
+@numba.njit
+def _run_mix(x, out, n):
+    """_mix of the first n lanes of x's three rows into out's four rows."""
+    xf, of, r, o = x.reshape(-1), out.reshape(-1), x.shape[1], out.shape[1]
+    _mix_lanes((xf, xf, xf, of, of, of, of), (0, r, 2 * r, 0, o, 2 * o, 3 * o), n)
+
+
+@numba.njit
+def _run_in_place(x, n):
+    """x's first row <- _mix's first and then (the same array named twice) its last output."""
+    xf = x.reshape(-1)
+    _mix_lanes((xf, xf, xf, xf, xf, xf, xf), (0, n, 2 * n, 3 * n, 4 * n, 5 * n, 3 * n), n)
+
+
+def _mix_case(n):
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((3, n), dtype=np.float32)
+    x[2, :4] = x[0, :4] * x[1, :4] + np.float32(1e-3)  # s = -1e-3 or so: flushed
+    x[2, 5] = np.nan
+    return x
 
 
 def _case(rows=8, taps=21, lanes=3 * vt.TILE + 2 * vt.WIDTH, seed=0):
@@ -101,13 +133,15 @@ def test_tap_sums_relu_and_gated_masks_keep_nans():
 
 
 def test_tap_sums_are_the_same_at_every_vector_width():
-    """Each lane is summed in one order (bias, then one fma per tap), and each float's tanh
-    computed by the same operations, at any width: a child process compiled for 4-float vectors
-    gives the same bits as this one."""
+    """Each lane is summed in one order (bias, then one fma per tap), and each float's tanh and
+    ``lanes`` body computed by the same operations, at any width: a child process compiled for
+    4-float vectors gives the same bits as this one."""
     w, x, order, bias = _case(rows=4, taps=42, lanes=64)
     out = np.empty((4, 64), np.float32)
     _tap_sums(w, x, order * 64, 42, out, 64, bias, 64, vt.PLAIN, out)
     _tanh_lanes(out, 0, out.size, 0.5, 0.5)
+    mixed = np.empty((4, 64), np.float32)
+    _run_mix(out[:3].copy(), mixed, 64)
     code = (
         "import json, numpy as np, test_vector_tiles as t\n"
         "from tactile_exp.models import vector_tiles as vt\n"
@@ -115,7 +149,10 @@ def test_tap_sums_are_the_same_at_every_vector_width():
         "out = np.empty((4, 64), np.float32)\n"
         "t._tap_sums(w, x, order * 64, 42, out, 64, bias, 64, vt.PLAIN, out)\n"
         "t._tanh_lanes(out, 0, out.size, 0.5, 0.5)\n"
-        "print(json.dumps([vt.WIDTH, out.view(np.uint32).tolist()]))\n"
+        "mixed = np.empty((4, 64), np.float32)\n"
+        "t._run_mix(out[:3].copy(), mixed, 64)\n"
+        "print(json.dumps([vt.WIDTH, out.view(np.uint32).tolist(), "
+        "mixed.view(np.uint32).tolist()]))\n"
     )
     env = {
         **os.environ,
@@ -125,9 +162,10 @@ def test_tap_sums_are_the_same_at_every_vector_width():
     child = subprocess.run(
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     )
-    width, bits = json.loads(child.stdout)
+    width, bits, mixed_bits = json.loads(child.stdout)
     assert width == 4
     np.testing.assert_array_equal(np.array(bits, np.uint32), out.view(np.uint32))
+    np.testing.assert_array_equal(np.array(mixed_bits, np.uint32), mixed.view(np.uint32))
 
 
 @pytest.mark.parametrize("count", range(1, vt.DOT_TAPS + 1))
@@ -170,6 +208,48 @@ def test_tanh_lanes_is_tanh_and_the_sigmoid_within_the_approximations_error():
     np.testing.assert_allclose(sigmoid[finite], (1 / (1 + np.exp(-exact)))[finite], atol=1e-6)
     assert (tanh[: vt.WIDTH] == 5).all() and (tanh[-vt.WIDTH :] == 5).all()  # the rest untouched
     assert abs(got[-1] - 1) < 3e-7 and abs(got[0] + 1) < 3e-7  # clamped: saturated, no overflow
+
+
+def test_lanes_run_the_bodys_arithmetic_a_vector_at_a_time():
+    """Each operation rounded once in float32, as numpy's; tanh is tanh_lanes'; flush zeroes
+    magnitudes under the threshold and NaN; lanes past ``count`` are left alone."""
+    n = 5 * vt.WIDTH
+    x = _mix_case(n)
+    out = np.full((4, n + vt.WIDTH), 7.0, np.float32)
+    _run_mix(x, out, n)
+    a, b, c = x
+    s = a * b - c
+    tanh = (a + np.float32(2)).reshape(1, -1).copy()
+    _tanh_lanes(tanh, 0, n, 1.0, 0.0)
+    small = s * np.float32(1e-28)
+    flushed = np.where(np.abs(small) >= np.float32(1e-30), small, np.float32(0))
+    expected = [np.float32(1) - s, tanh[0], flushed, np.float32(3) * b + s]
+    for row, want in zip(out[:, :n], expected, strict=True):
+        np.testing.assert_array_equal(row, want)
+    assert (out[2, :4] == 0).all() and out[2, 5] == 0 and (out[2, 6:n] != 0).all()
+    assert np.isnan(out[0, 5]) and np.isnan(out[3, 5])  # NaN stays NaN through arithmetic
+    assert (out[:, n:] == 7).all()
+    x2 = np.concatenate([x, np.zeros((4, n), np.float32)])
+    _run_in_place(x2, n)
+    np.testing.assert_array_equal(x2[3], expected[3])  # the later of the two values stored
+
+
+def test_lanes_refuse_what_they_cannot_address():
+    flat = _mix_case(vt.WIDTH).reshape(-1)
+    with pytest.raises(TypingError, match="_mix: expects tuples of arrays and of their offsets"):
+        _mix_reads_only(flat)
+    with pytest.raises(TypingError, match="_mix: array must be a C-contiguous float32 array"):
+        _mix_four(flat.astype(np.float64))
+
+
+@numba.njit
+def _mix_reads_only(flat):
+    _mix_lanes((flat, flat, flat), (0, 1, 2), 0)  # arrays to read, none to write
+
+
+@numba.njit
+def _mix_four(flat):
+    _mix_lanes((flat, flat, flat, flat), (0, 1, 2, 3), 0)
 
 
 def test_transpose_tile_writes_the_rows_as_columns():

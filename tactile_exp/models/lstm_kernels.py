@@ -48,10 +48,13 @@ import torch
 
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
 from tactile_exp.models.numba_setup import announce_compile, numba
+from tactile_exp.models.scratch import scratch
 from tactile_exp.models.vector_tiles import (
     PLAIN,
     ROWS,
     WIDTH,
+    Lanes,
+    lanes,
     tanh_lanes,
     tap_sums,
     transpose_tile,
@@ -99,6 +102,40 @@ def _gather(X, rows, start, inputs):
                 inputs[t, c, b] = 0
 
 
+def _cell(i: Lanes, f: Lanes, g: Lanes, o: Lanes, c: Lanes) -> tuple[Lanes, ...]:
+    """From the gates' activations and c_{t-1}: c_{t-1} (kept), c_t, tanh(c_t) and h_t."""
+    c_t = f * c + i * g
+    tanh_c = c_t.tanh()
+    return c, c_t, tanh_c, o * tanh_c
+
+
+def _gate_grads(
+    i: Lanes, f: Lanes, g: Lanes, o: Lanes, tanh_c: Lanes, c_prev: Lanes, dh: Lanes, dc: Lanes
+) -> tuple[Lanes, ...]:
+    """The gates' pre-activation gradients (i, f, g, o) from d loss / d h_t and d loss / d c_t
+    (through c_{t+1}), and d loss / d c_{t-1}, set to 0 below ``_TINY``."""
+    dcv = dc + dh * o * (1.0 - tanh_c * tanh_c)
+    return (
+        dcv * g * i * (1.0 - i),
+        dcv * c_prev * f * (1.0 - f),
+        dcv * i * (1.0 - g * g),
+        dh * tanh_c * o * (1.0 - o),
+        (dcv * f).flush(float(_TINY)),
+    )
+
+
+def _flushed(x: Lanes) -> tuple[Lanes]:
+    """``x``, 0 below ``_TINY``."""
+    return (x.flush(float(_TINY)),)
+
+
+# The elementwise loops over a step's rows, as whole vectors (``lanes``: numba's own loops over
+# these many arrays stay scalar).
+_cell_lanes = lanes(_cell, reads=5)
+_gate_grad_lanes = lanes(_gate_grads, reads=8)
+_flush_lanes = lanes(_flushed, reads=1)
+
+
 @numba.njit(inline="always", **_JIT)
 def _gate_sums(w, bias, inputs, acts, taps, t):
     """acts[t] = bias + w @ inputs[t, :K] over the chunk's lanes, ``ROWS`` gates per register
@@ -121,8 +158,8 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
 
     Step by step, so that what a step touches (~20 KB, contiguous in each array) stays in L1:
     four gates at a time (``tap_sums``), each gate's sum is its bias, then its inputs, then its
-    states; the gates' nonlinearities over the step's rows (``tanh_lanes``); c_t into
-    ``tanh_c``, its tanh in place, then h_t."""
+    states; the gates' nonlinearities over the step's rows (``tanh_lanes``); then c_t, its
+    tanh and h_t (``_cell``), h_t into the next step's inputs."""
     G, K = w.shape
     H = G // 4
     C = K - H
@@ -132,33 +169,34 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
         for b in range(CHUNK):
             inputs[0, C + j, b] = 0
     taps = np.arange(K) * CHUNK  # input k of step t: inputs[t].flat[taps[k] + lane]
-    acts_flat, tanh_c_flat = acts.reshape(-1), tanh_c.reshape(-1)
+    acts_flat, in_flat = acts.reshape(-1), inputs.reshape(-1)
+    c_flat, c_prev_flat, tanh_c_flat, h_flat = (
+        c.reshape(-1),
+        c_prev.reshape(-1),
+        tanh_c.reshape(-1),
+        h.reshape(-1),
+    )
     rows = H * CHUNK  # floats of one gate's (or the states') rows in a step
+    K_in = inputs.shape[1]
     for t in range(T):
         _gate_sums(w, bias, inputs, acts, taps, t)
         at = t * G * CHUNK
         tanh_lanes(acts_flat, at, 2 * rows, _HALF, _HALF)  # i, f: sigmoid
         tanh_lanes(acts_flat, at + 2 * rows, rows, _ONE, _ZERO)  # g: tanh
         tanh_lanes(acts_flat, at + 3 * rows, rows, _HALF, _HALF)  # o: sigmoid
-        for j in range(H):
-            for b in range(CHUNK):
-                cp = c[j, b]
-                c_prev[t, j, b] = cp
-                cv = acts[t, H + j, b] * cp + acts[t, j, b] * acts[t, 2 * H + j, b]
-                c[j, b] = cv
-                tanh_c[t, j, b] = cv
-        tanh_lanes(tanh_c_flat, t * rows, rows, _ONE, _ZERO)
-        for j in range(H):
-            for b in range(CHUNK):
-                h[j, b] = acts[t, 3 * H + j, b] * tanh_c[t, j, b]
-            if t + 1 < T:
-                for b in range(CHUNK):
-                    inputs[t + 1, C + j, b] = h[j, b]
+        # h_t into the next step's inputs, the last one into h
+        h_out, h_at = (in_flat, ((t + 1) * K_in + C) * CHUNK) if t + 1 < T else (h_flat, 0)
+        _cell_lanes(
+            (acts_flat, acts_flat, acts_flat, acts_flat, c_flat, c_prev_flat, c_flat, tanh_c_flat,
+             h_out),
+            (at, at + rows, at + 2 * rows, at + 3 * rows, 0, t * rows, 0, t * rows, h_at),
+            rows,
+        )  # fmt: skip
 
 
 @numba.njit(inline="always", **_JIT)
-def _step_weight_grad(inputs, d_gates, t, starts, d_t, taps, zero, part, d_wt):
-    """``d_wt`` (K', G') += ``inputs[t]`` (K', CHUNK) @ ``d_gates[t]`` (G', CHUNK).T: the step's
+def _step_weight_grad(inputs, d_gates, t, td, starts, d_t, taps, zero, part, d_wt):
+    """``d_wt`` (K', G') += ``inputs[t]`` (K', CHUNK) @ ``d_gates[td]`` (G', CHUNK).T: the step's
     gate gradients transposed in registers into ``d_t`` (CHUNK, G'), then summed over the
     chunk's lanes by register tiles (``tap_sums``: four inputs x all gates) into ``part``, which
     is added to the running sum: the sum over the chunk's steps runs one step at a time."""
@@ -166,7 +204,7 @@ def _step_weight_grad(inputs, d_gates, t, starts, d_t, taps, zero, part, d_wt):
     d_flat, d_t_flat, part_flat = d_gates.reshape(-1), d_t.reshape(-1), part.reshape(-1)
     for g in range(0, G_pad, WIDTH):
         for i in range(WIDTH):
-            starts[i] = (t * G_pad + g + i) * CHUNK
+            starts[i] = (td * G_pad + g + i) * CHUNK
         for m in range(0, CHUNK, WIDTH):
             transpose_tile(d_flat, starts, m, d_t_flat, g, G_pad)
     in_flat = inputs.reshape(-1)
@@ -181,7 +219,8 @@ def _step_weight_grad(inputs, d_gates, t, starts, d_t, taps, zero, part, d_wt):
 @numba.njit(**_JIT)
 def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_wt):
     """Back-propagate d loss / d h_T ``dh`` (H, CHUNK) through one chunk's forward into the gate
-    pre-activation gradients ``d_gates`` (T, G', CHUNK) and the chunk's weight and bias
+    pre-activation gradients ``d_gates`` (T, G', CHUNK; or (1, G', CHUNK): only the current
+    step's, all a step needs, which stay in L1) and the chunk's weight and bias
     gradients, transposed, in ``d_wt`` (K', G'): row k < C + H input k's, row C + H the bias's
     (``inputs[:, C + H]`` is ones), columns past the 4H gates zero (``d_gates``' rows past 4H
     are zero). ``dh`` and ``dc`` are overwritten."""
@@ -205,128 +244,113 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_wt):
     lane_taps = np.arange(CHUNK) * G_pad  # lane m of d_t: d_t.flat[lane_taps[m] + gate]
     d_wt[:] = 0
     dc[:] = 0
+    acts_flat, tanh_c_flat, c_prev_flat = acts.reshape(-1), tanh_c.reshape(-1), c_prev.reshape(-1)
+    dh_in, dc_flat = dh.reshape(-1), dc.reshape(-1)
+    n = H * CHUNK  # floats of one gate's (or the states') rows in a step
     for t in range(T - 1, -1, -1):
-        for j in range(H):
-            for b in range(CHUNK):
-                i = acts[t, j, b]
-                f = acts[t, H + j, b]
-                g = acts[t, 2 * H + j, b]
-                o = acts[t, 3 * H + j, b]
-                tc = tanh_c[t, j, b]
-                d = dh[j, b]
-                dcv = dc[j, b] + d * o * (_ONE - tc * tc)
-                d_gates[t, j, b] = dcv * g * i * (_ONE - i)
-                d_gates[t, H + j, b] = dcv * c_prev[t, j, b] * f * (_ONE - f)
-                d_gates[t, 2 * H + j, b] = dcv * i * (_ONE - g * g)
-                d_gates[t, 3 * H + j, b] = d * tc * o * (_ONE - o)
-                dcn = dcv * f
-                dc[j, b] = dcn if abs(dcn) >= _TINY else _ZERO
+        td = t if len(d_gates) > 1 else 0
+        at, d_at = t * G * CHUNK, td * G_pad * CHUNK
+        _gate_grad_lanes(
+            (acts_flat, acts_flat, acts_flat, acts_flat, tanh_c_flat, c_prev_flat, dh_in, dc_flat,
+             d_flat, d_flat, d_flat, d_flat, dc_flat),
+            (at, at + n, at + 2 * n, at + 3 * n, t * n, t * n, 0, 0,
+             d_at, d_at + n, d_at + 2 * n, d_at + 3 * n, 0),
+            n,
+        )  # fmt: skip
         for k in range(0, rows, ROWS):
-            tap_sums(w_state_flat, k * G, G, 1, d_flat, t * G_pad * CHUNK, taps, G, dh_flat,
+            tap_sums(w_state_flat, k * G, G, 1, d_flat, d_at, taps, G, dh_flat,
                      k * CHUNK, CHUNK, zero, 0, CHUNK, PLAIN, dh_flat)  # fmt: skip
-        for k in range(H):
-            for b in range(CHUNK):
-                s = dh_sum[k, b]
-                dh[k, b] = s if abs(s) >= _TINY else _ZERO
-        _step_weight_grad(inputs, d_gates, t, starts, d_t, lane_taps, zero, part, d_wt)
+        _flush_lanes((dh_flat, dh_in), (0, 0), n)
+        _step_weight_grad(inputs, d_gates, t, td, starts, d_t, lane_taps, zero, part, d_wt)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _forward(X, rows, w, bias, h_last, parts):
-    """h_T (len(rows), H) of the instances ``X[rows]`` (N, C, T), chunks shared by ``parts``
-    threads."""
-    G, K = w.shape
-    H = G // 4
-    T = X.shape[2]
+def _forward(X, rows, w, bias, h_last, inputs, acts, c_prev, tanh_c):
+    """h_T (len(rows), H) of the instances ``X[rows]`` (N, C, T), chunks shared by threads: one
+    per row of the arrays ``_activations`` gives."""
     n_chunks = (len(rows) + CHUNK - 1) // CHUNK
+    parts = len(inputs)
     for p in numba.prange(parts):
-        inputs = np.empty((T, K, CHUNK), np.float32)
-        acts = np.empty((T, G, CHUNK), np.float32)
-        c_prev = np.empty((T, H, CHUNK), np.float32)
-        tanh_c = np.empty((T, H, CHUNK), np.float32)
-        h = np.empty((H, CHUNK), np.float32)
-        c = np.empty((H, CHUNK), np.float32)
+        h, c = _states(c_prev)
         for chunk in range(p, n_chunks, parts):
             start = chunk * CHUNK
-            _gather(X, rows, start, inputs)
-            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
+            _gather(X, rows, start, inputs[p])
+            _chunk_forward(w, bias, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c)
             for b in range(min(CHUNK, len(rows) - start)):
-                for j in range(H):
+                for j in range(len(h)):
                     h_last[start + b, j] = h[j, b]
 
 
 @numba.njit(inline="always", **_JIT)
-def _backward_buffers(T, K, K_pad, G, G_pad):
-    """A thread's arrays for a chunk's forward and backward: inputs (with the bias's row of
-    ones: its gradient is the gate gradients' sum), activations, states and gate gradients."""
-    H = G // 4
-    inputs = np.zeros((T, K_pad, CHUNK), np.float32)
-    inputs[:, K] = 1
-    acts = np.empty((T, G, CHUNK), np.float32)
-    c_prev = np.empty((T, H, CHUNK), np.float32)
-    tanh_c = np.empty((T, H, CHUNK), np.float32)
-    d_gates = np.zeros((T, G_pad, CHUNK), np.float32)
-    h = np.empty((H, CHUNK), np.float32)
-    c = np.empty((H, CHUNK), np.float32)
-    return inputs, acts, c_prev, tanh_c, d_gates, h, c
+def _states(c_prev):
+    """A thread's h and c (H, CHUNK), H from ``c_prev`` (threads, T, H, CHUNK)."""
+    H = c_prev.shape[2]
+    return np.empty((H, CHUNK), np.float32), np.empty((H, CHUNK), np.float32)
 
 
 @numba.njit(parallel=True, **_JIT)
-def _backward(X, rows, w, bias, dh_last, d_wt, dx, parts):
+def _backward(X, rows, w, bias, dh_last, d_wt, dx, inputs, acts, c_prev, tanh_c, d_gates):
     """Gradients of the loss through h_T: each chunk's weight and bias gradients, transposed, in
     ``d_wt`` (n_chunks, K', G') (as ``_chunk_backward``; the caller sums them in order), and
-    d loss / d X[rows] in ``dx`` (len(rows), C, T) unless ``dx`` is empty; as ``_forward``."""
+    d loss / d X[rows] in ``dx`` (len(rows), C, T) unless ``dx`` is empty; as ``_forward``, with
+    each thread's gate gradients in ``d_gates`` (threads, T, G', CHUNK), rows past 4H zero."""
     G, K = w.shape
     H = G // 4
     C = K - H
     T = X.shape[2]
-    n_chunks, K_pad, G_pad = d_wt.shape
+    n_chunks = d_wt.shape[0]
+    parts = len(inputs)
     for p in numba.prange(parts):
-        inputs, acts, c_prev, tanh_c, d_gates, h, c = _backward_buffers(T, K, K_pad, G, G_pad)
+        h, c = _states(c_prev)
         for chunk in range(p, n_chunks, parts):
             start = chunk * CHUNK
             n = min(CHUNK, len(rows) - start)
-            _gather(X, rows, start, inputs)
-            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
+            _gather(X, rows, start, inputs[p])
+            _chunk_forward(w, bias, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c)
             h[:] = 0  # now d loss / d h_T; lanes past the last row stay zero
             for b in range(n):
                 for j in range(H):
                     h[j, b] = dh_last[start + b, j]
-            _chunk_backward(w, inputs, acts, c_prev, tanh_c, h, c, d_gates, d_wt[chunk])
+            _chunk_backward(
+                w, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c, d_gates[p], d_wt[chunk]
+            )
             if dx.shape[0] > 0:
                 for b in range(n):
                     for ch in range(C):
                         for t in range(T):
                             s = np.float32(0)
                             for gate in range(G):
-                                s += w[gate, ch] * d_gates[t, gate, b]
+                                s += w[gate, ch] * d_gates[p, t, gate, b]
                             dx[start + b, ch, t] = s
 
 
 @numba.njit(parallel=True, **_JIT)
 def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_out, losses,
-           parts):  # fmt: skip
+           inputs, acts, c_prev, tanh_c):  # fmt: skip
     """One training step of LSTM -> FC(F) + ReLU -> FC(1) -> loss, a chunk at a time: its
     forward, the two layers, each instance's loss (``sign``: +-1 per row of ``X``; the mean over
     the batch) and back through all of it, the chunk's activations still in cache (no forward
     run again). Per chunk: ``d_wt`` as ``_backward``'s, ``d_fc`` (F, H + 1) the FC layer's weight
-    and bias gradients, ``d_out`` (F + 1) the output layer's, ``losses`` its summed loss."""
+    and bias gradients, ``d_out`` (F + 1) the output layer's, ``losses`` its summed loss. The
+    arrays after them as ``_forward``'s."""
     G, K = w.shape
     H = G // 4
-    T = X.shape[2]
-    n_chunks, K_pad, G_pad = d_wt.shape
+    n_chunks, _, G_pad = d_wt.shape
+    parts = len(inputs)
     F = fc_w.shape[0]
     scale = _ONE / np.float32(len(rows))  # the mean's gradient
     for p in numba.prange(parts):
-        inputs, acts, c_prev, tanh_c, d_gates, h, c = _backward_buffers(T, K, K_pad, G, G_pad)
+        h, c = _states(c_prev)
         z = np.empty((F, CHUNK), np.float32)  # FC pre-activations, then their gradients
         a = np.empty((F, CHUNK), np.float32)  # after the ReLU
         gs = np.empty(CHUNK, np.float32)
+        d_gates = np.zeros((1, G_pad, CHUNK), np.float32)  # one step's (its rows past the 4H
+        # gates stay zero); the whole chunk's only the input's gradient needs
         for chunk in range(p, n_chunks, parts):
             start = chunk * CHUNK
             n = min(CHUNK, len(rows) - start)
-            _gather(X, rows, start, inputs)
-            _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c)
+            _gather(X, rows, start, inputs[p])
+            _chunk_forward(w, bias, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c)
             for f in range(F):
                 for b in range(CHUNK):
                     z[f, b] = fc_b[f]
@@ -370,13 +394,36 @@ def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, 
                     weight = fc_w[f, j]
                     for b in range(CHUNK):
                         h[j, b] += weight * z[f, b]
-            _chunk_backward(w, inputs, acts, c_prev, tanh_c, h, c, d_gates, d_wt[chunk])
+            _chunk_backward(w, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c, d_gates, d_wt[chunk])
 
 
 def _parts(n_rows: int) -> int:
     """Threads for ``n_rows`` instances: numba's, at most one per chunk (the kernels take it as
     an argument: calling ``numba.get_num_threads`` inside would keep them out of the cache)."""
     return max(1, min(-(-n_rows // CHUNK), numba.get_num_threads()))
+
+
+def _padded(K: int, G: int) -> tuple[int, int]:
+    """(K', G'): the inputs and the bias's row of ones in whole tiles of rows, the gates in whole
+    vectors (the shapes of the transposed weight gradient)."""
+    return -(-(K + 1) // ROWS) * ROWS, -(-G // WIDTH) * WIDTH
+
+
+def _activations(n_rows: int, T: int, K: int, G: int) -> tuple[np.ndarray, ...]:
+    """Each thread's arrays for a chunk's forward, one row per thread, from the scratch pool
+    (fresh ones, ~4 MB a thread, cost a page fault per 4 KB every step): inputs (T, K', CHUNK)
+    with the bias's row of ones (its gradient is the gate gradients' sum) and zero rows past
+    it, activations (T, G, CHUNK), c_{t-1} and tanh(c_t) (T, H, CHUNK)."""
+    parts, (K_pad, _), H = _parts(n_rows), _padded(K, G), G // 4
+    inputs = scratch(parts, T, K_pad, CHUNK)
+    inputs[:, :, K:] = 0
+    inputs[:, :, K] = 1
+    return (
+        inputs,
+        scratch(parts, T, G, CHUNK),
+        scratch(parts, T, H, CHUNK),
+        scratch(parts, T, H, CHUNK),
+    )
 
 
 class LSTMLastHidden(torch.autograd.Function):
@@ -390,7 +437,9 @@ class LSTMLastHidden(torch.autograd.Function):
         bias = (b_ih + b_hh).detach().contiguous()
         h_last = np.empty((len(rows), w_hh.shape[1]), np.float32)
         X = x.detach().numpy()
-        _forward(X, rows.numpy(), w.numpy(), bias.numpy(), h_last, _parts(len(rows)))
+        G, K = w.shape
+        arrays = _activations(len(rows), x.shape[2], K, G)
+        _forward(X, rows.numpy(), w.numpy(), bias.numpy(), h_last, *arrays)
         ctx.save_for_backward(x, rows)
         ctx.weights = (w, bias)
         return torch.from_numpy(h_last)
@@ -401,13 +450,14 @@ class LSTMLastHidden(torch.autograd.Function):
         w, bias = ctx.weights
         G, K = w.shape
         n_chunks = (len(rows) + CHUNK - 1) // CHUNK
-        # inputs and the bias's row of ones in whole tiles of rows, gates in whole vectors
-        d_wt = np.empty((n_chunks, -(-(K + 1) // ROWS) * ROWS, -(-G // WIDTH) * WIDTH), np.float32)
+        d_wt = np.empty((n_chunks, *_padded(K, G)), np.float32)
         dx = np.empty((len(rows) if ctx.needs_input_grad[0] else 0, *x.shape[1:]), np.float32)
         X = x.detach().numpy()
         dh_last = dh.contiguous().numpy()
-        parts = _parts(len(rows))
-        _backward(X, rows.numpy(), w.numpy(), bias.numpy(), dh_last, d_wt, dx, parts)
+        arrays = _activations(len(rows), x.shape[2], K, G)
+        d_gates = scratch(len(arrays[0]), x.shape[2], d_wt.shape[2], CHUNK)
+        d_gates[:, :, G:] = 0
+        _backward(X, rows.numpy(), w.numpy(), bias.numpy(), dh_last, d_wt, dx, *arrays, d_gates)
         total = d_wt.sum(0)
         d_w_all = torch.from_numpy(np.ascontiguousarray(total[:K, :G].T))
         d_b_all = torch.from_numpy(total[K, :G].copy())
@@ -446,7 +496,7 @@ class LSTMStep(torch.autograd.Function):
         G, K = w.shape
         F, H = fc_w.shape
         n_chunks = (len(rows) + CHUNK - 1) // CHUNK
-        d_wt = np.empty((n_chunks, -(-(K + 1) // ROWS) * ROWS, -(-G // WIDTH) * WIDTH), np.float32)
+        d_wt = np.empty((n_chunks, *_padded(K, G)), np.float32)
         d_fc = np.empty((n_chunks, F, H + 1), np.float32)
         d_out = np.empty((n_chunks, F + 1), np.float32)
         losses = np.empty(n_chunks, np.float32)
@@ -465,7 +515,7 @@ class LSTMStep(torch.autograd.Function):
             d_fc,
             d_out,
             losses,
-            _parts(len(rows)),
+            *_activations(len(rows), x.shape[2], K, G),
         )
         total, fc, out = d_wt.sum(0), d_fc.sum(0), d_out.sum(0)
         d_w_all = torch.from_numpy(np.ascontiguousarray(total[:K, :G].T))

@@ -1,4 +1,4 @@
-"""Reusable float32 scratch arrays for the compiled CPU kernels of the haptic ConvNet.
+"""Reusable float32 scratch arrays for the compiled CPU kernels of the haptic ConvNet and LSTM.
 
 A training step at batch 1000 needs 100-150 MB of activations and gradients. Freshly allocated
 memory is page-faulted and zeroed by the OS on its first touch, every step, which cost more than

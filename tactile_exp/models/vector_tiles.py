@@ -18,7 +18,11 @@ every shape against torch).
   the products summed over steps in registers and over lanes at the end;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
 - ``tanh_lanes``: tanh (or, scaled, the sigmoid) of a block of floats in place, a whole vector at
-  a time (numba's loops use 256-bit vectors on AVX-512 CPUs, half the width).
+  a time (numba's loops use 256-bit vectors on AVX-512 CPUs, half the width);
+- ``lanes``: an elementwise loop written as plain arithmetic on whole vectors (``Lanes``), for
+  loops numba leaves scalar: one that reads and writes several arrays, which LLVM cannot prove
+  apart, runs a float at a time (the LSTM's cell update and its gates' gradients ran 4-8x
+  slower so).
 
 The vector width follows the CPU numba compiles for: 16 float32 lanes with AVX-512, 8 with
 AVX2, else 4. ``tap_sums`` sums each lane in the same order at any width (the bias, then one
@@ -230,6 +234,26 @@ TANH_P = (-2.76076847742355e-16, 2.00018790482477e-13, -8.60467152213735e-11,
 TANH_Q = (1.19825839466702e-06, 1.18534705686654e-04, 2.26843463243900e-03, 4.89352518554385e-03)
 
 
+def _tanh(builder, v):
+    """Eigen's tanh of the vector ``v``: clamped, then v P(v^2) / Q(v^2); NaN stays NaN."""
+    fma = _fma(builder)
+
+    def const(value):
+        return ir.Constant(_VEC, [value] * WIDTH)
+
+    def poly(coefficients, x2):
+        value = const(coefficients[0])
+        for c in coefficients[1:]:
+            value = builder.call(fma, [value, x2, const(c)])
+        return value
+
+    low, high = const(-TANH_CLAMP), const(TANH_CLAMP)
+    v = builder.select(builder.fcmp_ordered("<", v, low), low, v)
+    v = builder.select(builder.fcmp_ordered(">", v, high), high, v)
+    x2 = builder.fmul(v, v)
+    return builder.fdiv(builder.fmul(v, poly(TANH_P, x2)), poly(TANH_Q, x2))
+
+
 @intrinsic
 def tanh_lanes(typingctx, x, at, count, scale, shift):  # noqa: ARG001
     """``x[at + m] = scale * tanh(scale * x[at + m]) + shift`` for m < ``count`` (a multiple of
@@ -241,32 +265,109 @@ def tanh_lanes(typingctx, x, at, count, scale, shift):  # noqa: ARG001
 
     def codegen(context, builder, signature, args):
         x_v, at_v, n, scale_v, shift_v = args
-        fma = _fma(builder)
-
-        def const(value):
-            return ir.Constant(_VEC, [value] * WIDTH)
-
-        def poly(coefficients, x2):
-            value = const(coefficients[0])
-            for c in coefficients[1:]:
-                value = builder.call(fma, [value, x2, const(c)])
-            return value
-
         scale, shift = _splat(builder, scale_v), _splat(builder, shift_v)
         base = builder.gep(_data(context, builder, signature.args[0], x_v), [at_v])
         zero, step = ir.Constant(n.type, 0), ir.Constant(n.type, WIDTH)
         with cgutils.for_range_slice(builder, zero, n, step) as (m, _):
             where = builder.bitcast(builder.gep(base, [m]), _VEC.as_pointer())
-            v = builder.fmul(builder.load(where, align=4), scale)
-            low, high = const(-TANH_CLAMP), const(TANH_CLAMP)
-            v = builder.select(builder.fcmp_ordered("<", v, low), low, v)
-            v = builder.select(builder.fcmp_ordered(">", v, high), high, v)
-            x2 = builder.fmul(v, v)
-            t = builder.fdiv(builder.fmul(v, poly(TANH_P, x2)), poly(TANH_Q, x2))
-            builder.store(builder.call(fma, [scale, t, shift]), where, align=4)
+            t = _tanh(builder, builder.fmul(builder.load(where, align=4), scale))
+            builder.store(builder.call(_fma(builder), [scale, t, shift]), where, align=4)
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+class Lanes:
+    """A vector of ``WIDTH`` floats inside a ``lanes`` body: ``+``, ``-`` and ``*`` with other
+    vectors or numbers, ``tanh`` and ``flush`` emit the vector instructions (each operation
+    rounded once, in the order written: the same floats at any width)."""
+
+    def __init__(self, builder, value) -> None:
+        self.builder, self.value = builder, value
+
+    def _other(self, other):
+        if isinstance(other, Lanes):
+            return other.value
+        return ir.Constant(_VEC, [float(other)] * WIDTH)
+
+    def __add__(self, other):
+        return Lanes(self.builder, self.builder.fadd(self.value, self._other(other)))
+
+    __radd__ = __add__
+
+    def __sub__(self, other):
+        return Lanes(self.builder, self.builder.fsub(self.value, self._other(other)))
+
+    def __rsub__(self, other):
+        return Lanes(self.builder, self.builder.fsub(self._other(other), self.value))
+
+    def __mul__(self, other):
+        return Lanes(self.builder, self.builder.fmul(self.value, self._other(other)))
+
+    __rmul__ = __mul__
+
+    def tanh(self):
+        """``tanh_lanes``' tanh."""
+        return Lanes(self.builder, _tanh(self.builder, self.value))
+
+    def flush(self, tiny: float):
+        """The value where its magnitude is at least ``tiny``, else 0 (NaN too)."""
+        magnitude = self.builder.call(
+            cgutils.get_or_insert_function(
+                self.builder.module, ir.FunctionType(_VEC, [_VEC]), f"llvm.fabs.v{WIDTH}f32"
+            ),
+            [self.value],
+        )
+        keep = self.builder.fcmp_ordered(">=", magnitude, self._other(tiny))
+        return Lanes(self.builder, self.builder.select(keep, self.value, self._other(0.0)))
+
+
+def lanes(body, reads: int):
+    """An intrinsic ``f(arrays, offsets, count)`` running ``body`` over lanes m < ``count`` (a
+    multiple of ``WIDTH``), a vector at a time: ``arrays`` a tuple of flat float32 arrays,
+    ``offsets`` one int per array; ``body`` takes the vectors ``arrays[k][offsets[k] + m]`` of
+    the first ``reads`` arrays as ``Lanes`` and returns one ``Lanes`` per other array, stored at
+    its offset, in order (an array named twice holds the later value)."""
+
+    @intrinsic
+    def kernel(typingctx, arrays, offsets, count):  # noqa: ARG001
+        if not (
+            isinstance(arrays, types.BaseTuple)
+            and isinstance(offsets, types.BaseTuple)
+            and len(arrays) == len(offsets) > reads
+        ):
+            raise TypingError(f"{body.__name__}: expects tuples of arrays and of their offsets")
+        for ty in arrays:
+            _check(body.__name__, array=ty)
+        sig = types.void(arrays, offsets, types.intp)
+
+        def codegen(context, builder, signature, args):
+            arrays_v = cgutils.unpack_tuple(builder, args[0])
+            offsets_v = [
+                context.cast(builder, v, ty, types.intp)
+                for v, ty in zip(
+                    cgutils.unpack_tuple(builder, args[1]), signature.args[1], strict=True
+                )
+            ]
+            bases = [
+                builder.gep(_data(context, builder, ty, v), [at])
+                for ty, v, at in zip(signature.args[0], arrays_v, offsets_v, strict=True)
+            ]
+            n = args[2]
+            zero, step = ir.Constant(n.type, 0), ir.Constant(n.type, WIDTH)
+            with cgutils.for_range_slice(builder, zero, n, step) as (m, _):
+                where = [builder.bitcast(builder.gep(b, [m]), _VEC.as_pointer()) for b in bases]
+                inputs = [Lanes(builder, builder.load(p, align=4)) for p in where[:reads]]
+                outputs = body(*inputs)
+                if len(outputs) != len(where) - reads:
+                    raise TypingError(f"{body.__name__}: returns {len(outputs)} vectors")
+                for p, value in zip(where[reads:], outputs, strict=True):
+                    builder.store(value.value, p, align=4)
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    return kernel
 
 
 DOT_TAPS = 5  # taps per tap_dots call: ROWS x DOT_TAPS running sums in registers
