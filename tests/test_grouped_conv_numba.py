@@ -132,19 +132,18 @@ def test_huge_page_buffers_are_private_aligned_and_never_handed_out_while_a_view
 
 @pytest.mark.parametrize("parts", [[(0, 3)], [(0, 1), (1, 3)], [(0, 2), (2, 3)]])
 def test_to_layout_fills_every_block_whatever_the_split(parts):
-    """Rows 37 of a batch padded to 48 lanes: whole tiles, the last instance one value at a
-    time, zero padding, and 21 steps (16 in tiles); each task's blocks alone, in any split."""
+    """A batch of 37 padded to 48 lanes: whole tiles, the last instance one value at a time,
+    zero padding, and 21 steps (16 in tiles); each task's blocks alone, in any split."""
     from tactile_exp.models.grouped_conv_numba import LANES, to_layout
 
     rng = np.random.default_rng(3)
-    x = rng.standard_normal((60, 2 * 3, 21), dtype=np.float32)  # 3 groups of 2 channels
-    rows = rng.permutation(60)[:37]
+    x = rng.standard_normal((37, 2 * 3, 21), dtype=np.float32)  # 3 groups of 2 channels
     out = np.full((3, 2, 21, 3 * LANES), np.nan, np.float32)
     for start, stop in parts:
-        to_layout(x, rows, 3, out, start, stop)
+        to_layout(x, 3, out, start, stop)
     want = np.zeros_like(out)
     for c in range(6):
-        want[c % 3, c // 3, :, :37] = x[rows, c, :].T
+        want[c % 3, c // 3, :, :37] = x[:, c, :].T
     np.testing.assert_array_equal(out, want)
 
 

@@ -1,10 +1,15 @@
 """numba's settings for every kernel module (cache folder, threading layer) and the compile
-ahead: the kernels a job runs compiled in a background process while it loads its data."""
+ahead: the kernels a job runs compiled in a background process while it loads its data; the
+kernels' row check."""
 
 import logging
 import os
 import subprocess
 import sys
+
+import numpy as np
+import pytest
+import torch
 
 from tactile_exp.models import numba_setup
 
@@ -125,3 +130,11 @@ def test_a_failed_compile_ahead_leaves_the_compile_to_the_first_call(tmp_path, m
     numba_setup.announce_compile("toy_failing")
     assert process.returncode != 0
     assert caplog.records[-1].getMessage().startswith("compiling the toy_failing kernels (")
+
+
+def test_check_rows_refuses_rows_outside_the_input_and_takes_the_rest():
+    for rows in (torch.tensor([0, 4, 2]), np.array([3]), torch.tensor([], dtype=torch.int64)):
+        numba_setup.check_rows(rows, 5, "kernel")
+    for rows in (torch.tensor([0, 5]), np.array([-1, 2])):
+        with pytest.raises(IndexError, match=r"^kernel: rows must lie in \[0, 5\), the rows of"):
+            numba_setup.check_rows(rows, 5, "kernel")

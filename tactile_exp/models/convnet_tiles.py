@@ -36,7 +36,7 @@ from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.grouped_conv_numba import _in_parallel, conv_out_len
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
-from tactile_exp.models.numba_setup import announce_compile, numba
+from tactile_exp.models.numba_setup import announce_compile, check_rows, numba
 from tactile_exp.models.vector_tiles import (
     DOT_TAPS,
     GATED,
@@ -348,8 +348,7 @@ def tiled_loss(
     """``losses.LOSSES[loss](head(grouped_conv_stack(X[rows])).squeeze(1), y[rows])`` for float32
     CPU ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, with its gradient: one
     compiled pass per step (the rows read in place)."""
-    if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(X):
-        raise IndexError(f"tiled ConvNet step: rows must lie in [0, {len(X)}), the rows of X")
+    check_rows(rows, len(X), "tiled ConvNet step")
     params = [p for pair in zip(weights, biases, strict=True) for p in pair]
     return TiledStep.apply(
         X.contiguous(),

@@ -368,10 +368,9 @@ def stack_backward(
 
 
 @numba.njit(**_JIT)
-def to_layout(x, rows, groups, out, start, stop):  # pragma: no cover (compiled)
-    """Rows ``rows`` of (N, c_in * groups, T), channel c in group c % groups -> (groups, c_in,
-    T, n_pad), for the blocks of ``LANES`` instances ``start`` to ``stop``: the batch is read in
-    place from the whole input, never copied out first.
+def to_layout(x, groups, out, start, stop):  # pragma: no cover (compiled)
+    """The batch ``x`` (n, c_in * groups, T), channel c in group c % groups -> (groups, c_in,
+    T, n_pad), for the blocks of ``LANES`` instances ``start`` to ``stop``.
 
     Block by block, each instance's channels in order (a sequential sweep of its signals), in
     square tiles of ``WIDTH`` instances x ``WIDTH`` steps transposed in registers
@@ -379,7 +378,7 @@ def to_layout(x, rows, groups, out, start, stop):  # pragma: no cover (compiled)
     value at a time.
     """
     channels, steps = x.shape[1], x.shape[2]
-    n, n_pad = rows.shape[0], out.shape[3]
+    n, n_pad = x.shape[0], out.shape[3]
     flat_x, flat_out = x.reshape(-1), out.reshape(-1)
     tiled = steps - steps % WIDTH
     starts = np.empty(WIDTH, np.int64)
@@ -391,13 +390,13 @@ def to_layout(x, rows, groups, out, start, stop):  # pragma: no cover (compiled)
                 first = 0
                 if m0 + WIDTH <= n:
                     for i in range(WIDTH):
-                        starts[i] = (rows[m0 + i] * channels + c) * steps
+                        starts[i] = ((m0 + i) * channels + c) * steps
                     for t in range(0, tiled, WIDTH):
                         transpose_tile(flat_x, starts, t, flat_out, at + m0, n_pad)
                     first = tiled
                 for t in range(first, steps):
                     for m in range(m0, m0 + WIDTH):
-                        dst[t, m] = x[rows[m], c, t] if m < n else np.float32(0.0)
+                        dst[t, m] = x[m, c, t] if m < n else np.float32(0.0)
 
 
 @numba.njit(**_JIT)
@@ -451,22 +450,17 @@ def _per_group(a: np.ndarray, groups: int) -> np.ndarray:
 
 
 def _forward(
-    x: torch.Tensor,
-    rows: torch.Tensor,
-    params: Sequence[torch.Tensor],
-    groups: int,
-    strides: tuple[int, int, int],
+    x: torch.Tensor, params: Sequence[torch.Tensor], groups: int, strides: tuple[int, int, int]
 ) -> list[np.ndarray]:
-    """The input rows ``rows`` and each layer's ReLU output in the layout (groups, channels,
-    time, n_pad)."""
+    """The input and each layer's ReLU output in the layout (groups, channels, time, n_pad)."""
     if x.requires_grad:
         raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
     announce_compile(__name__)
     _, channels, steps = x.shape
-    n_pad = _padded(len(rows))
+    n_pad = _padded(len(x))
     h = scratch(groups, channels // groups, steps, n_pad)
-    batch, index = np.ascontiguousarray(x.detach().numpy()), rows.numpy()
-    _in_parallel(lambda _, a, b: to_layout(batch, index, groups, h, a, b), n_pad // LANES)
+    batch = np.ascontiguousarray(x.detach().numpy())
+    _in_parallel(lambda _, a, b: to_layout(batch, groups, h, a, b), n_pad // LANES)
     acts = [h]
     for weight, stride in zip(params[0::2], strides, strict=True):
         h = scratch(
@@ -510,7 +504,7 @@ class GroupedConvStack(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, x, groups: int, strides: Sequence[int], *params: torch.Tensor):
-        acts = _forward(x, torch.arange(len(x)), params, groups, tuple(strides))
+        acts = _forward(x, params, groups, tuple(strides))
         h = acts[-1].reshape(-1, acts[-1].shape[3])
         result = np.empty((len(x), h.shape[0]), np.float32)
         _in_parallel(lambda _, a, b: from_layout(h, len(x), result, a, b), -(-len(h) // LANES))

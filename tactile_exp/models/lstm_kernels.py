@@ -47,7 +47,7 @@ import numpy as np
 import torch
 
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
-from tactile_exp.models.numba_setup import announce_compile, numba
+from tactile_exp.models.numba_setup import announce_compile, check_rows, numba
 from tactile_exp.models.scratch import scratch
 from tactile_exp.models.vector_tiles import (
     PLAIN,
@@ -477,8 +477,7 @@ def lstm_last_hidden(
         raise ValueError(f"compiled LSTM: expects float32 CPU input, got {x.dtype} on {x.device}")
     x = x.contiguous()
     rows = torch.arange(len(x)) if rows is None else rows.to(torch.int64).contiguous()
-    if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(x):
-        raise IndexError(f"compiled LSTM: rows must lie in [0, {len(x)}), the rows of x")
+    check_rows(rows, len(x), "compiled LSTM")
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
     announce_compile(__name__)
     return LSTMLastHidden.apply(x, rows, *params)
@@ -559,8 +558,7 @@ def lstm_loss(
     if x.device.type != "cpu" or x.dtype != torch.float32:
         raise ValueError(f"compiled LSTM: expects float32 CPU input, got {x.dtype} on {x.device}")
     rows = rows.to(torch.int64).contiguous()
-    if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < len(x):
-        raise IndexError(f"compiled LSTM: rows must lie in [0, {len(x)}), the rows of x")
+    check_rows(rows, len(x), "compiled LSTM")
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
     announce_compile(__name__)
     return LSTMStep.apply(

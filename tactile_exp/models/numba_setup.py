@@ -19,7 +19,7 @@ import logging
 import os
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Sequence, Sized
 from pathlib import Path
 
 from tactile_exp.data.phac2 import default_cache_dir
@@ -102,4 +102,11 @@ def announce_compile(module: str) -> None:
         )
 
 
-__all__ = ["announce_compile", "compile_ahead", "numba"]
+def check_rows(rows: Sized, n: int, kernel: str) -> None:
+    """Refuse row indices (an integer tensor or array) outside [0, ``n``): the compiled kernels
+    read the rows of their input without bounds checks."""
+    if len(rows) and not 0 <= int(rows.min()) <= int(rows.max()) < n:
+        raise IndexError(f"{kernel}: rows must lie in [0, {n}), the rows of the input")
+
+
+__all__ = ["announce_compile", "check_rows", "compile_ahead", "numba"]
