@@ -12,7 +12,13 @@ whole chunk at the end (~3 MB of operands). Chunks run in parallel on numba's th
 step runs a chunk at a time through everything (``lstm_loss``: the recurrence, both FC layers, each
 instance's loss and back through all of it), so the backward reads the chunk's forward from cache:
 nothing outlives the chunk and nothing runs twice (1.71x faster than the autograd path below,
-bench/bench_roofline.py --before, two threads). Through autograd (``lstm_last_hidden``: scoring,
+bench/bench_roofline.py --before, two threads). It keeps only the current step's gate gradients
+(the step's weight and state gradients use them at once; a chunk's all, 1.8 MB, only the input's
+gradient needs), takes its arrays from the scratch pool (fresh ones, ~4 MB a thread, cost a page
+fault per 4 KB every step) and runs its elementwise loops, the cell update and the gates'
+gradients, as whole vectors (``vector_tiles.lanes``: numba's loops over that many arrays stayed
+scalar or behind alias checks): together 1.11x (bench/bench_roofline.py --before, both sides in
+child processes, two threads, 2026-11-27). Through autograd (``lstm_last_hidden``: scoring,
 and training with a loss the step does not compute) the forward keeps nothing and the backward
 recomputes a chunk's forward in cache. Keeping every chunk's activations for that backward instead
 (~63 MB a batch of 1,000) made a training step 1.25x faster alone, but in the Table I grid, two
@@ -32,7 +38,8 @@ same way): a chunk's input projection as one BLAS product (numba's ``np.dot``) b
 recurrence, a forward 1.2x slower; the input projection kept from the forward for the backward's
 recomputation (24 MB a batch), a step 1.2-1.3x slower; a forward pass that keeps only the current
 step's activations, 6% faster on its own (~1.5% of a step); chunks of 128 instances (as fast) or 32
-(1.13x slower).
+(1.13x slower); tanh's division shared by two floats (p q' r and p' q r, r = 1 / (q q')), no
+faster: a vector's tanh is bound by its other operations, not by the division.
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
