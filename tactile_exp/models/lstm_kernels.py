@@ -137,7 +137,7 @@ def _flushed(x: Lanes) -> tuple[Lanes]:
 
 
 # The elementwise loops over a step's rows, as whole vectors (``lanes``: numba's own loops over
-# these many arrays stay scalar).
+# these many arrays stay scalar or behind runtime alias checks).
 _cell_lanes = lanes(_cell, reads=5)
 _gate_grad_lanes = lanes(_gate_grads, reads=8)
 _flush_lanes = lanes(_flushed, reads=1)
