@@ -75,6 +75,23 @@ def test_paper_sized_rows_match_nn_lstm():
     assert not grads[0][others].any()  # rows not read get none
 
 
+def test_weight_gradients_are_the_same_without_the_inputs_gradient():
+    """Without the input's gradient the backward keeps one time step's gate gradients, not all
+    of them: the weights' gradients must not change by a bit."""
+    torch.manual_seed(0)
+    lstm = LSTMBody(32, impl="compiled").lstm
+    x = torch.randn(3 * CHUNK + 5, 32, 150)
+    weights = torch.randn(len(x), 10)
+    grads = []
+    for needs in (True, False):
+        lstm.zero_grad()
+        (lstm_last_hidden(x.clone().requires_grad_(needs), lstm) * weights).sum().backward()
+        grads.append([p.grad.clone() for p in lstm.parameters()])
+    assert all(float(g.abs().max()) > 0 for g in grads[1])
+    for with_x, without in zip(*grads, strict=True):
+        assert torch.equal(with_x, without)
+
+
 @pytest.mark.skipif(numba_config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")
 def test_results_do_not_depend_on_the_thread_count():
     rows = torch.arange(3 * CHUNK + 5)

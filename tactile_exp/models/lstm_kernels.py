@@ -300,7 +300,8 @@ def _backward(X, rows, w, bias, dh_last, d_wt, dx, inputs, acts, c_prev, tanh_c,
     """Gradients of the loss through h_T: each chunk's weight and bias gradients, transposed, in
     ``d_wt`` (n_chunks, K', G') (as ``_chunk_backward``; the caller sums them in order), and
     d loss / d X[rows] in ``dx`` (len(rows), C, T) unless ``dx`` is empty; as ``_forward``, with
-    each thread's gate gradients in ``d_gates`` (threads, T, G', CHUNK), rows past 4H zero."""
+    each thread's gate gradients in ``d_gates`` (``_gate_gradients``: every step's when ``dx``
+    is wanted, else the current step's)."""
     G, K = w.shape
     H = G // 4
     C = K - H
@@ -333,16 +334,16 @@ def _backward(X, rows, w, bias, dh_last, d_wt, dx, inputs, acts, c_prev, tanh_c,
 
 @numba.njit(parallel=True, **_JIT)
 def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_out, losses,
-           inputs, acts, c_prev, tanh_c):  # fmt: skip
+           inputs, acts, c_prev, tanh_c, d_gates):  # fmt: skip
     """One training step of LSTM -> FC(F) + ReLU -> FC(1) -> loss, a chunk at a time: its
     forward, the two layers, each instance's loss (``sign``: +-1 per row of ``X``; the mean over
     the batch) and back through all of it, the chunk's activations still in cache (no forward
     run again). Per chunk: ``d_wt`` as ``_backward``'s, ``d_fc`` (F, H + 1) the FC layer's weight
     and bias gradients, ``d_out`` (F + 1) the output layer's, ``losses`` its summed loss. The
-    arrays after them as ``_forward``'s."""
+    arrays after them as ``_backward``'s."""
     G, K = w.shape
     H = G // 4
-    n_chunks, _, G_pad = d_wt.shape
+    n_chunks = d_wt.shape[0]
     parts = len(inputs)
     F = fc_w.shape[0]
     scale = _ONE / np.float32(len(rows))  # the mean's gradient
@@ -351,8 +352,6 @@ def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, 
         z = np.empty((F, CHUNK), np.float32)  # FC pre-activations, then their gradients
         a = np.empty((F, CHUNK), np.float32)  # after the ReLU
         gs = np.empty(CHUNK, np.float32)
-        d_gates = np.zeros((1, G_pad, CHUNK), np.float32)  # one step's (its rows past the 4H
-        # gates stay zero); the whole chunk's only the input's gradient needs
         for chunk in range(p, n_chunks, parts):
             start = chunk * CHUNK
             n = min(CHUNK, len(rows) - start)
@@ -401,7 +400,9 @@ def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, 
                     weight = fc_w[f, j]
                     for b in range(CHUNK):
                         h[j, b] += weight * z[f, b]
-            _chunk_backward(w, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c, d_gates, d_wt[chunk])
+            _chunk_backward(
+                w, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c, d_gates[p], d_wt[chunk]
+            )
 
 
 def _parts(n_rows: int) -> int:
@@ -433,6 +434,15 @@ def _activations(n_rows: int, T: int, K: int, G: int) -> tuple[np.ndarray, ...]:
     )
 
 
+def _gate_gradients(threads: int, steps: int, G: int, G_pad: int) -> np.ndarray:
+    """Each thread's gate gradients (threads, steps, G_pad, CHUNK) from the scratch pool, the rows
+    past the G gates zero: every step's for the input's gradient, else one step's (what a step's
+    weight and state gradients use at once; 12 KB, in L1, against the chunk's 1.8 MB)."""
+    d_gates = scratch(threads, steps, G_pad, CHUNK)
+    d_gates[:, :, G:] = 0
+    return d_gates
+
+
 class LSTMLastHidden(torch.autograd.Function):
     """The last hidden state (B, H) of a one-layer LSTM over the rows ``rows`` of (N, C, T)
     float32 CPU input, with ``nn.LSTM``'s parameters (weight_ih (4H, C), weight_hh (4H, H),
@@ -462,8 +472,8 @@ class LSTMLastHidden(torch.autograd.Function):
         X = x.detach().numpy()
         dh_last = dh.contiguous().numpy()
         arrays = _activations(len(rows), x.shape[2], K, G)
-        d_gates = scratch(len(arrays[0]), x.shape[2], d_wt.shape[2], CHUNK)
-        d_gates[:, :, G:] = 0
+        steps = x.shape[2] if len(dx) else 1
+        d_gates = _gate_gradients(len(arrays[0]), steps, G, d_wt.shape[2])
         _backward(X, rows.numpy(), w.numpy(), bias.numpy(), dh_last, d_wt, dx, *arrays, d_gates)
         total = d_wt.sum(0)
         d_w_all = torch.from_numpy(np.ascontiguousarray(total[:K, :G].T))
@@ -506,6 +516,7 @@ class LSTMStep(torch.autograd.Function):
         d_fc = np.empty((n_chunks, F, H + 1), np.float32)
         d_out = np.empty((n_chunks, F + 1), np.float32)
         losses = np.empty(n_chunks, np.float32)
+        arrays = _activations(len(rows), x.shape[2], K, G)
         _train(
             x.detach().numpy(),
             rows.numpy(),
@@ -521,7 +532,8 @@ class LSTMStep(torch.autograd.Function):
             d_fc,
             d_out,
             losses,
-            *_activations(len(rows), x.shape[2], K, G),
+            *arrays,
+            _gate_gradients(len(arrays[0]), 1, G, d_wt.shape[2]),
         )
         total, fc, out = d_wt.sum(0), d_fc.sum(0), d_out.sum(0)
         d_w_all = torch.from_numpy(np.ascontiguousarray(total[:K, :G].T))
