@@ -21,12 +21,12 @@ of them alike; best of ``--repeats``):
 
 - what the ConvNet's shapes permit (``attainable``): with 4 output channels per group no pass is
   a large matrix product, so beside sgemm the bench measures two ceilings of its own and holds
-  each ConvNet pass against the lowest: the conv kernels' inner loop (``_combine``: 4 rows x 20
-  taps, conv2's, one register tile) on rows that stay in L1 (256 lanes) and at the batch's 1008
-  lanes (rows in L2), one thread; and memory: a 64 MB copy's bytes per second times the pass's
-  FLOPs per byte of the traffic it cannot avoid (the scoring forward: read the batch, write the
-  layout's input and the three activations; the training step: read the batch once, every
-  activation of a tile staying in cache);
+  each ConvNet pass against the lowest: the training step's inner loop (``tap_sums`` as it runs
+  conv2's forward for one group and tile: 4 rows x 20 taps, the 38 output steps as slots, one
+  vector of lanes) on rows in L1, one thread; and memory: a 64 MB copy's bytes per second times
+  the pass's FLOPs per byte of the traffic it cannot avoid (the scoring forward: read the batch,
+  write the layout's input and the three activations; the training step: read the batch once,
+  every activation of a tile staying in cache);
 - what the LSTM's kernels permit: their gate sums' inner loop (``tap_sums`` over the 42 inputs,
   four gates a tile) for all 40 gates of one step, on a chunk's rows in L1, one thread: each
   LSTM pass is held against the lower of it and sgemm (a chunk's working set stays in cache, so
@@ -137,14 +137,16 @@ def conv_gbytes() -> dict[str, float]:
     return {"convnet forward": forward, "convnet forward+backward": sizes[0]}
 
 
-LOOP_TAPS, LOOP_LANES = WIDTH * KERNEL, (256, 1008)  # conv2's taps per output row; lanes
-LOOP_CALLS = 400
+LOOP_TAPS = WIDTH * KERNEL  # conv2's taps per output row
+LOOP_CALLS = 20000
 COPY_MB = 64
 
 
-def loop_name(lanes: int) -> str:
-    where = "L1" if lanes * 4 * (LOOP_TAPS + 4) < 48 * 2**10 else "L2"
-    return f"conv inner loop, 4 rows x {LOOP_TAPS} taps x {lanes} lanes (in {where}), 1 thread"
+def loop_name() -> str:
+    from tactile_exp.models.vector_tiles import WIDTH as LANES
+
+    steps = conv_layers()[1][2]
+    return f"conv inner loop, 4 rows x {LOOP_TAPS} taps x {steps} steps x {LANES} lanes (in L1)"
 
 
 COPY = f"copy {COPY_MB} MB (numpy), 1 thread"
@@ -164,19 +166,19 @@ def lstm_loop_name() -> str:
 def bound_gflop() -> dict[str, float]:
     """GFLOP of the inner-loop timers; GB (read + written) of the copy."""
     from tactile_exp.models.lstm_kernels import CHUNK
+    from tactile_exp.models.vector_tiles import WIDTH as LANES
 
-    loops = {loop_name(n): 2 * 4 * LOOP_TAPS * n * LOOP_CALLS / 1e9 for n in LOOP_LANES}
+    conv2 = 2 * 4 * LOOP_TAPS * conv_layers()[1][2] * LANES * LOOP_CALLS / 1e9
     gates = 2 * 4 * HIDDEN * LSTM_INPUTS * CHUNK * LSTM_LOOP_CALLS / 1e9
-    return {**loops, lstm_loop_name(): gates, COPY: 2 * COPY_MB * 2**20 / 1e9}
+    return {loop_name(): conv2, lstm_loop_name(): gates, COPY: 2 * COPY_MB * 2**20 / 1e9}
 
 
 def bound_timers() -> dict[str, Timer]:
     """The inner loops of the conv and LSTM kernels on resident rows, and a memory copy."""
-    from tactile_exp.models import grouped_conv_numba as conv
     from tactile_exp.models import lstm_kernels as lstm
-    from tactile_exp.models.vector_tiles import PLAIN
-
-    numba = conv.numba
+    from tactile_exp.models.numba_setup import numba
+    from tactile_exp.models.vector_tiles import RELU, tap_sums
+    from tactile_exp.models.vector_tiles import WIDTH as LANES
 
     @numba.njit
     def gate_sums(w, inputs, acts, bias, calls):  # one step's gates, as _chunk_forward runs them
@@ -185,19 +187,20 @@ def bound_timers() -> dict[str, Timer]:
             lstm._gate_sums(w, bias, inputs, acts, taps, 0)
 
     @numba.njit
-    def loop(rows, src, taps, wts, bias, calls):
+    def loop(w, x, taps, out, bias, steps, calls):  # as convnet_tiles runs conv2's forward
         for _ in range(calls):
-            conv._combine(rows, 0, src, taps, wts, LOOP_TAPS, bias, PLAIN, rows)
+            tap_sums(w, 0, LOOP_TAPS, 1, x, 0, taps, LOOP_TAPS, out, 0, steps * LANES, bias, 0,
+                     steps, STRIDE * LANES, LANES, RELU, out)  # fmt: skip
 
     rng = np.random.default_rng(0)
-    timers = {}
-    for lanes in LOOP_LANES:
-        src = rng.standard_normal((WIDTH, KERNEL, lanes), dtype=np.float32)
-        rows = np.zeros((4, 1, lanes), np.float32)
-        taps = np.arange(LOOP_TAPS) * lanes  # every row of src, in order
-        wts = rng.standard_normal((LOOP_TAPS, 4), dtype=np.float32)
-        args = (rows, src, taps, wts, np.zeros(4, np.float32), LOOP_CALLS)
-        timers[loop_name(lanes)] = _timed(lambda args=args: loop(*args))
+    c_in, t_in, t_out = conv_layers()[1]
+    rows = t_in + 2 * KERNEL  # each channel's steps with zero rows either side
+    x = rng.standard_normal(c_in * rows * LANES, dtype=np.float32)
+    taps = np.array([(i * rows + j) * LANES for i in range(c_in) for j in range(KERNEL)])
+    w = rng.standard_normal(4 * LOOP_TAPS, dtype=np.float32)
+    out = np.zeros(4 * t_out * LANES, np.float32)
+    args = (w, x, taps, out, np.zeros(4, np.float32), t_out, LOOP_CALLS)
+    timers = {loop_name(): _timed(lambda: loop(*args))}
     w = rng.standard_normal((4 * HIDDEN, LSTM_INPUTS), dtype=np.float32)
     inputs = rng.standard_normal((1, LSTM_INPUTS, lstm.CHUNK), dtype=np.float32)  # one step
     acts = np.zeros((1, 4 * HIDDEN, lstm.CHUNK), np.float32)
@@ -458,7 +461,7 @@ def main() -> None:
         "sgemm, GFLOP/s (the ceiling: the faster BLAS)": round(ceiling, 1),
         "sgemm, GFLOP per CPU s": round(ceiling_cpu, 1),
     }
-    loop_cpu = max(gflop[loop_name(n)] / best[loop_name(n)][1] for n in LOOP_LANES)
+    loop_cpu = gflop[loop_name()] / best[loop_name()][1]
     copy_cpu = gflop[COPY] / best[COPY][1]
     figures[f"{COPY}, GB per CPU s"] = round(copy_cpu, 1)
     for name, (wall, cpu) in best.items():

@@ -16,7 +16,7 @@ from tactile_exp.models.losses import LOSSES
 
 # (instances, batch, channels, steps, groups, kernel_sizes, widths, strides)
 SHAPES = [
-    (300, 150, 32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2)),  # the default net, 2 full tiles + 22
+    (300, 150, 32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2)),  # the default net; a part tile
     (9, 1, 32, 150, 32, (5, 5, 5), (4, 4, 4), (2, 2, 2)),  # a batch of one
     (20, 7, 64, 41, 32, (3, 9, 5), (1, 8, 4), (3, 1, 2)),  # kernel 9 > DOT_TAPS, widths 1 and 8
     (80, 70, 6, 20, 1, (9, 3, 5), (8, 1, 4), (1, 3, 2)),  # one group of 6 channels

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+import torch
 from numba.core.errors import TypingError
 
 from tactile_exp.models import vector_tiles as vt
@@ -25,7 +26,8 @@ def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
     )
     for r in range(0, w.shape[0], vt.ROWS):
         vt.tap_sums(flat_w, r * w.shape[1], w.shape[1], 1, flat_x, 0, taps, count, flat_out,
-                    r * out_step, out_step, bias, r, lanes, mode, flat_gate)  # fmt: skip
+                    r * out_step, out_step, bias, r, lanes // vt.WIDTH, vt.WIDTH, vt.WIDTH, mode,
+                    flat_gate)  # fmt: skip
 
 
 @numba.njit
@@ -113,10 +115,40 @@ def test_tap_sums_cover_every_width_of_the_last_tile(extra):
     np.testing.assert_allclose(out, expected, rtol=1e-5, atol=1e-5)
 
 
-def test_tap_sums_relu_and_gated_masks_keep_nans():
+@numba.njit
+def _tap_sums_along_time(w, x, taps, out, bias, slots, stride):
+    """A strided convolution's first ``slots`` output steps, ReLU'd: w (rows, taps), x (steps,
+    WIDTH), out (rows, steps, WIDTH)."""
+    flat_out, row = out.reshape(-1), out.shape[1] * vt.WIDTH
+    for r in range(0, w.shape[0], vt.ROWS):
+        vt.tap_sums(w.reshape(-1), r * w.shape[1], w.shape[1], 1, x.reshape(-1), 0, taps,
+                    len(taps), flat_out, r * row, row, bias, r, slots, stride * vt.WIDTH,
+                    vt.WIDTH, vt.RELU, flat_out)  # fmt: skip
+
+
+@pytest.mark.parametrize("slots", [3 * vt.VECTORS, 3 * vt.VECTORS + 1, vt.VECTORS - 1])
+def test_tap_sums_with_slots_along_time_are_a_strided_convolution(slots):
+    """Slot v reads the taps' rows ``stride`` steps on from slot v - 1 and writes the next output
+    row: whole tiles of VECTORS slots, then the rest as one narrower tile."""
+    rng = np.random.default_rng(5)
+    kernel, stride, rows = 5, 2, 8
+    w = rng.standard_normal((rows, kernel), dtype=np.float32)
+    bias = rng.standard_normal(rows, dtype=np.float32)
+    x = rng.standard_normal((stride * slots + kernel, vt.WIDTH), dtype=np.float32)
+    out = np.full((rows, slots + 1, vt.WIDTH), np.nan, np.float32)
+    _tap_sums_along_time(w, x, np.arange(kernel) * vt.WIDTH, out, bias, slots, stride)
+    windows = np.stack([x[v * stride : v * stride + kernel] for v in range(slots)])  # (v, j, m)
+    expected = bias[:, None, None] + np.einsum("rj,vjm->rvm", w.astype(np.float64), windows)
+    np.testing.assert_allclose(out[:, :slots], np.maximum(expected, 0), rtol=1e-5, atol=1e-5)
+    assert np.isnan(out[:, slots:]).all()
+
+
+def test_tap_sums_relu_keeps_nans_and_a_shut_gate_gives_zero():
+    """The ReLU keeps a NaN; its backward gives 0 wherever the gate is shut, NaN or not, as
+    torch's threshold_backward does."""
     w, x, order, bias = _case()
     lanes = x.shape[1]
-    x[3, 5] = np.nan  # tap 17 reads row 3: lane 5 of every output row is NaN
+    x[3, 5] = x[3, 6] = np.nan  # tap 17 reads row 3: lanes 5 and 6 of every output row are NaN
     plain = np.empty((w.shape[0], lanes), np.float32)
     relu, gated = np.empty_like(plain), np.empty_like(plain)
     gate = np.where(np.arange(lanes) % 3 == 0, -1.0, 1.0).astype(np.float32) * np.ones_like(plain)
@@ -124,12 +156,13 @@ def test_tap_sums_relu_and_gated_masks_keep_nans():
     for mode, out, g in ((vt.PLAIN, plain, plain), (vt.RELU, relu, relu), (vt.GATED, gated, gate)):
         _tap_sums(w, x, taps, x.shape[0], out, lanes, bias, lanes, mode, g)
     finite = ~np.isnan(plain)
-    assert (
-        np.isnan(plain[:, 5]).all() and np.isnan(relu[:, 5]).all() and np.isnan(gated[:, 5]).all()
-    )
-    np.testing.assert_array_equal(relu[finite], (plain * (plain > 0))[finite])
+    assert np.isnan(plain[:, 5:7]).all() and np.isnan(relu[:, 5:7]).all()
+    assert np.isnan(gated[:, 5]).all() and (gated[:, 6] == 0).all()  # gate open at 5, shut at 6
+    np.testing.assert_array_equal(relu[finite], np.maximum(plain, 0)[finite])
     np.testing.assert_array_equal(gated[finite], (plain * (gate > 0))[finite])
     assert (relu[finite] >= 0).all() and (plain[finite] < 0).any()
+    expected = torch.ops.aten.threshold_backward(torch.from_numpy(plain), torch.from_numpy(gate), 0)
+    np.testing.assert_array_equal(gated, expected.numpy())
 
 
 def test_tap_sums_are_the_same_at_every_vector_width():

@@ -3,10 +3,11 @@
 At batch 1000 a layer's activations are 10-40 MB: a step that runs each layer over the whole batch
 writes them to memory in the forward and reads them back in the backward, and the step is bound by
 memory bandwidth (``grouped_conv_numba``'s layout, bench/bench_roofline.py). Here a step runs
-forward, loss and backward for ``TILE_LANES`` instances at once: their input gathered from the
-training set (rows read in place), every layer of every signal group, the classification layer,
-each instance's loss and its gradient, and back through all layers, with the tile's activations (~6
-MB at the paper's sizes) in the CPU's caches. Nothing of a tile outlives it but its share of the
+forward, loss and backward for ``TILE_LANES`` instances at once (one vector: 16 with AVX-512):
+their input gathered from the training set (rows read in place), every layer of every signal
+group, the classification layer, each instance's loss and its gradient, and back through all
+layers, with the tile's activations (~1.4 MB at the paper's sizes with 16 lanes) in the core's L2
+cache. Nothing of a tile outlives it but its share of the
 gradients. The loss is computed inside (``linear_sgd.LOSSES``: the registered losses it computes); a
 step with another loss runs through autograd (``grouped_conv_numba``).
 
@@ -14,16 +15,19 @@ Layout per tile: (groups, channels, time, lanes), the tile's instances innermost
 contiguous as in ``grouped_conv_numba``, with ``pad`` zero rows before and after each channel's
 time axis, so every output step of a convolution reads all its taps (zeros at the edges add
 exactly 0) and each layer's taps are one fixed offset table. Output channels are padded to a
-multiple of ``ROWS`` with zero weights (``tap_sums`` computes ``ROWS`` rows at a time); their
-gradients are dropped. The forward and the input gradients sum their taps in the order
+multiple of ``ROWS`` with zero weights; their gradients are dropped. ``tap_sums`` computes
+``ROWS`` rows x ``VECTORS`` slots in registers, the slots running along time: a convolution's output
+steps (its input's rows a stride apart), and for an input gradient the input steps of one phase
+of the stride. The forward and the input gradients sum their taps in the order
 ``grouped_conv_numba``'s kernels do; the weight gradients sum each tile over its steps and lanes
 (``tap_dots``), then the tiles in order: results do not depend on the thread count, and differ
 from the whole-batch kernels' by float rounding.
 
-Measured against the whole-batch kernels through autograd, the training step at batch 1000 of 5,300
-instances: 1.38x faster (bench/bench_roofline.py --before, two threads, interleaved in one process,
-2026-11-27). Tile widths (one thread, interleaved): 16 lanes, a tile in L2, no faster than the
-whole batch; 32 slower than 64; 128 as fast as 64.
+Measured (2-core Xeon, 2026-11-27, one thread, batch 1000 of 5,300 instances, a process per
+version, alternating): a training step took 17.1-18.6 ms with tiles of 16 lanes, 20.0-20.5 with 32
+and 22.1-22.3 with 64 (slots along time; the tile's activations ~1.4, 2.7 and 5.4 MB), and
+23.6-23.8 with 64 lanes and the slots along them, a call per output step. Against the whole-batch
+kernels through autograd: bench/bench_roofline.py --before.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from tactile_exp.models.vector_tiles import (
     transpose_tile,
 )
 
-TILE_LANES = 64  # instances per tile: see the module docstring for 16, 32 and 128
+TILE_LANES = WIDTH  # instances per tile, one vector: see the module docstring for wider tiles
 # Reassociation lets the reductions over lanes vectorise; no nnan/ninf, so NaNs propagate.
 _JIT = dict(nogil=True, cache=True, fastmath={"reassoc", "contract", "nsz", "arcp"},
             error_model="numpy")  # fmt: skip
@@ -88,7 +92,7 @@ def _shape(geo, layer):  # pragma: no cover (compiled)
 
 @numba.njit(**_JIT)
 def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, bwts, jtaps,
-           acts, grads, hinge, gws, gbs, ghw, ghb, losses, partial, gs, zeros, start,
+           acts, grads, hinge, gws, gbs, ghw, ghb, losses, partial, gs, zeros, ones, start,
            stop):  # fmt: skip  # pragma: no cover (compiled)
     """Tiles ``start`` to ``stop`` of the batch ``rows``: each tile's summed loss into
     ``losses[tile]`` and its share of every gradient into ``gws``, ``gbs``, ``ghw``, ``ghb``
@@ -109,12 +113,10 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
                 tpo = a_out.shape[1]
                 fin, fout = a_in.reshape(-1), a_out.reshape(-1)
                 wf, bf, at_w = ws[layer].reshape(-1), bs[layer].reshape(-1), g * cout * cin * k
-                for t in range(geo[layer, 6]):
-                    for e in range(0, cout, ROWS):
-                        tap_sums(wf, at_w + e * cin * k, cin * k, 1, fin,
-                                 (pad - left + t * s) * lanes, ftaps[layer], cin * k, fout,
-                                 (e * tpo + pad + t) * lanes, tpo * lanes, bf, g * cout + e,
-                                 lanes, RELU, fout)  # fmt: skip
+                for e in range(0, cout, ROWS):  # each output step a slot
+                    tap_sums(wf, at_w + e * cin * k, cin * k, 1, fin, (pad - left) * lanes,
+                             ftaps[layer], cin * k, fout, (e * tpo + pad) * lanes, tpo * lanes, bf,
+                             g * cout + e, geo[layer, 6], s * lanes, lanes, RELU, fout)  # fmt: skip
             part, a3 = partial[g], acts[3][g]
             part[:] = 0.0
             for e in range(c3):
@@ -133,7 +135,7 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
             total += loss
             gs[m] = f * slope * scale
         losses[tile], ghb[tile] = total, gs.sum()
-        for g in range(groups):
+        for g in range(groups - 1, -1, -1):  # the last groups' activations are still in cache
             a3, d3 = acts[3][g], grads[2]
             for e in range(c3):
                 for t in range(t3):
@@ -157,19 +159,22 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
                                      (i * tpi + pad - left) * lanes, jtaps[j:],
                                      min(DOT_TAPS, k - j), s * lanes, steps, gw,
                                      (e * cin + i) * k + j, cin * k, lanes)  # fmt: skip
-                for e in range(cout):
-                    gbs[layer][tile, g, e] = d_out[e, pad : pad + steps].sum()
+                gb = gbs[layer][tile, g]
+                gb[:] = 0.0
+                for e in range(0, cout, ROWS):  # the bias's gradient: a tap on a row of ones
+                    tap_dots(fd, (e * tpo + pad) * lanes, tpo * lanes, lanes, ones, 0, jtaps, 1, 0,
+                             steps, gb, e, 1, lanes)  # fmt: skip
                 if layer == 0:  # the input needs no gradient
                     continue
                 fdin, bw = grads[layer - 1].reshape(-1), bwts[layer].reshape(-1)
                 most = bwts[layer].shape[3]
-                for si in range(geo[layer, 5]):  # each input step from the taps that reach it
-                    phase, u = si % s, si // s
+                for phase in range(s):  # the input steps u * s + phase, each a slot
+                    slots = (geo[layer, 5] - phase + s - 1) // s
                     for i in range(0, cin, ROWS):
-                        tap_sums(bw, ((g * s + phase) * cin + i) * most, most, 1, fd,
-                                 (pad + u) * lanes, btaps[layer][phase], bcount[layer][phase],
-                                 fdin, (i * tpi + pad + si) * lanes, tpi * lanes, zeros, 0,
-                                 lanes, GATED, fin)  # fmt: skip
+                        tap_sums(bw, ((g * s + phase) * cin + i) * most, most, 1, fd, pad * lanes,
+                                 btaps[layer][phase], bcount[layer][phase], fdin,
+                                 (i * tpi + pad + phase) * lanes, tpi * lanes, zeros, 0, slots,
+                                 lanes, s * lanes, GATED, fin)  # fmt: skip
 
 
 # (role, shape, padding) -> its buffer; role: the task and which activation or gradient it holds
@@ -281,7 +286,7 @@ def train_step(
     losses = np.empty(tiles, np.float32)
     partial = [np.empty((groups, TILE_LANES), np.float32) for _ in range(threads)]
     gs = [np.empty(TILE_LANES, np.float32) for _ in range(threads)]
-    zeros = np.zeros(ROWS, np.float32)
+    zeros, ones = np.zeros(ROWS, np.float32), np.ones(TILE_LANES, np.float32)
     announce_compile(__name__)
 
     def task(slot: int, start: int, stop: int) -> None:
@@ -289,7 +294,7 @@ def train_step(
                plan.hw, np.float32(head_bias), tuple(plan.ftaps), tuple(plan.btaps),
                tuple(plan.bcount), tuple(plan.bwts), plan.jtaps, acts[slot], grads[slot],
                loss == "hinge", gws, gbs, ghw, ghb, losses, partial[slot], gs[slot], zeros,
-               start, stop)  # fmt: skip
+               ones, start, stop)  # fmt: skip
 
     _in_parallel(task, tiles)
     out = []

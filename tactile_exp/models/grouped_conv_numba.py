@@ -144,8 +144,8 @@ def _combine(dst, s, src, taps, wts, count, bias, mode, gate):  # pragma: no cov
     e = 0
     while e + ROWS <= c_out:
         at = (e * t_dst + s) * n
-        tap_sums(flat_w, e, 1, c_out, flat_src, 0, taps, count, flat_dst, at, t_dst * n, bias, e, n,
-                 mode, flat_gate)  # fmt: skip
+        tap_sums(flat_w, e, 1, c_out, flat_src, 0, taps, count, flat_dst, at, t_dst * n, bias, e,
+                 n // WIDTH, WIDTH, WIDTH, mode, flat_gate)  # fmt: skip
         e += ROWS
     while e < c_out:
         row = dst[e, s]

@@ -152,7 +152,7 @@ def _gate_sums(w, bias, inputs, acts, taps, t):
     x_at = t * inputs.shape[1] * CHUNK
     for g in range(0, G, ROWS):
         tap_sums(w_flat, g * K, K, 1, x_flat, x_at, taps, K, acts_flat, (t * G + g) * CHUNK,
-                 CHUNK, bias, g, CHUNK, PLAIN, acts_flat)  # fmt: skip
+                 CHUNK, bias, g, CHUNK // WIDTH, WIDTH, WIDTH, PLAIN, acts_flat)  # fmt: skip
 
 
 @numba.njit(**_JIT)
@@ -217,7 +217,8 @@ def _step_weight_grad(inputs, d_gates, t, td, starts, d_t, taps, zero, part, d_w
     in_flat = inputs.reshape(-1)
     for k in range(0, K_pad, ROWS):
         tap_sums(in_flat, (t * K_pad + k) * CHUNK, CHUNK, 1, d_t_flat, 0, taps, CHUNK, part_flat,
-                 k * G_pad, G_pad, zero, 0, G_pad, PLAIN, part_flat)  # fmt: skip
+                 k * G_pad, G_pad, zero, 0, G_pad // WIDTH, WIDTH, WIDTH, PLAIN,
+                 part_flat)  # fmt: skip
     for k in range(K_pad):
         for g in range(G_pad):
             d_wt[k, g] += part[k, g]
@@ -266,7 +267,8 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_wt):
         )  # fmt: skip
         for k in range(0, rows, ROWS):
             tap_sums(w_state_flat, k * G, G, 1, d_flat, d_at, taps, G, dh_flat,
-                     k * CHUNK, CHUNK, zero, 0, CHUNK, PLAIN, dh_flat)  # fmt: skip
+                     k * CHUNK, CHUNK, zero, 0, CHUNK // WIDTH, WIDTH, WIDTH, PLAIN,
+                     dh_flat)  # fmt: skip
         _flush_lanes((dh_flat, dh_in), (0, 0), n)
         _step_weight_grad(inputs, d_gates, t, td, starts, d_t, lane_taps, zero, part, d_wt)
 

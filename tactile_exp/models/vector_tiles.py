@@ -103,21 +103,24 @@ def _splat(builder, value):
 
 @intrinsic
 def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at, out_step, bias,
-             bias_at, lanes, mode, gate):  # fmt: skip  # noqa: ARG001
-    """For the ``ROWS`` rows r and the lanes m < ``lanes`` (a multiple of ``WIDTH``), with
-    ``o = out_at + r * out_step + m``: ``out[o] = f(bias[bias_at + r]
-    + sum_{q < count} w[w_at + r * w_row + q * w_col] * x[x_at + taps[q] + m])``,
-    indices into the flat arrays (``taps``: int64 offsets of the input rows). The sum runs
-    q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width; lanes past
-    the last whole tile go as one narrower tile. ``f`` by ``mode`` (``PLAIN``, ``RELU``,
-    ``GATED``): v; the ReLU v * (v > 0); or v * (gate[o] > 0),
-    a ReLU's backward (``gate``: the ReLU's output, laid out as ``out``). ``gate[o]`` is read in
-    every mode, so pass ``out`` itself when not GATED. The product form keeps a NaN a NaN."""
+             bias_at, slots, x_slot, out_slot, mode, gate):  # fmt: skip  # noqa: ARG001
+    """For the ``ROWS`` rows r and the slots v < ``slots`` (each ``WIDTH`` lanes m), with
+    ``o = out_at + r * out_step + v * out_slot + m``: ``out[o] = f(bias[bias_at + r]
+    + sum_{q < count} w[w_at + r * w_row + q * w_col] * x[x_at + taps[q] + v * x_slot + m]``,
+    indices into the flat arrays (``taps``: int64 offsets of the input rows). A slot is a vector of
+    lanes: ``x_slot = out_slot = WIDTH`` runs along a row's lanes (``slots`` = lanes / ``WIDTH``);
+    a row's length per slot runs along time (a convolution's output steps, ``x_slot`` its stride's
+    rows). ``VECTORS`` slots go per register tile, the last ones as one narrower tile. The sum runs
+    q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width. ``f`` by
+    ``mode`` (``PLAIN``, ``RELU``, ``GATED``): v; the ReLU, 0 where v < 0 (a NaN stays NaN); or
+    v where gate[o] > 0, else 0, a ReLU's backward as torch's (``gate``: the ReLU's output, laid
+    out as ``out``). ``gate[o]`` is read in every mode, so pass ``out`` itself when not GATED.
+    Both are selects, one instruction or two whatever the caller's fastmath flags."""
     _check("tap_sums", w=w, x=x, out=out, bias=bias, gate=gate)
     if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
         raise TypingError(f"tap_sums: taps must be an int64 array, got {taps}")
     i = types.intp
-    sig = types.void(w, i, i, i, x, i, taps, i, out, i, i, bias, i, i, i, gate)
+    sig = types.void(w, i, i, i, x, i, taps, i, out, i, i, bias, i, i, i, i, i, gate)
 
     def codegen(context, builder, signature, args):
         w_p, x_p, o_p, b_p = (
@@ -125,8 +128,8 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
             for n in (0, 4, 8, 11)
         )
         taps_p = _data(context, builder, signature.args[6], args[6])
-        gate_p = builder.gep(_data(context, builder, signature.args[15], args[15]), [args[9]])
-        w_r, w_c, q_n, o_s, m_n, mode = (args[n] for n in (2, 3, 7, 10, 13, 14))
+        gate_p = builder.gep(_data(context, builder, signature.args[17], args[17]), [args[9]])
+        w_r, w_c, q_n, o_s, v_n, x_v, o_v, mode = (args[n] for n in (2, 3, 7, 10, 13, 14, 15, 16))
         relu, gated = (
             builder.icmp_signed("==", mode, ir.Constant(mode.type, f)) for f in (RELU, GATED)
         )
@@ -140,16 +143,18 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
 
         sums = [cgutils.alloca_once(builder, _VEC) for _ in range(ROWS * VECTORS)]
 
-        def tile(m, vectors):  # ROWS x vectors sums in registers over every tap, then stored
+        def tile(v0, vectors):  # ROWS x vectors sums in registers over every tap, then stored
+            x_at = [builder.mul(builder.add(v0, const(v)), x_v) for v in range(vectors)]
+            o_at = [builder.mul(builder.add(v0, const(v)), o_v) for v in range(vectors)]
             for r in range(ROWS):
                 start = _splat(builder, builder.load(builder.gep(b_p, [const(r)])))
                 for v in range(vectors):
                     builder.store(start, sums[r * VECTORS + v])
             with cgutils.for_range(builder, q_n) as loop:
                 q = loop.index
-                row = builder.add(builder.load(builder.gep(taps_p, [q])), m)
+                row = builder.load(builder.gep(taps_p, [q]))
                 xs = [
-                    builder.load(at(x_p, builder.add(row, const(v * WIDTH))), align=4)
+                    builder.load(at(x_p, builder.add(row, x_at[v])), align=4)
                     for v in range(vectors)
                 ]
                 for r in range(ROWS):
@@ -159,23 +164,22 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
                         slot = sums[r * VECTORS + v]
                         builder.store(builder.call(fma, [weight, xs[v], builder.load(slot)]), slot)
             for r in range(ROWS):
-                base = builder.add(builder.mul(const(r), o_s), m)
+                base = builder.mul(const(r), o_s)
                 for v in range(vectors):
-                    offset = builder.add(base, const(v * WIDTH))
+                    offset = builder.add(base, o_at[v])
                     value = builder.load(sums[r * VECTORS + v])
                     gate_value = builder.load(at(gate_p, offset), align=4)
-                    positive = builder.fcmp_ordered(
-                        ">", builder.select(relu, value, gate_value), zero
-                    )
-                    masked = builder.fmul(value, builder.uitofp(positive, _VEC))
-                    value = builder.select(builder.or_(relu, gated), masked, value)
+                    negative = builder.fcmp_ordered("<", value, zero)  # one maxps (NaN kept)
+                    value = builder.select(relu, builder.select(negative, zero, value), value)
+                    shut = builder.fcmp_unordered("<=", gate_value, zero)
+                    value = builder.select(gated, builder.select(shut, zero, value), value)
                     builder.store(value, at(o_p, offset), align=4)
 
-        tiled = builder.sub(m_n, builder.srem(m_n, const(TILE)))
-        with cgutils.for_range_slice(builder, const(0), tiled, const(TILE)) as (m, _):
-            tile(m, VECTORS)
-        left = builder.sdiv(builder.sub(m_n, tiled), const(WIDTH))
-        for vectors in range(1, VECTORS):  # the lanes past the last whole tile: a narrower tile
+        tiled = builder.sub(v_n, builder.srem(v_n, const(VECTORS)))
+        with cgutils.for_range_slice(builder, const(0), tiled, const(VECTORS)) as (v0, _):
+            tile(v0, VECTORS)
+        left = builder.sub(v_n, tiled)
+        for vectors in range(1, VECTORS):  # the slots past the last whole tile: a narrower tile
             with builder.if_then(builder.icmp_signed("==", left, const(vectors))):
                 tile(tiled, vectors)
         return context.get_dummy_value()
