@@ -374,27 +374,26 @@ def to_layout(x, groups, out, start, stop):  # pragma: no cover (compiled)
 
     Block by block, each instance's channels in order (a sequential sweep of its signals), in
     square tiles of ``WIDTH`` instances x ``WIDTH`` steps transposed in registers
-    (``transpose_tile``); the last steps, and instances past the batch's last whole tile, one
-    value at a time.
+    (``transpose_tile``; the last steps' tile overlaps the one before, its rows written twice
+    with the same values); instances past the batch's last whole tile one value at a time.
     """
     channels, steps = x.shape[1], x.shape[2]
     n, n_pad = x.shape[0], out.shape[3]
     flat_x, flat_out = x.reshape(-1), out.reshape(-1)
-    tiled = steps - steps % WIDTH
     starts = np.empty(WIDTH, np.int64)
     for block in range(start, stop):
         for c in range(channels):
             dst = out[c % groups, c // groups]
             at = ((c % groups) * out.shape[1] + c // groups) * steps * n_pad
             for m0 in range(block * LANES, (block + 1) * LANES, WIDTH):
-                first = 0
-                if m0 + WIDTH <= n:
+                if m0 + WIDTH <= n and steps >= WIDTH:
                     for i in range(WIDTH):
                         starts[i] = ((m0 + i) * channels + c) * steps
-                    for t in range(0, tiled, WIDTH):
+                    for t in range(0, steps - WIDTH, WIDTH):
                         transpose_tile(flat_x, starts, t, flat_out, at + m0, n_pad)
-                    first = tiled
-                for t in range(first, steps):
+                    transpose_tile(flat_x, starts, steps - WIDTH, flat_out, at + m0, n_pad)
+                    continue
+                for t in range(steps):
                     for m in range(m0, m0 + WIDTH):
                         dst[t, m] = x[m, c, t] if m < n else np.float32(0.0)
 

@@ -86,11 +86,13 @@ CHUNK = 64
 @numba.njit(**_JIT)
 def _gather(X, rows, start, inputs):
     """``inputs[:, :C]`` (T, C, CHUNK) <- X[rows[start:start + CHUNK]] (rows, C, T), transposed
-    in tiles of ``WIDTH`` instances x ``WIDTH`` steps (``transpose_tile``), the rest one by one;
-    lanes past the last row are zero, so they carry zeros through forward and backward."""
+    in tiles of ``WIDTH`` instances x ``WIDTH`` steps (``transpose_tile``; the last steps' tile
+    overlaps the one before, its rows written twice with the same values), the instances past
+    the last whole tile one by one; lanes past the last row are zero, so they carry zeros
+    through forward and backward."""
     _, C, T = X.shape
     n = min(CHUNK, len(rows) - start)
-    tiled, steps = n - n % WIDTH, T - T % WIDTH
+    tiled = n - n % WIDTH if T >= WIDTH else 0
     step = inputs.shape[1] * CHUNK
     flat, flat_in = X.reshape(-1), inputs.reshape(-1)
     starts = np.empty(WIDTH, np.int64)
@@ -98,11 +100,12 @@ def _gather(X, rows, start, inputs):
         for b0 in range(0, tiled, WIDTH):
             for i in range(WIDTH):
                 starts[i] = (rows[start + b0 + i] * C + c) * T
-            for t in range(0, steps, WIDTH):
+            for t in range(0, T - WIDTH, WIDTH):
                 transpose_tile(flat, starts, t, flat_in, c * CHUNK + b0, step)
-        for b in range(n):
+            transpose_tile(flat, starts, T - WIDTH, flat_in, c * CHUNK + b0, step)  # overlaps
+        for b in range(tiled, n):
             r = rows[start + b]
-            for t in range(steps if b < tiled else 0, T):
+            for t in range(T):
                 inputs[t, c, b] = X[r, c, t]
         for t in range(T):
             for b in range(n, CHUNK):

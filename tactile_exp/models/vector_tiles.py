@@ -189,10 +189,10 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
 
 @intrinsic
 def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: ARG001
-    """``out[out_at + j * out_step + i] = src[starts[i] + t + j]`` for i, j < ``WIDTH``: a square
-    tile of ``WIDTH`` rows of ``src`` (each starting at an index in ``starts``, int64), written
-    out transposed. One vector load per row, ``WIDTH`` x log2(``WIDTH``) shuffles and one vector
-    store per column, where a scalar transpose takes a load and a store per float."""
+    """``out[out_at + (t + j) * out_step + i] = src[starts[i] + t + j]`` for i, j < ``WIDTH``: a
+    square tile of ``WIDTH`` rows of ``src`` (each starting at an index in ``starts``, int64),
+    written out transposed. One vector load per row, ``WIDTH`` x log2(``WIDTH``) shuffles and one
+    vector store per column, where a scalar transpose takes a load and a store per float."""
     _check("transpose_tile", src=src, out=out)
     if not (isinstance(starts, types.Array) and starts.dtype == types.int64):
         raise TypingError(f"transpose_tile: starts must be an int64 array, got {starts}")
