@@ -2,7 +2,8 @@
 beside the same run's sgemm rate.
 
 In one run, interleaved (every repetition times each item once, in turn, so load changes hit all
-of them alike; best of ``--repeats``):
+of them alike, each timed call after an untimed one: steady rates, as in training; best of
+``--repeats``):
 
 - sgemm: torch's and numpy's BLAS on a 2000^3 single-precision product (the machine's rate, the
   ceiling the kernels are held against: the larger of the two), and BLAS at the shapes an im2col
@@ -385,21 +386,23 @@ class Package:
 # Idle BLAS and OpenMP threads spin for up to ~0.2 s after their work before they sleep: with
 # ``--before``, two processes take turns on the cores, and one's spinning threads took a core
 # from the other's next pass (the ConvNet's backward ran at half speed in the child, the same code
-# on both sides). A pause before each timing lets them sleep first.
+# on both sides). A pause before each timing lets them sleep first. After a pause the cores run
+# the first pass slower (the ConvNet's training step on one thread: 22.1 ms after 0.3 s idle, 16.5
+# back to back, 17.8 after one untimed step; 2-core Xeon, 2026-11-27), so each timed call follows
+# an untimed one, as a training step follows the one before.
 SETTLE_S = 0.25
 
 
 def interleaved(
     timers: dict[str, Timer], repeats: int, settle_s: float = SETTLE_S
 ) -> dict[str, tuple[float, float]]:
-    """Best wall and CPU seconds of each timer: one warm-up each, then ``repeats`` rounds, each
-    timing after a pause of ``settle_s``."""
-    for timer in timers.values():
-        timer()
+    """Best wall and CPU seconds of each timer: ``repeats`` rounds, each timing a call that
+    follows a pause of ``settle_s`` and one untimed call."""
     best = {name: (float("inf"), float("inf")) for name in timers}
     for _ in range(repeats):
         for name, timer in timers.items():
             time.sleep(settle_s)
+            timer()
             wall, cpu = timer()
             best[name] = (min(best[name][0], wall), min(best[name][1], cpu))
     return best

@@ -13,7 +13,8 @@ tiles check no bounds: the kernels keep their offsets inside their arrays (their
 every shape against torch).
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
-  with the ReLU or its backward applied before the one store;
+  with the ReLU or its backward applied before the one store, a tile's vectors along a row's
+  lanes or along time (a convolution's output steps);
 - ``tap_dots``: a convolution's weight gradient, rows of gradients against each tap's input rows,
   the products summed over steps in registers and over lanes at the end;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
