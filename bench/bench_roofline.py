@@ -511,7 +511,8 @@ def main() -> None:
         from record import write
 
         notes = (
-            f"best of {args.repeats} interleaved, {args.threads} threads, batch {BATCH}; % of "
+            f"best of {args.repeats} interleaved, each timed call after an untimed one, "
+            f"{args.threads} threads, batch {BATCH}; % of "
             "sgemm per CPU s compares FLOPs per CPU second of all threads, steadier than wall "
             "time when other work shares the cores; attainable per CPU s: the lowest of sgemm, "
             "the conv kernels' inner loop on resident rows and memory bandwidth x the pass's "
