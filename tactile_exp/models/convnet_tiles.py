@@ -7,20 +7,21 @@ forward, loss and backward for ``TILE_LANES`` instances at once (one vector: 16 
 their input gathered from the training set (rows read in place), every layer of every signal
 group, the classification layer, each instance's loss and its gradient, and back through all
 layers, with the tile's activations (~1.4 MB at the paper's sizes with 16 lanes) in the core's L2
-cache. Nothing of a tile outlives it but its share of the
-gradients. The loss is computed inside (``linear_sgd.LOSSES``: the registered losses it computes); a
-step with another loss runs through autograd (``grouped_conv_numba``).
+cache. Nothing of a tile outlives it but its share of the gradients. The loss is computed inside
+(``linear_sgd.LOSSES``: the registered losses it computes); a step with another loss runs through
+autograd (``grouped_conv_numba``).
 
 Layout per tile: (groups, channels, time, lanes), the tile's instances innermost and
 contiguous as in ``grouped_conv_numba``, with ``pad`` zero rows before and after each channel's
 time axis, so every output step of a convolution reads all its taps (zeros at the edges add
 exactly 0) and each layer's taps are one fixed offset table. Output channels are padded to a
 multiple of ``ROWS`` with zero weights; their gradients are dropped. ``tap_sums`` computes
-``ROWS`` rows x ``VECTORS`` slots in registers, the slots running along time: a convolution's output
-steps (its input's rows a stride apart), and for an input gradient the input steps of one phase
-of the stride. The forward and the input gradients sum their taps in the order
+``ROWS`` rows x ``VECTORS`` slots in registers, the slots running along time: a convolution's
+output steps (its input's rows a stride apart), and for an input gradient the input steps of one
+phase of the stride. The forward and the input gradients sum their taps in the order
 ``grouped_conv_numba``'s kernels do; the weight gradients sum each tile over its steps and lanes
-(``tap_dots``), then the tiles in order: results do not depend on the thread count, and differ
+(``tap_dots``), then the tiles in order: results do not depend on the thread count (the weight
+gradients' order does on the vector width: 16-lane tiles with AVX-512, 8 with AVX2), and differ
 from the whole-batch kernels' by float rounding.
 
 Measured (2-core Xeon, 2026-11-27, one thread, batch 1000 of 5,300 instances, a process per
