@@ -296,6 +296,23 @@ def test_transpose_tile_writes_the_rows_as_columns():
     assert np.isnan(out).sum() == out.size - vt.WIDTH**2
 
 
+@numba.njit
+def _transpose_rows(src, starts, steps, out, out_at, out_step):
+    vt.transpose_rows(src.reshape(-1), starts, steps, out.reshape(-1), out_at, out_step)
+
+
+@pytest.mark.parametrize("steps", [vt.WIDTH, 2 * vt.WIDTH, 150])
+def test_transpose_rows_writes_every_step_once_the_last_tile_overlapping(steps):
+    """Whole rows: every step written, whether or not WIDTH divides the steps, nothing past."""
+    rng = np.random.default_rng(1)
+    src = rng.standard_normal((30, steps + 3), dtype=np.float32)
+    rows = rng.permutation(30)[: vt.WIDTH]
+    out = np.full((steps + 4, 2 * vt.WIDTH), np.nan, np.float32)
+    _transpose_rows(src, rows * src.shape[1] + 2, steps, out, 2 * out.shape[1] + 1, out.shape[1])
+    np.testing.assert_array_equal(out[2 : 2 + steps, 1 : 1 + vt.WIDTH], src[rows, 2 : 2 + steps].T)
+    assert np.isnan(out).sum() == out.size - steps * vt.WIDTH
+
+
 def test_tiles_refuse_arrays_they_cannot_address():
     w, x, order, bias = _case(rows=4)
     out = np.empty((4, x.shape[1]), np.float32)

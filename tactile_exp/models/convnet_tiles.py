@@ -50,7 +50,7 @@ from tactile_exp.models.vector_tiles import (
     WIDTH,
     tap_dots,
     tap_sums,
-    transpose_tile,
+    transpose_rows,
 )
 
 TILE_LANES = WIDTH  # instances per tile, one vector: see the module docstring for wider tiles
@@ -62,9 +62,8 @@ _JIT = dict(nogil=True, cache=True, fastmath={"reassoc", "contract", "nsz", "arc
 @numba.njit(**_JIT)
 def _gather(X, rows, m0, n, groups, pad, a0):  # pragma: no cover (compiled)
     """a0[c % groups, c // groups, pad + t, m] = X[rows[m0 + m], c, t] for the tile's ``n``
-    instances (zeros in the lanes past them), in ``WIDTH`` x ``WIDTH`` register transposes, the
-    last one overlapping the one before when ``WIDTH`` does not divide the steps (its rows are
-    written twice, with the same values); one value at a time only in a part tile."""
+    instances (zeros in the lanes past them), in ``WIDTH`` x ``WIDTH`` register transposes
+    (``transpose_rows``); one value at a time only in a part tile or below ``WIDTH`` steps."""
     channels, steps = X.shape[1], X.shape[2]
     lanes, tp, c_in = a0.shape[3], a0.shape[2], a0.shape[1]
     flat_x, flat0 = X.reshape(-1), a0.reshape(-1)
@@ -75,9 +74,7 @@ def _gather(X, rows, m0, n, groups, pad, a0):  # pragma: no cover (compiled)
             if l0 + WIDTH <= n and steps >= WIDTH:
                 for w in range(WIDTH):
                     starts[w] = (rows[m0 + l0 + w] * channels + c) * steps
-                for t in range(0, steps - WIDTH, WIDTH):
-                    transpose_tile(flat_x, starts, t, flat0, base + l0, lanes)
-                transpose_tile(flat_x, starts, steps - WIDTH, flat0, base + l0, lanes)
+                transpose_rows(flat_x, starts, steps, flat0, base + l0, lanes)
                 continue
             for t in range(steps):
                 for m in range(l0, l0 + WIDTH):

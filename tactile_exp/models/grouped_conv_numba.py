@@ -57,7 +57,7 @@ from tactile_exp.models.vector_tiles import (
     ROWS,
     WIDTH,
     tap_sums,
-    transpose_tile,
+    transpose_rows,
 )
 
 LANES = 16  # batch padding: a whole number of vectors at every width (vector_tiles.WIDTH)
@@ -374,8 +374,8 @@ def to_layout(x, groups, out, start, stop):  # pragma: no cover (compiled)
 
     Block by block, each instance's channels in order (a sequential sweep of its signals), in
     square tiles of ``WIDTH`` instances x ``WIDTH`` steps transposed in registers
-    (``transpose_tile``; the last steps' tile overlaps the one before, its rows written twice
-    with the same values); instances past the batch's last whole tile one value at a time.
+    (``transpose_rows``); instances past the batch's last whole tile, and batches of fewer than
+    ``WIDTH`` steps, one value at a time.
     """
     channels, steps = x.shape[1], x.shape[2]
     n, n_pad = x.shape[0], out.shape[3]
@@ -389,9 +389,7 @@ def to_layout(x, groups, out, start, stop):  # pragma: no cover (compiled)
                 if m0 + WIDTH <= n and steps >= WIDTH:
                     for i in range(WIDTH):
                         starts[i] = ((m0 + i) * channels + c) * steps
-                    for t in range(0, steps - WIDTH, WIDTH):
-                        transpose_tile(flat_x, starts, t, flat_out, at + m0, n_pad)
-                    transpose_tile(flat_x, starts, steps - WIDTH, flat_out, at + m0, n_pad)
+                    transpose_rows(flat_x, starts, steps, flat_out, at + m0, n_pad)
                     continue
                 for t in range(steps):
                     for m in range(m0, m0 + WIDTH):

@@ -64,6 +64,7 @@ from tactile_exp.models.vector_tiles import (
     lanes,
     tanh_lanes,
     tap_sums,
+    transpose_rows,
     transpose_tile,
 )
 
@@ -86,10 +87,9 @@ CHUNK = 64
 @numba.njit(**_JIT)
 def _gather(X, rows, start, inputs):
     """``inputs[:, :C]`` (T, C, CHUNK) <- X[rows[start:start + CHUNK]] (rows, C, T), transposed
-    in tiles of ``WIDTH`` instances x ``WIDTH`` steps (``transpose_tile``; the last steps' tile
-    overlaps the one before, its rows written twice with the same values), the instances past
-    the last whole tile one by one; lanes past the last row are zero, so they carry zeros
-    through forward and backward."""
+    in tiles of ``WIDTH`` instances x ``WIDTH`` steps (``transpose_rows``), the instances past
+    the last whole tile (all of them below ``WIDTH`` steps) one by one; lanes past the last row
+    are zero, so they carry zeros through forward and backward."""
     _, C, T = X.shape
     n = min(CHUNK, len(rows) - start)
     tiled = n - n % WIDTH if T >= WIDTH else 0
@@ -100,9 +100,7 @@ def _gather(X, rows, start, inputs):
         for b0 in range(0, tiled, WIDTH):
             for i in range(WIDTH):
                 starts[i] = (rows[start + b0 + i] * C + c) * T
-            for t in range(0, T - WIDTH, WIDTH):
-                transpose_tile(flat, starts, t, flat_in, c * CHUNK + b0, step)
-            transpose_tile(flat, starts, T - WIDTH, flat_in, c * CHUNK + b0, step)  # overlaps
+            transpose_rows(flat, starts, T, flat_in, c * CHUNK + b0, step)
         for b in range(tiled, n):
             r = rows[start + b]
             for t in range(T):

@@ -18,6 +18,7 @@ every shape against torch).
 - ``tap_dots``: a convolution's weight gradient, rows of gradients against each tap's input rows,
   the products summed over steps in registers and over lanes at the end;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
+  ``transpose_rows``: whole rows, tile by tile;
 - ``tanh_lanes``: tanh (or, scaled, the sigmoid) of a block of floats in place, a whole vector at
   a time (numba's loops use 256-bit vectors on AVX-512 CPUs, half the width);
 - ``lanes``: an elementwise loop written as plain arithmetic on whole vectors (``Lanes``), for
@@ -229,6 +230,17 @@ def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: A
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+@numba.njit(inline="always", nogil=True, cache=True)
+def transpose_rows(src, starts, steps, out, out_at, out_step):  # pragma: no cover (compiled)
+    """``out[out_at + t * out_step + i] = src[starts[i] + t]`` for i < ``WIDTH``, t < ``steps``
+    (``steps >= WIDTH``): ``WIDTH`` rows transposed a square tile at a time, the last tile
+    overlapping the one before where ``WIDTH`` does not divide ``steps`` (its rows written
+    twice, with the same values), so no step is copied one float at a time."""
+    for t in range(0, steps - WIDTH, WIDTH):
+        transpose_tile(src, starts, t, out, out_at, out_step)
+    transpose_tile(src, starts, steps - WIDTH, out, out_at, out_step)
 
 
 # Eigen's float tanh: x * P(x^2) / Q(x^2) on [-CLAMP, CLAMP] (max error ~4e-7 over the real line;
