@@ -165,6 +165,22 @@ def test_tap_sums_relu_keeps_nans_and_a_shut_gate_gives_zero():
     np.testing.assert_array_equal(gated, expected.numpy())
 
 
+def test_tap_sums_added_is_a_running_sum_rounded_as_two_passes():
+    """ADDED stores gate[o] + sum, the sum rounded as PLAIN computes it: bit for bit the sums
+    computed into a buffer, then added (the LSTM's weight gradient, step by step)."""
+    w, x, order, bias = _case()
+    lanes = x.shape[1]
+    taps = order * lanes
+    plain = np.empty((w.shape[0], lanes), np.float32)
+    _tap_sums(w, x, taps, x.shape[0], plain, lanes, bias, lanes, vt.PLAIN, plain)
+    running = np.random.default_rng(2).standard_normal(plain.shape).astype(np.float32)
+    expected = running + plain
+    _tap_sums(w, x, taps, x.shape[0], running, lanes, bias, lanes, vt.ADDED, running)
+    np.testing.assert_array_equal(running, expected)
+    _tap_sums(w, x, taps, x.shape[0], running, lanes, bias, lanes, vt.ADDED, running)
+    np.testing.assert_array_equal(running, expected + plain)
+
+
 def test_tap_sums_are_the_same_at_every_vector_width():
     """Each lane is summed in one order (bias, then one fma per tap), and each float's tanh and
     ``lanes`` body computed by the same operations, at any width: a child process compiled for

@@ -57,6 +57,7 @@ from tactile_exp.models.linear_sgd import LOSSES, loss_slope
 from tactile_exp.models.numba_setup import announce_compile, check_rows, numba
 from tactile_exp.models.scratch import scratch
 from tactile_exp.models.vector_tiles import (
+    ADDED,
     PLAIN,
     ROWS,
     WIDTH,
@@ -203,13 +204,14 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
 
 
 @numba.njit(inline="always", **_JIT)
-def _step_weight_grad(inputs, d_gates, t, td, starts, d_t, taps, zero, part, d_wt):
+def _step_weight_grad(inputs, d_gates, t, td, starts, d_t, taps, zero, d_wt):
     """``d_wt`` (K', G') += ``inputs[t]`` (K', CHUNK) @ ``d_gates[td]`` (G', CHUNK).T: the step's
     gate gradients transposed in registers into ``d_t`` (CHUNK, G'), then summed over the
-    chunk's lanes by register tiles (``tap_sums``: four inputs x all gates) into ``part``, which
-    is added to the running sum: the sum over the chunk's steps runs one step at a time."""
+    chunk's lanes by register tiles (``tap_sums``: four inputs x all gates), each sum added to
+    the running sum as it is stored (``ADDED``): the sum over the chunk's steps runs one step at
+    a time."""
     K_pad, G_pad = d_wt.shape
-    d_flat, d_t_flat, part_flat = d_gates.reshape(-1), d_t.reshape(-1), part.reshape(-1)
+    d_flat, d_t_flat, d_wt_flat = d_gates.reshape(-1), d_t.reshape(-1), d_wt.reshape(-1)
     for g in range(0, G_pad, WIDTH):
         for i in range(WIDTH):
             starts[i] = (td * G_pad + g + i) * CHUNK
@@ -217,12 +219,9 @@ def _step_weight_grad(inputs, d_gates, t, td, starts, d_t, taps, zero, part, d_w
             transpose_tile(d_flat, starts, m, d_t_flat, g, G_pad)
     in_flat = inputs.reshape(-1)
     for k in range(0, K_pad, ROWS):
-        tap_sums(in_flat, (t * K_pad + k) * CHUNK, CHUNK, 1, d_t_flat, 0, taps, CHUNK, part_flat,
-                 k * G_pad, G_pad, zero, 0, G_pad // WIDTH, WIDTH, WIDTH, PLAIN,
-                 part_flat)  # fmt: skip
-    for k in range(K_pad):
-        for g in range(G_pad):
-            d_wt[k, g] += part[k, g]
+        tap_sums(in_flat, (t * K_pad + k) * CHUNK, CHUNK, 1, d_t_flat, 0, taps, CHUNK, d_wt_flat,
+                 k * G_pad, G_pad, zero, 0, G_pad // WIDTH, WIDTH, WIDTH, ADDED,
+                 d_wt_flat)  # fmt: skip
 
 
 @numba.njit(**_JIT)
@@ -249,7 +248,6 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_wt):
     taps = np.arange(G) * CHUNK  # gate g of step t: d_gates[t].flat[taps[g] + lane]
     starts = np.empty(WIDTH, np.int64)
     d_t = np.empty((CHUNK, G_pad), np.float32)
-    part = np.empty_like(d_wt)
     lane_taps = np.arange(CHUNK) * G_pad  # lane m of d_t: d_t.flat[lane_taps[m] + gate]
     d_wt[:] = 0
     dc[:] = 0
@@ -271,7 +269,7 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_wt):
                      k * CHUNK, CHUNK, zero, 0, CHUNK // WIDTH, WIDTH, WIDTH, PLAIN,
                      dh_flat)  # fmt: skip
         _flush_lanes((dh_flat, dh_in), (0, 0), n)
-        _step_weight_grad(inputs, d_gates, t, td, starts, d_t, lane_taps, zero, part, d_wt)
+        _step_weight_grad(inputs, d_gates, t, td, starts, d_t, lane_taps, zero, d_wt)
 
 
 @numba.njit(parallel=True, **_JIT)

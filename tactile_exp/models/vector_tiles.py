@@ -13,7 +13,7 @@ tiles check no bounds: the kernels keep their offsets inside their arrays (their
 every shape against torch).
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
-  with the ReLU or its backward applied before the one store, a tile's vectors along a row's
+  with the ReLU or its backward applied, or added to a running sum, in the one store, a tile's vectors along a row's
   lanes or along time (a convolution's output steps);
 - ``tap_dots``: a convolution's weight gradient, rows of gradients against each tap's input rows,
   the products summed over steps in registers and over lanes at the end;
@@ -43,7 +43,7 @@ from numba.extending import intrinsic
 from tactile_exp.models.numba_setup import numba
 
 ROWS = 4  # rows of a tile: four gates share each input vector
-PLAIN, RELU, GATED = 0, 1, 2  # what tap_sums applies to its sums before storing them
+PLAIN, RELU, GATED, ADDED = 0, 1, 2, 3  # what tap_sums applies to its sums before storing them
 
 
 def _features() -> set[str]:
@@ -114,10 +114,12 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
     a row's length per slot runs along time (a convolution's output steps, ``x_slot`` its stride's
     rows). ``VECTORS`` slots go per register tile, the last ones as one narrower tile. The sum runs
     q = 0, 1, ... with one rounding per term (``fma``), whatever the vector width. ``f`` by
-    ``mode`` (``PLAIN``, ``RELU``, ``GATED``): v; the ReLU, 0 where v < 0 (a NaN stays NaN); or
-    v where gate[o] > 0, else 0, a ReLU's backward as torch's (``gate``: the ReLU's output, laid
-    out as ``out``). ``gate[o]`` is read in every mode, so pass ``out`` itself when not GATED.
-    Both are selects, one instruction or two whatever the caller's fastmath flags."""
+    ``mode`` (``PLAIN``, ``RELU``, ``GATED``, ``ADDED``): v; the ReLU, 0 where v < 0 (a NaN
+    stays NaN); v where gate[o] > 0, else 0, a ReLU's backward as torch's (``gate``: the ReLU's
+    output, laid out as ``out``); or gate[o] + v, a running sum (``gate`` is ``out`` itself:
+    the sums added in the store, with no second pass). ``gate[o]`` is read in every mode, so
+    pass ``out`` itself when not GATED (a constant mode drops the unused read). The ReLU and
+    its backward are selects, one instruction or two whatever the caller's fastmath flags."""
     _check("tap_sums", w=w, x=x, out=out, bias=bias, gate=gate)
     if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
         raise TypingError(f"tap_sums: taps must be an int64 array, got {taps}")
@@ -132,8 +134,9 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
         taps_p = _data(context, builder, signature.args[6], args[6])
         gate_p = builder.gep(_data(context, builder, signature.args[17], args[17]), [args[9]])
         w_r, w_c, q_n, o_s, v_n, x_v, o_v, mode = (args[n] for n in (2, 3, 7, 10, 13, 14, 15, 16))
-        relu, gated = (
-            builder.icmp_signed("==", mode, ir.Constant(mode.type, f)) for f in (RELU, GATED)
+        relu, gated, added = (
+            builder.icmp_signed("==", mode, ir.Constant(mode.type, f))
+            for f in (RELU, GATED, ADDED)
         )
         fma, zero = _fma(builder), ir.Constant(_VEC, [0.0] * WIDTH)
 
@@ -175,6 +178,7 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
                     value = builder.select(relu, builder.select(negative, zero, value), value)
                     shut = builder.fcmp_unordered("<=", gate_value, zero)
                     value = builder.select(gated, builder.select(shut, zero, value), value)
+                    value = builder.select(added, builder.fadd(gate_value, value), value)
                     builder.store(value, at(o_p, offset), align=4)
 
         tiled = builder.sub(v_n, builder.srem(v_n, const(VECTORS)))
