@@ -13,8 +13,8 @@ tiles check no bounds: the kernels keep their offsets inside their arrays (their
 every shape against torch).
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
-  with the ReLU or its backward applied, or added to a running sum, in the one store, a tile's vectors along a row's
-  lanes or along time (a convolution's output steps);
+  with the ReLU or its backward applied, or added to a running sum, in the one store; a tile's
+  vectors along a row's lanes or along time (a convolution's output steps);
 - ``tap_dots``: a convolution's weight gradient, rows of gradients against each tap's input rows,
   the products summed over steps in registers and over lanes at the end;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
@@ -135,8 +135,7 @@ def tap_sums(typingctx, w, w_at, w_row, w_col, x, x_at, taps, count, out, out_at
         gate_p = builder.gep(_data(context, builder, signature.args[17], args[17]), [args[9]])
         w_r, w_c, q_n, o_s, v_n, x_v, o_v, mode = (args[n] for n in (2, 3, 7, 10, 13, 14, 15, 16))
         relu, gated, added = (
-            builder.icmp_signed("==", mode, ir.Constant(mode.type, f))
-            for f in (RELU, GATED, ADDED)
+            builder.icmp_signed("==", mode, ir.Constant(mode.type, f)) for f in (RELU, GATED, ADDED)
         )
         fma, zero = _fma(builder), ir.Constant(_VEC, [0.0] * WIDTH)
 
