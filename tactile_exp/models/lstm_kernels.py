@@ -146,12 +146,10 @@ _flush_lanes = lanes(_flushed, reads=1)
 
 
 @numba.njit(inline="always", **_JIT)
-def _gate_sums(w, bias, inputs, acts, taps, t):
+def _gate_sums(w_flat, G, K, bias, x_flat, x_at, acts_flat, taps, t):
     """acts[t] = bias + w @ inputs[t, :K] over the chunk's lanes, ``ROWS`` gates per register
-    tile (``tap_sums``); ``taps``: each input's offset in ``inputs[t].flat``."""
-    G, K = w.shape
-    w_flat, x_flat, acts_flat = w.reshape(-1), inputs.reshape(-1), acts.reshape(-1)
-    x_at = t * inputs.shape[1] * CHUNK
+    tile (``tap_sums``), on the flat arrays (``x_at``: where ``inputs[t]`` starts); ``taps``:
+    each input's offset in ``inputs[t].flat``."""
     for g in range(0, G, ROWS):
         tap_sums(w_flat, g * K, K, 1, x_flat, x_at, taps, K, acts_flat, (t * G + g) * CHUNK,
                  CHUNK, bias, g, CHUNK // WIDTH, WIDTH, WIDTH, PLAIN, acts_flat)  # fmt: skip
@@ -187,8 +185,9 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
     )
     rows = H * CHUNK  # floats of one gate's (or the states') rows in a step
     K_in = inputs.shape[1]
+    w_flat = w.reshape(-1)
     for t in range(T):
-        _gate_sums(w, bias, inputs, acts, taps, t)
+        _gate_sums(w_flat, G, K, bias, in_flat, t * K_in * CHUNK, acts_flat, taps, t)
         at = t * G * CHUNK
         tanh_lanes(acts_flat, at, 2 * rows, _HALF, _HALF)  # i, f: sigmoid
         tanh_lanes(acts_flat, at + 2 * rows, rows, _ONE, _ZERO)  # g: tanh
@@ -204,20 +203,19 @@ def _chunk_forward(w, bias, inputs, acts, c_prev, tanh_c, h, c):
 
 
 @numba.njit(inline="always", **_JIT)
-def _step_weight_grad(inputs, d_gates, t, td, starts, d_t, taps, zero, d_wt):
-    """``d_wt`` (K', G') += ``inputs[t]`` (K', CHUNK) @ ``d_gates[td]`` (G', CHUNK).T: the step's
-    gate gradients transposed in registers into ``d_t`` (CHUNK, G'), then summed over the
-    chunk's lanes by register tiles (``tap_sums``: four inputs x all gates), each sum added to
-    the running sum as it is stored (``ADDED``): the sum over the chunk's steps runs one step at
-    a time."""
-    K_pad, G_pad = d_wt.shape
-    d_flat, d_t_flat, d_wt_flat = d_gates.reshape(-1), d_t.reshape(-1), d_wt.reshape(-1)
+def _step_weight_grad(
+    in_flat, K_pad, G_pad, d_flat, t, td, starts, d_t_flat, taps, zero, d_wt_flat
+):
+    """``d_wt`` (K', G') += ``inputs[t]`` (K', CHUNK) @ ``d_gates[td]`` (G', CHUNK).T, on the
+    flat arrays: the step's gate gradients transposed in registers into ``d_t`` (CHUNK, G'),
+    then summed over the chunk's lanes by register tiles (``tap_sums``: four inputs x all
+    gates), each sum added to the running sum as it is stored (``ADDED``): the sum over the
+    chunk's steps runs one step at a time."""
     for g in range(0, G_pad, WIDTH):
         for i in range(WIDTH):
             starts[i] = (td * G_pad + g + i) * CHUNK
         for m in range(0, CHUNK, WIDTH):
             transpose_tile(d_flat, starts, m, d_t_flat, g, G_pad)
-    in_flat = inputs.reshape(-1)
     for k in range(0, K_pad, ROWS):
         tap_sums(in_flat, (t * K_pad + k) * CHUNK, CHUNK, 1, d_t_flat, 0, taps, CHUNK, d_wt_flat,
                  k * G_pad, G_pad, zero, 0, G_pad // WIDTH, WIDTH, WIDTH, ADDED,
@@ -253,6 +251,8 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_wt):
     dc[:] = 0
     acts_flat, tanh_c_flat, c_prev_flat = acts.reshape(-1), tanh_c.reshape(-1), c_prev.reshape(-1)
     dh_in, dc_flat = dh.reshape(-1), dc.reshape(-1)
+    in_flat, d_t_flat, d_wt_flat = inputs.reshape(-1), d_t.reshape(-1), d_wt.reshape(-1)
+    K_pad = d_wt.shape[0]
     n = H * CHUNK  # floats of one gate's (or the states') rows in a step
     for t in range(T - 1, -1, -1):
         td = t if len(d_gates) > 1 else 0
@@ -269,7 +269,8 @@ def _chunk_backward(w, inputs, acts, c_prev, tanh_c, dh, dc, d_gates, d_wt):
                      k * CHUNK, CHUNK, zero, 0, CHUNK // WIDTH, WIDTH, WIDTH, PLAIN,
                      dh_flat)  # fmt: skip
         _flush_lanes((dh_flat, dh_in), (0, 0), n)
-        _step_weight_grad(inputs, d_gates, t, td, starts, d_t, lane_taps, zero, d_wt)
+        _step_weight_grad(in_flat, K_pad, G_pad, d_flat, t, td, starts, d_t_flat, lane_taps,
+                          zero, d_wt_flat)  # fmt: skip
 
 
 @numba.njit(parallel=True, **_JIT)
