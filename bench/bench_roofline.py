@@ -183,9 +183,11 @@ def bound_timers() -> dict[str, Timer]:
 
     @numba.njit
     def gate_sums(w, inputs, acts, bias, calls):  # one step's gates, as _chunk_forward runs them
-        taps = np.arange(w.shape[1]) * lstm.CHUNK
+        G, K = w.shape
+        taps, w_flat = np.arange(K) * lstm.CHUNK, w.ravel()
+        x_flat, acts_flat = inputs.ravel(), acts.ravel()
         for _ in range(calls):
-            lstm._gate_sums(w, bias, inputs, acts, taps, 0)
+            lstm._gate_sums(w_flat, G, K, bias, x_flat, 0, acts_flat, taps, 0)
 
     @numba.njit
     def loop(w, x, taps, out, bias, steps, calls):  # as convnet_tiles runs conv2's forward

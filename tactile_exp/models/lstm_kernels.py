@@ -18,7 +18,10 @@ gradient needs), takes its arrays from the scratch pool (fresh ones, ~4 MB a thr
 fault per 4 KB every step) and runs its elementwise loops, the cell update and the gates'
 gradients, as whole vectors (``vector_tiles.lanes``: numba's loops over that many arrays stayed
 scalar or behind alias checks): together 1.11x (bench/bench_roofline.py --before, both sides in
-child processes, two threads, 2026-11-27). Through autograd (``lstm_last_hidden``: scoring,
+child processes, two threads, 2026-11-27). Each step's weight-gradient sums are added to the
+running sum as the tile stores them (``ADDED``), not in a second pass, and each step's kernels
+take the chunk's flat arrays (a view made per step costs numba two atomic reference counts):
+together XXX, the same gradients bit for bit. Through autograd (``lstm_last_hidden``: scoring,
 and training with a loss the step does not compute) the forward keeps nothing and the backward
 recomputes a chunk's forward in cache. Keeping every chunk's activations for that backward instead
 (~63 MB a batch of 1,000) made a training step 1.25x faster alone, but in the Table I grid, two
@@ -38,8 +41,12 @@ same way): a chunk's input projection as one BLAS product (numba's ``np.dot``) b
 recurrence, a forward 1.2x slower; the input projection kept from the forward for the backward's
 recomputation (24 MB a batch), a step 1.2-1.3x slower; a forward pass that keeps only the current
 step's activations, 6% faster on its own (~1.5% of a step); chunks of 128 instances (as fast) or 32
-(1.13x slower); tanh's division shared by two floats (p q' r and p' q r, r = 1 / (q q')), no
-faster: a vector's tanh is bound by its other operations, not by the division.
+(1.13x slower); tanh's division shared by two floats (p q' r and p' q r, r = 1 / (q q')), or
+replaced by a reciprocal estimate and a Newton step, no faster: a vector's tanh is bound by its
+other operations (~8 cycles for 16 floats in L1), not by the division; the next chunk's gather
+spread over the backward's steps, a tile of it per step into a second inputs buffer, its rows
+prefetched 2 or 8 steps ahead, a step 1.03x slower (one thread; the gather is ~18% of a step,
+bound by moving the rows, not by waiting for them).
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
