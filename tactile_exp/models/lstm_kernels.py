@@ -14,22 +14,23 @@ loss and back through all of it), so the backward reads the chunk's forward from
 outlives the chunk and nothing runs twice (1.71x faster than the autograd path below,
 bench/bench_roofline.py --before, two threads). It keeps only the current step's gate gradients (the
 step's weight and state gradients use them at once; a chunk's all, 1.8 MB, only the input's gradient
-needs), takes its arrays from the scratch pool (fresh ones, ~4 MB a thread, cost a page fault per 4
-KB every step) and runs its elementwise loops, the cell update and the gates' gradients, as whole
+needs), takes its arrays from the scratch pool (fresh ones, ~4 MB a thread, cost a page fault per
+4 KB every step) and runs its elementwise loops, the cell update and the gates' gradients, as whole
 vectors (``vector_tiles.lanes``: numba's loops over that many arrays stayed scalar or behind alias
 checks): together 1.11x (bench/bench_roofline.py --before, both sides in child processes, two
 threads, 2026-11-27). Each step's weight-gradient sums are added to the running sum as the tile
 stores them (``ADDED``), not in a second pass, and each step's kernels take the chunk's flat arrays
-(a view made per step costs numba two atomic reference counts): together a step ~4% faster, the same
-gradients bit for bit (one thread, a process per version, alternating, 8 pairs: median ratio 0.963,
-range 0.88-1.04; 2026-11-27). Through autograd (``lstm_last_hidden``: scoring, and training with a
-loss the step does not compute) the forward keeps nothing and the backward recomputes a chunk's
-forward in cache. Keeping every chunk's activations for that backward instead (~63 MB a batch of
-1,000) made a training step 1.25x faster alone, but in the Table I grid, two jobs side by side on
-two cores, the LSTM job gained ~3% and the ConvNet job beside it lost ~5% (rows G and H against the
-grid before, scaled by the machine's speed on rows A to F, which neither version touches): writing
-and re-reading them takes the memory bandwidth the other job needs. Each chunk's gradients are
-summed on their own and the chunks' in a fixed order, so results do not depend on the thread count.
+(a view made per step costs numba two atomic reference counts): together a step 2-4% faster, the
+same gradients bit for bit (one thread, a process per version, alternating, 8 pairs: median ratio
+0.963, range 0.88-1.04; bench/bench_roofline.py --before, two threads: x0.99 to x1.14 in three runs;
+2026-11-27). Through autograd (``lstm_last_hidden``: scoring, and training with a loss the step does
+not compute) the forward keeps nothing and the backward recomputes a chunk's forward in cache.
+Keeping every chunk's activations for that backward instead (~63 MB a batch of 1,000) made a
+training step 1.25x faster alone, but in the Table I grid, two jobs side by side on two cores, the
+LSTM job gained ~3% and the ConvNet job beside it lost ~5% (rows G and H against the grid before,
+scaled by the machine's speed on rows A to F, which neither version touches): writing and re-reading
+them takes the memory bandwidth the other job needs. Each chunk's gradients are summed on their own
+and the chunks' in a fixed order, so results do not depend on the thread count.
 The inner loops are explicit vectors (``vector_tiles``): the gate sums (forward), the states'
 gradient and the weight gradient (backward) are register tiles (``tap_sums``: four gates' sums over
 all 42 inputs, or four inputs' over a step's 64 lanes for all gates, stay in registers), the
@@ -45,8 +46,8 @@ step's activations, 6% faster on its own (~1.5% of a step); chunks of 128 instan
 replaced by a reciprocal estimate and a Newton step, no faster: a vector's tanh is bound by its
 other operations (~8 cycles for 16 floats in L1), not by the division; the next chunk's gather
 spread over the backward's steps, a tile of it per step into a second inputs buffer, its rows
-prefetched 2 or 8 steps ahead, a step 1.03x slower (one thread; the gather is ~18% of a step,
-bound by moving the rows, not by waiting for them).
+prefetched 2 or 8 steps ahead, a step 1.03x slower (one thread; the gather is ~18% of a step in
+a profile).
 
 tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
 real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
