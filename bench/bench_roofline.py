@@ -143,11 +143,17 @@ LOOP_CALLS = 20000
 COPY_MB = 64
 
 
-def loop_name() -> str:
-    from tactile_exp.models.vector_tiles import WIDTH as LANES
+def vector_lanes() -> int:
+    """The kernels' vector width (``vector_tiles.WIDTH``), imported when asked: a ``--before``
+    child imports the package of another revision, so this module imports none at its top."""
+    from tactile_exp.models.vector_tiles import WIDTH
 
-    steps = conv_layers()[1][2]
-    return f"conv inner loop, 4 rows x {LOOP_TAPS} taps x {steps} steps x {LANES} lanes (in L1)"
+    return WIDTH
+
+
+def loop_name() -> str:
+    steps, lanes = conv_layers()[1][2], vector_lanes()
+    return f"conv inner loop, 4 rows x {LOOP_TAPS} taps x {steps} steps x {lanes} lanes (in L1)"
 
 
 COPY = f"copy {COPY_MB} MB (numpy), 1 thread"
@@ -167,9 +173,8 @@ def lstm_loop_name() -> str:
 def bound_gflop() -> dict[str, float]:
     """GFLOP of the inner-loop timers; GB (read + written) of the copy."""
     from tactile_exp.models.lstm_kernels import CHUNK
-    from tactile_exp.models.vector_tiles import WIDTH as LANES
 
-    conv2 = 2 * 4 * LOOP_TAPS * conv_layers()[1][2] * LANES * LOOP_CALLS / 1e9
+    conv2 = 2 * 4 * LOOP_TAPS * conv_layers()[1][2] * vector_lanes() * LOOP_CALLS / 1e9
     gates = 2 * 4 * HIDDEN * LSTM_INPUTS * CHUNK * LSTM_LOOP_CALLS / 1e9
     return {loop_name(): conv2, lstm_loop_name(): gates, COPY: 2 * COPY_MB * 2**20 / 1e9}
 
@@ -179,7 +184,8 @@ def bound_timers() -> dict[str, Timer]:
     from tactile_exp.models import lstm_kernels as lstm
     from tactile_exp.models.numba_setup import numba
     from tactile_exp.models.vector_tiles import RELU, tap_sums
-    from tactile_exp.models.vector_tiles import WIDTH as LANES
+
+    lanes = vector_lanes()  # a constant of the compiled loop below
 
     @numba.njit
     def gate_sums(w, inputs, acts, bias, calls):  # one step's gates, as _chunk_forward runs them
@@ -192,16 +198,16 @@ def bound_timers() -> dict[str, Timer]:
     @numba.njit
     def loop(w, x, taps, out, bias, steps, calls):  # as convnet_tiles runs conv2's forward
         for _ in range(calls):
-            tap_sums(w, 0, LOOP_TAPS, 1, x, 0, taps, LOOP_TAPS, out, 0, steps * LANES, bias, 0,
-                     steps, STRIDE * LANES, LANES, RELU, out)  # fmt: skip
+            tap_sums(w, 0, LOOP_TAPS, 1, x, 0, taps, LOOP_TAPS, out, 0, steps * lanes, bias, 0,
+                     steps, STRIDE * lanes, lanes, RELU, out)  # fmt: skip
 
     rng = np.random.default_rng(0)
     c_in, t_in, t_out = conv_layers()[1]
     rows = t_in + 2 * KERNEL  # each channel's steps with zero rows either side
-    x = rng.standard_normal(c_in * rows * LANES, dtype=np.float32)
-    taps = np.array([(i * rows + j) * LANES for i in range(c_in) for j in range(KERNEL)])
+    x = rng.standard_normal(c_in * rows * lanes, dtype=np.float32)
+    taps = np.array([(i * rows + j) * lanes for i in range(c_in) for j in range(KERNEL)])
     w = rng.standard_normal(4 * LOOP_TAPS, dtype=np.float32)
-    out = np.zeros(4 * t_out * LANES, np.float32)
+    out = np.zeros(4 * t_out * lanes, np.float32)
     args = (w, x, taps, out, np.zeros(4, np.float32), t_out, LOOP_CALLS)
     timers = {loop_name(): _timed(lambda: loop(*args))}
     w = rng.standard_normal((4 * HIDDEN, LSTM_INPUTS), dtype=np.float32)
