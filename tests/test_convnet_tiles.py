@@ -126,6 +126,22 @@ def test_other_losses_train_through_the_compiled_stack_and_autograd():
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-5)
 
 
+def test_the_gradients_scale_with_the_loss():
+    """Back from 0.25 x the loss, every gradient is 0.25 x its gradient from the loss (exactly:
+    a power of two)."""
+    net, head = _net(32, 30, 32, (5, 3, 3), (4, 4, 4), (2, 2, 2), seed=6)
+    net.impl = "compiled"
+    X, y = torch.randn(40, 32, 30), (torch.rand(40) > 0.5).float()
+    grads = []
+    for scale in (1.0, 0.25):
+        net.zero_grad()
+        head.zero_grad()
+        (scale * net.batch_loss(X, y, head, "hinge", torch.arange(40))).backward()
+        grads.append([p.grad.clone() for p in [*net.parameters(), *head.parameters()]])
+    for one, quarter in zip(*grads, strict=True):
+        assert one.abs().max() > 0 and torch.equal(quarter, 0.25 * one)
+
+
 def test_rows_outside_the_input_are_refused():
     net, head = _net(32, 30, 32, (5, 3, 3), (4, 4, 4), (2, 2, 2), seed=4)
     X, y = torch.randn(10, 32, 30), torch.zeros(10)
@@ -150,8 +166,9 @@ def test_a_tiles_padding_rows_stay_zero_across_steps():
     assert got == pytest.approx(want, rel=1e-5)
     for g_c, g_t in zip(grads_c, grads_t, strict=True):
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-5)
+    # padded: activations and their gradients (the tiles' gradient shares have no padding)
+    kept = [b for (_, _, pad), b in convnet_tiles._BUFFERS.items() if pad]
+    assert kept and len(kept) % 7 == 0 and np.isfinite(got)  # per thread: 4 activations, 3 grads
     pad = 5  # the largest kernel: every time axis's padding on each side
-    kept = list(convnet_tiles._BUFFERS.values())
-    assert kept and np.isfinite(got)
     for buffer in kept:  # time is the second axis from the end
         assert not buffer[..., :pad, :].any() and not buffer[..., -pad:, :].any()

@@ -108,9 +108,9 @@ def test_results_do_not_depend_on_the_thread_count():
         assert torch.equal(a, b)
 
 
-def _step(impl, loss, rows, n=400, channels=32, steps=150, hidden=10, width=10):
+def _step(impl, loss, rows, n=400, channels=32, steps=150, hidden=10, width=10, scale=1.0):
     """The training step's loss and the gradients of every parameter (LSTM, FC, output layer)
-    at the model's init, the rows ``rows`` of ``n`` instances."""
+    at the model's init, the rows ``rows`` of ``n`` instances, back from ``scale`` x the loss."""
     torch.manual_seed(0)
     body = LSTMBody(channels, hidden, width, impl="compiled")
     out = nn.Linear(width, 1)
@@ -120,7 +120,7 @@ def _step(impl, loss, rows, n=400, channels=32, steps=150, hidden=10, width=10):
     else:
         h = body.lstm(x[rows].transpose(1, 2))[1][0][-1]
         value = LOSSES[loss](out(body.fc(h).relu()).squeeze(1), y[rows])
-    value.backward()
+    (scale * value).backward()
     return value.item(), [p.grad.clone() for p in [*body.parameters(), *out.parameters()]]
 
 
@@ -140,6 +140,16 @@ def test_the_training_step_equals_torch(loss, sizes):
         scale = float(b.abs().max())
         assert scale > 0, name
         assert float((a - b).abs().max()) <= 2e-5 * scale, name
+
+
+def test_the_training_steps_gradients_scale_with_the_loss():
+    """Back from 0.25 x the loss, every gradient is 0.25 x its gradient from the loss (exactly:
+    a power of two), each parameter's its own tensor."""
+    rows = torch.arange(CHUNK + 9)
+    _, ones = _step("compiled", "hinge", rows)
+    _, quarters = _step("compiled", "hinge", rows, scale=0.25)
+    for one, quarter in zip(ones, quarters, strict=True):
+        assert one.abs().max() > 0 and torch.equal(quarter, 0.25 * one)
 
 
 @pytest.mark.skipif(numba_config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")

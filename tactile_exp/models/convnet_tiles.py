@@ -215,13 +215,31 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
                            ones, zeros)  # fmt: skip
 
 
+@numba.njit(nogil=True, cache=True)  # no fastmath: the sums' order is kept
+def _tile_sum(parts, out):  # pragma: no cover (compiled)
+    """``out`` (n,) <- ``parts`` (tiles, n) summed over the tiles in order (numpy's
+    ``sum(axis=0)``, to the bit)."""
+    out[:] = parts[0]
+    for tile in range(1, len(parts)):
+        for e in range(len(out)):
+            out[e] += parts[tile, e]
+
+
+def _summed(parts: np.ndarray) -> np.ndarray:
+    """``parts`` (tiles, ...) summed over the tiles in order."""
+    total = np.empty(parts.shape[1:], np.float32)
+    _tile_sum(parts.reshape(len(parts), -1), total.reshape(-1))
+    return total
+
+
 # (role, shape, padding) -> its buffer; role: the task and which activation or gradient it holds
 _BUFFERS: dict[tuple[tuple[int, int], tuple[int, ...], int], np.ndarray] = {}
 
 
 def _buffer(role: tuple[int, int], shape: tuple[int, ...], pad: int) -> np.ndarray:
     """The zeroed buffer of ``shape`` for ``role``, kept from step to step: the kernels never
-    write its ``pad`` rows at either end of time, so they stay zero."""
+    write its ``pad`` rows at either end of time, so they stay zero (``pad`` 0: a buffer they
+    write whole)."""
     if (role, shape, pad) not in _BUFFERS:
         _BUFFERS[role, shape, pad] = np.zeros(shape, np.float32)
     return _BUFFERS[role, shape, pad]
@@ -232,64 +250,111 @@ def _ceil(n: int, multiple: int) -> int:
 
 
 class _Plan:
-    """One step's arguments to ``_tiles`` for the given weights: shapes, padded weights and the
-    offset tables of every layer's taps."""
+    """The arguments of ``_tiles`` for one set of shapes: the geometry and offset tables of every
+    layer's taps, built once (``_plan``), and the padded weights, refilled each step (``load``)."""
 
     def __init__(
         self,
         channels: int,
         steps: int,
-        weights: Sequence[np.ndarray],
-        biases: Sequence[np.ndarray],
-        head: np.ndarray,
+        shapes: Sequence[tuple[int, int, int]],
         groups: int,
         strides: Sequence[int],
     ) -> None:
         lanes = TILE_LANES
-        kernels = [w.shape[2] for w in weights]
+        kernels = [shape[2] for shape in shapes]
         self.pad = pad = max(kernels)  # >= every layer's padding on either side
         lengths, c_in, self.geo = [steps], channels // groups, np.zeros((3, 8), np.int64)
         ins, outs = [], []
-        for layer, (w, stride) in enumerate(zip(weights, strides, strict=True)):
-            k = w.shape[2]
+        for layer, (shape, stride) in enumerate(zip(shapes, strides, strict=True)):
+            k = shape[2]
             lengths.append(conv_out_len(lengths[-1], k, stride))
             ins.append(c_in if layer == 0 else outs[-1])
-            outs.append(_ceil(w.shape[0] // groups, ROWS))
-            real = w.shape[0] // groups  # output channels, unpadded
+            outs.append(_ceil(shape[0] // groups, ROWS))
+            real = shape[0] // groups  # output channels, unpadded
             self.geo[layer] = (k, stride, k // 2, ins[-1], outs[-1], *lengths[-2:], real * k)
         rows = [t + 2 * pad for t in lengths]
         self.shapes = [(groups, c, t, lanes) for c, t in zip([c_in, *outs], rows, strict=True)]
         self.ws, self.bs, self.ftaps, self.btaps, self.bcount, self.bwts = [], [], [], [], [], []
-        for layer, (w, b, stride) in enumerate(zip(weights, biases, strides, strict=True)):
-            k, cout, cin = w.shape[2], w.shape[0] // groups, w.shape[1]
-            w = w.reshape(groups, cout, cin, k)
-            padded = np.zeros((groups, outs[layer], ins[layer], k), np.float32)
-            padded[:, :cout, :cin] = w
-            self.ws.append(padded)
+        self.reach: list[tuple[np.ndarray, np.ndarray]] = []  # per phase: each tap's o, j
+        for layer, (shape, stride) in enumerate(zip(shapes, strides, strict=True)):
+            k, cout = shape[2], shape[0] // groups
+            self.ws.append(np.zeros((groups, outs[layer], ins[layer], k), np.float32))
             self.bs.append(np.zeros((groups, outs[layer]), np.float32))
-            self.bs[-1][:, :cout] = b.reshape(groups, cout)
             taps = [(i * rows[layer] + j) * lanes for i in range(ins[layer]) for j in range(k)]
             self.ftaps.append(np.array(taps, np.int64))
             # The input gradient at step u * stride + phase: the output rows t = u + delta that
             # read it, in the order grouped_conv_numba sums them (tap j, then channel o).
             taps = np.zeros((stride, cout * k), np.int64)
             count = np.zeros(stride, np.int64)
-            wts = np.zeros((groups, stride, ins[layer], cout * k), np.float32)
+            reach = np.zeros((2, stride, cout * k), np.int64)
             for phase in range(stride):
-                reaching = [j for j in range(k) if (phase + k // 2 - j) % stride == 0]
-                for q, (j, o) in enumerate((j, o) for j in reaching for o in range(cout)):
-                    delta = (phase + k // 2 - j) // stride
-                    taps[phase, q] = (o * rows[layer + 1] + delta) * lanes
-                    wts[:, phase, :cin, q] = w[:, o, :, j]
-                count[phase] = len(reaching) * cout
+                pairs = [(o, j) for j in range(k) if (phase + k // 2 - j) % stride == 0
+                         for o in range(cout)]  # fmt: skip
+                for q, (o, j) in enumerate(pairs):
+                    taps[phase, q] = (o * rows[layer + 1] + (phase + k // 2 - j) // stride) * lanes
+                    reach[:, phase, q] = o, j
+                count[phase] = len(pairs)
+            self.reach.append((reach[0], reach[1]))
             self.btaps.append(taps)
             self.bcount.append(count)
-            self.bwts.append(wts)
-        c3 = weights[2].shape[0] // groups
+            self.bwts.append(np.zeros((groups, stride, ins[layer], cout * k), np.float32))
         self.hw = np.zeros((groups, outs[2], lengths[3]), np.float32)
-        self.hw[:, :c3] = head.reshape(groups, c3, lengths[3])
         self.jtaps = np.arange(pad, dtype=np.int64) * lanes
-        self.sizes = [(w.shape[0] // groups, w.shape[1]) for w in weights]
+        self.sizes = [(shape[0] // groups, shape[1]) for shape in shapes]
+
+    def load(
+        self, weights: Sequence[np.ndarray], biases: Sequence[np.ndarray], head: np.ndarray
+    ) -> None:
+        """Copy the step's weights into the padded ones (their padding stays zero)."""
+        for layer, (w, b) in enumerate(zip(weights, biases, strict=True)):
+            _load_layer(w, b, self.ws[layer], self.bs[layer], self.bwts[layer],
+                        *self.reach[layer], self.bcount[layer])  # fmt: skip
+        groups, c3 = self.hw.shape[0], weights[2].shape[0] // self.hw.shape[0]
+        self.hw[:, :c3] = head.reshape(groups, c3, self.hw.shape[2])
+
+
+@numba.njit(**_JIT)
+def _load_layer(w, b, ws, bs, bwts, reach_o, reach_j, count):  # pragma: no cover (compiled)
+    """A layer's weight (C_out, c_in, k) and bias into its padded weights ``ws`` (groups,
+    c_out', c_in', k) and biases ``bs``, and into the input gradient's ``bwts`` (groups, stride,
+    c_in', taps): tap ``q`` of ``phase`` applies output channel ``reach_o[phase, q]``'s tap
+    ``reach_j[phase, q]``. Padding entries are left as they are (zero)."""
+    groups, (_, cin, k) = ws.shape[0], w.shape
+    cout = w.shape[0] // groups
+    for g in range(groups):
+        for o in range(cout):
+            bs[g, o] = b[g * cout + o]
+            for i in range(cin):
+                for j in range(k):
+                    ws[g, o, i, j] = w[g * cout + o, i, j]
+        for phase in range(bwts.shape[1]):
+            for q in range(count[phase]):
+                row = w[g * cout + reach_o[phase, q]]
+                for i in range(cin):
+                    bwts[g, phase, i, q] = row[i, reach_j[phase, q]]
+
+
+# (channels, steps, weight shapes, groups, strides) -> its plan
+_PLANS: dict[tuple, _Plan] = {}
+
+
+def _plan(
+    channels: int,
+    steps: int,
+    weights: Sequence[np.ndarray],
+    biases: Sequence[np.ndarray],
+    head: np.ndarray,
+    groups: int,
+    strides: Sequence[int],
+) -> _Plan:
+    """The plan for these shapes, built on first use, loaded with these weights."""
+    shapes = tuple(w.shape for w in weights)
+    key = (channels, steps, shapes, groups, tuple(strides))
+    if key not in _PLANS:
+        _PLANS[key] = _Plan(channels, steps, shapes, groups, strides)
+    _PLANS[key].load(weights, biases, head)
+    return _PLANS[key]
 
 
 def train_step(
@@ -310,7 +375,7 @@ def train_step(
     as the parameters."""
     if loss not in LOSSES:
         raise ValueError(f"the tiled ConvNet step computes {', '.join(LOSSES)}, not {loss!r}")
-    plan = _Plan(X.shape[1], X.shape[2], weights, biases, head_weight, groups, strides)
+    plan = _plan(X.shape[1], X.shape[2], weights, biases, head_weight, groups, strides)
     tiles = -(-len(rows) // TILE_LANES)
     threads = numba.get_num_threads()
     acts, grads = [], []
@@ -319,9 +384,10 @@ def train_step(
         grads.append(
             tuple(_buffer((slot, 4 + k), s[1:], plan.pad) for k, s in enumerate(plan.shapes[1:]))
         )
-    gws = tuple(np.empty((tiles, *w.shape), np.float32) for w in plan.ws)
-    gbs = tuple(np.empty((tiles, *b.shape), np.float32) for b in plan.bs)
-    ghw, ghb = np.empty((tiles, *plan.hw.shape), np.float32), np.empty(tiles, np.float32)
+    # every tile's share of the gradients (the kernels write them whole), kept from step to step
+    gws = tuple(_buffer((-1, k), (tiles, *w.shape), 0) for k, w in enumerate(plan.ws))
+    gbs = tuple(_buffer((-1, 3 + k), (tiles, *b.shape), 0) for k, b in enumerate(plan.bs))
+    ghw, ghb = _buffer((-1, 6), (tiles, *plan.hw.shape), 0), np.empty(tiles, np.float32)
     losses = np.empty(tiles, np.float32)
     partial = [np.empty((groups, TILE_LANES), np.float32) for _ in range(threads)]
     gs = [np.empty(TILE_LANES, np.float32) for _ in range(threads)]
@@ -339,14 +405,17 @@ def train_step(
                partial[slot], gs[slot], zeros, ones, start, stop)  # fmt: skip
 
     _in_parallel(task, tiles)
-    out = []
-    for (cout, cin), gw, gb in zip(plan.sizes, gws, gbs, strict=True):
-        k = gw.shape[4]
-        out.append(np.ascontiguousarray(gw.sum(axis=0)[:, :cout, :cin]).reshape(-1, cin, k))
-        out.append(np.ascontiguousarray(gb.sum(axis=0)[:, :cout]).reshape(-1))
+    params = [p for pair in zip(weights, biases, strict=True) for p in pair] + [head_weight]
+    # one flat array for the gradients, cut into the parameters' shapes and the head's bias
+    parts = np.split(np.empty(sum(p.size for p in params) + 1, np.float32),
+                     np.cumsum([p.size for p in params]))  # fmt: skip
+    out = [g.reshape(p.shape) for g, p in zip(parts, params, strict=False)] + [parts[-1]]
+    for (cout, cin), gw, gb, k in zip(plan.sizes, gws, gbs, range(0, 6, 2), strict=True):
+        out[k][:] = _summed(gw)[:, :cout, :cin].reshape(out[k].shape)
+        out[k + 1][:] = _summed(gb)[:, :cout].reshape(-1)
     c3 = plan.sizes[2][0]
-    out.append(np.ascontiguousarray(ghw.sum(axis=0)[:, :c3]).reshape(1, -1))
-    out.append(ghb.sum(keepdims=True))
+    out[6][:] = _summed(ghw)[:, :c3].reshape(1, -1)
+    out[7][:] = ghb.sum(keepdims=True)
     return float(losses.sum(dtype=np.float64)) / len(rows), out
 
 
@@ -356,7 +425,7 @@ class TiledStep(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, X, rows, y, loss, groups, strides, head_weight, head_bias, *params):
-        sign = (2.0 * y - 1.0).numpy()
+        sign = 2 * y.numpy() - 1  # float32, +-1
         value, grads = train_step(
             X.numpy(),
             rows.numpy(),
@@ -375,8 +444,10 @@ class TiledStep(torch.autograd.Function):
     @staticmethod
     @once_differentiable
     def backward(ctx, grad):
-        *convs, grad_head, grad_bias = (g * grad for g in ctx.grads)
+        *convs, grad_head, grad_bias = ctx.grads
         del ctx.grads
+        if grad.item() != 1.0:  # x * 1 == x: the usual ``loss.backward()`` skips 8 products
+            *convs, grad_head, grad_bias = (g * grad for g in (*convs, grad_head, grad_bias))
         return (None,) * 6 + (grad_head, grad_bias, *convs)
 
 

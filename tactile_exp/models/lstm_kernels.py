@@ -82,6 +82,7 @@ _JIT = dict(fastmath=True, error_model="numpy", cache=True)
 _ZERO = np.float32(0.0)
 _HALF = np.float32(0.5)
 _ONE = np.float32(1.0)
+_TWO = np.float32(2.0)
 # Gradients through time shrink by the forget gate (~1/2) each step, to ~1e-45 after 150 steps:
 # float32 denormals, which the CPU handles ~100x slower (they made backward 10x slower). The
 # carried gradients are set to 0 below this, ~1e-27 of any gradient that moves a weight.
@@ -343,16 +344,19 @@ def _backward(X, rows, w, bias, dh_last, d_wt, dx, inputs, acts, c_prev, tanh_c,
 
 
 @numba.njit(parallel=True, **_JIT)
-def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_out, losses,
-           inputs, acts, c_prev, tanh_c, d_gates):  # fmt: skip
+def _train(X, rows, y, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_out, losses,
+           inputs, acts, c_prev, tanh_c, d_gates, grads):  # fmt: skip
     """One training step of LSTM -> FC(F) + ReLU -> FC(1) -> loss, a chunk at a time: its
-    forward, the two layers, each instance's loss (``sign``: +-1 per row of ``X``; the mean over
-    the batch) and back through all of it, the chunk's activations still in cache (no forward
-    run again). Per chunk: ``d_wt`` as ``_backward``'s, ``d_fc`` (F, H + 1) the FC layer's weight
-    and bias gradients, ``d_out`` (F + 1) the output layer's, ``losses`` its summed loss. The
-    arrays after them as ``_backward``'s."""
+    forward, the two layers, each instance's loss (0/1 labels ``y`` per row of ``X``; the mean
+    over the batch) and back through all of it, the chunk's activations still in cache (no
+    forward run again). ``w`` (G, K) and ``bias`` as ``_forward``'s; ``fc_w``, ``fc_b`` the FC
+    layer's; ``out_w`` (F,) and ``out_b`` (1,) the output layer's. Per chunk: ``d_wt`` as
+    ``_backward``'s, ``d_fc`` (F, H + 1) the FC layer's weight and bias gradients, ``d_out``
+    (F + 1) the output layer's, ``losses`` its summed loss. The arrays after them as
+    ``_backward``'s. ``grads`` <- the chunks' gradients summed (``_gradient_sums``)."""
     G, K = w.shape
     H = G // 4
+    C = K - H
     n_chunks = d_wt.shape[0]
     parts = len(inputs)
     F = fc_w.shape[0]
@@ -379,10 +383,10 @@ def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, 
             total = np.float32(0.0)
             gs[:] = 0
             for b in range(n):
-                score = out_b
+                score = out_b[0]
                 for f in range(F):
                     score += out_w[f] * a[f, b]
-                label = sign[rows[start + b]]
+                label = _TWO * y[rows[start + b]] - _ONE
                 loss, slope = loss_slope(label * score, hinge, _ONE)
                 total += loss
                 gs[b] = label * slope * scale
@@ -413,6 +417,43 @@ def _train(X, rows, sign, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, 
             _chunk_backward(
                 w, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c, d_gates[p], d_wt[chunk]
             )
+    _gradient_sums(d_wt, d_fc, d_out, C, H, grads)
+
+
+@numba.njit(**_JIT)
+def _gradient_sums(d_wt, d_fc, d_out, C, H, grads):
+    """``grads`` <- the chunks' gradients summed in chunk order (numpy's ``sum(0)``'s rounding),
+    in the parameters' layout: ``nn.LSTM``'s weight_ih (G, C), weight_hh (G, H), bias_ih,
+    bias_hh (both the gates' summed gradient), then the FC layer's weight (F, H) and bias and the
+    output layer's weight (1, F) and bias."""
+    G, F = 4 * H, d_fc.shape[1]
+    K = C + H
+    total = d_wt[0].copy()
+    fc = d_fc[0].copy()
+    out = d_out[0].copy()
+    for chunk in range(1, d_wt.shape[0]):
+        total += d_wt[chunk]
+        fc += d_fc[chunk]
+        out += d_out[chunk]
+    for g in range(G):
+        for c in range(C):
+            grads[g * C + c] = total[c, g]
+    at = G * C
+    for g in range(G):
+        for j in range(H):
+            grads[at + g * H + j] = total[C + j, g]
+    at = G * K
+    for g in range(G):
+        grads[at + g] = total[K, g]
+        grads[at + G + g] = total[K, g]
+    at += 2 * G
+    for f in range(F):
+        for j in range(H):
+            grads[at + f * H + j] = fc[f, j]
+        grads[at + F * H + f] = fc[f, H]
+    at += F * H + F
+    for f in range(F + 1):
+        grads[at + f] = out[f]
 
 
 def _parts(n_rows: int) -> int:
@@ -516,55 +557,36 @@ class LSTMStep(torch.autograd.Function):
     backward."""
 
     @staticmethod
-    def forward(ctx, x, rows, y, loss, w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w, out_b):  # type: ignore[override]
-        w = torch.cat([w_ih, w_hh], 1).detach().contiguous()
-        bias = (b_ih + b_hh).detach().contiguous()
-        G, K = w.shape
-        F, H = fc_w.shape
+    def forward(ctx, x, rows, y, loss, *params):  # type: ignore[override]
+        (G, H), F = params[1].shape, params[4].shape[0]  # weight_hh, the FC layer's weight
         n_chunks = (len(rows) + CHUNK - 1) // CHUNK
-        d_wt = np.empty((n_chunks, *_padded(K, G)), np.float32)
+        K_pad, G_pad = _padded(x.shape[1] + H, G)
+        d_wt = np.empty((n_chunks, K_pad, G_pad), np.float32)
         d_fc = np.empty((n_chunks, F, H + 1), np.float32)
         d_out = np.empty((n_chunks, F + 1), np.float32)
         losses = np.empty(n_chunks, np.float32)
-        arrays = _activations(len(rows), x.shape[2], K, G)
+        grads = np.empty(sum(p.numel() for p in params), np.float32)
+        arrays = _activations(len(rows), x.shape[2], x.shape[1] + H, G)
+        w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w, out_b = (p.detach().numpy() for p in params)
         _train(
-            x.detach().numpy(),
-            rows.numpy(),
-            (2.0 * y - 1.0).numpy(),
-            w.numpy(),
-            bias.numpy(),
-            fc_w.detach().numpy(),
-            fc_b.detach().numpy(),
-            out_w.detach().numpy().reshape(-1),
-            np.float32(out_b.item()),
-            loss == "hinge",
-            d_wt,
-            d_fc,
-            d_out,
-            losses,
-            *arrays,
-            _gate_gradients(len(arrays[0]), 1, G, d_wt.shape[2]),
-        )
-        total, fc, out = d_wt.sum(0), d_fc.sum(0), d_out.sum(0)
-        d_w_all = torch.from_numpy(np.ascontiguousarray(total[:K, :G].T))
-        d_b_all = torch.from_numpy(total[K, :G].copy())
-        C = x.shape[1]
+            x.detach().numpy(), rows.numpy(), y.numpy(), np.concatenate((w_ih, w_hh), axis=1),
+            b_ih + b_hh, fc_w, fc_b, out_w.reshape(-1), out_b, loss == "hinge",
+            d_wt, d_fc, d_out, losses, *arrays,
+            _gate_gradients(len(arrays[0]), 1, G, G_pad), grads,
+        )  # fmt: skip
+        # one tensor per parameter (autograd then takes it as ``.grad`` without a copy)
+        parts = np.split(grads, np.cumsum([p.numel() for p in params[:-1]]))
         ctx.grads = [
-            d_w_all[:, :C],
-            d_w_all[:, C:],
-            d_b_all,
-            d_b_all,
-            torch.from_numpy(np.ascontiguousarray(fc[:, :H])),
-            torch.from_numpy(fc[:, H].copy()),
-            torch.from_numpy(out[:F].reshape(1, F).copy()),
-            torch.from_numpy(out[F:].copy()),
+            torch.from_numpy(g.reshape(p.shape)) for g, p in zip(parts, params, strict=True)
         ]
         return torch.tensor(float(losses.sum(dtype=np.float64)) / len(rows), dtype=torch.float32)
 
     @staticmethod
     def backward(ctx, grad):  # type: ignore[override]
-        grads = [g * grad for g in ctx.grads]
+        grads = ctx.grads
         del ctx.grads
+        if grad.item() != 1.0:  # x * 1 == x: the usual ``loss.backward()`` skips 8 products
+            grads = [g * grad for g in grads]
         return (None, None, None, None, *grads)
 
 
@@ -591,8 +613,8 @@ def lstm_loss(
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
     announce_compile(__name__)
     return LSTMStep.apply(
-        x.contiguous(), rows, y.to(torch.float32), loss, *params, fc.weight, fc.bias,
-        out.weight, out.bias,
+        x.contiguous(), rows, y.to(torch.float32).contiguous(), loss, *params, fc.weight,
+        fc.bias, out.weight, out.bias,
     )  # fmt: skip
 
 
