@@ -238,11 +238,22 @@ _BUFFERS: dict[tuple[tuple[int, int], tuple[int, ...], int], np.ndarray] = {}
 
 def _buffer(role: tuple[int, int], shape: tuple[int, ...], pad: int) -> np.ndarray:
     """The zeroed buffer of ``shape`` for ``role``, kept from step to step: the kernels never
-    write its ``pad`` rows at either end of time, so they stay zero (``pad`` 0: a buffer they
-    write whole)."""
+    write its ``pad`` rows at either end of time, so they stay zero."""
     if (role, shape, pad) not in _BUFFERS:
         _BUFFERS[role, shape, pad] = np.zeros(shape, np.float32)
     return _BUFFERS[role, shape, pad]
+
+
+# (which gradient, its shape) -> every tile's share of it, rows for the largest batch so far
+_SHARES: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}
+
+
+def _shares(gradient: int, tiles: int, shape: tuple[int, ...]) -> np.ndarray:
+    """(tiles, *shape) for every tile's share of a gradient (the kernels write it whole), kept
+    from step to step: a fresh one faults in ~2 MB of pages every step at the paper's sizes."""
+    if len(_SHARES.get((gradient, shape), ())) < tiles:
+        _SHARES[gradient, shape] = np.empty((tiles, *shape), np.float32)
+    return _SHARES[gradient, shape][:tiles]
 
 
 def _ceil(n: int, multiple: int) -> int:
@@ -384,10 +395,9 @@ def train_step(
         grads.append(
             tuple(_buffer((slot, 4 + k), s[1:], plan.pad) for k, s in enumerate(plan.shapes[1:]))
         )
-    # every tile's share of the gradients (the kernels write them whole), kept from step to step
-    gws = tuple(_buffer((-1, k), (tiles, *w.shape), 0) for k, w in enumerate(plan.ws))
-    gbs = tuple(_buffer((-1, 3 + k), (tiles, *b.shape), 0) for k, b in enumerate(plan.bs))
-    ghw, ghb = _buffer((-1, 6), (tiles, *plan.hw.shape), 0), np.empty(tiles, np.float32)
+    gws = tuple(_shares(k, tiles, w.shape) for k, w in enumerate(plan.ws))
+    gbs = tuple(_shares(3 + k, tiles, b.shape) for k, b in enumerate(plan.bs))
+    ghw, ghb = _shares(6, tiles, plan.hw.shape), np.empty(tiles, np.float32)
     losses = np.empty(tiles, np.float32)
     partial = [np.empty((groups, TILE_LANES), np.float32) for _ in range(threads)]
     gs = [np.empty(TILE_LANES, np.float32) for _ in range(threads)]
