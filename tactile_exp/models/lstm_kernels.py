@@ -23,8 +23,12 @@ stores them (``ADDED``), not in a second pass, and each step's kernels take the 
 (a view made per step costs numba two atomic reference counts): together a step 2-4% faster, the
 same gradients bit for bit (one thread, a process per version, alternating, 8 pairs: median ratio
 0.963, range 0.88-1.04; bench/bench_roofline.py --before, two threads: x0.99 to x1.14 in three runs;
-2026-11-27). Through autograd (``lstm_last_hidden``: scoring, and training with a loss the step does
-not compute) the forward keeps nothing and the backward recomputes a chunk's forward in cache.
+2026-11-27). The step's gradients are summed over the chunks and laid out as the parameters' inside
+the compiled step (``_gradient_sums``), one tensor per parameter, its arguments prepared in numpy,
+not torch: the time a two-thread step spends outside ``_train`` went from 0.62-0.79 ms to
+0.61-0.71 ms of ~9 ms (a process per version, alternating, 4 pairs; the bench: x0.99; 2026-11-27).
+Through autograd (``lstm_last_hidden``: scoring, and training with a loss the step does not
+compute) the forward keeps nothing and the backward recomputes a chunk's forward in cache.
 Keeping every chunk's activations for that backward instead (~63 MB a batch of 1,000) made a
 training step 1.25x faster alone, but in the Table I grid, two jobs side by side on two cores, the
 LSTM job gained ~3% and the ConvNet job beside it lost ~5% (rows G and H against the grid before,
