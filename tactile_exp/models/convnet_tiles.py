@@ -41,7 +41,7 @@ from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.grouped_conv_numba import _in_parallel, conv_out_len
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
-from tactile_exp.models.numba_setup import announce_compile, check_rows, numba
+from tactile_exp.models.numba_setup import check_rows, ensure_compiled, numba
 from tactile_exp.models.vector_tiles import (
     DOT_TAPS,
     GATED,
@@ -389,6 +389,7 @@ def train_step(
     as the parameters."""
     if loss not in LOSSES:
         raise ValueError(f"the tiled ConvNet step computes {', '.join(LOSSES)}, not {loss!r}")
+    ensure_compiled(__name__)  # before the first kernel call (``_plan``'s)
     plan = _plan(X.shape[1], X.shape[2], weights, biases, head_weight, groups, strides)
     tiles = -(-len(rows) // TILE_LANES)
     threads = numba.get_num_threads()
@@ -405,7 +406,6 @@ def train_step(
     partial = [np.empty((groups, TILE_LANES), np.float32) for _ in range(threads)]
     gs = [np.empty(TILE_LANES, np.float32) for _ in range(threads)]
     zeros, ones = np.zeros(ROWS, np.float32), np.ones(TILE_LANES, np.float32)
-    announce_compile(__name__)
 
     def flat(arrays):  # the kernels index these by their flat offsets
         return tuple(a.reshape(-1) for a in arrays)

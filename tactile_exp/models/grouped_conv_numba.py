@@ -48,7 +48,7 @@ import numpy as np
 import torch
 from torch.autograd.function import once_differentiable
 
-from tactile_exp.models.numba_setup import announce_compile, numba
+from tactile_exp.models.numba_setup import ensure_compiled, numba
 from tactile_exp.models.scratch import scratch
 from tactile_exp.models.vector_tiles import (
     GATED,
@@ -452,7 +452,7 @@ def _forward(
     """The input and each layer's ReLU output in the layout (groups, channels, time, n_pad)."""
     if x.requires_grad:
         raise ValueError("the compiled conv stack gives no input gradient; use impl='torch'")
-    announce_compile(__name__)
+    ensure_compiled(__name__)
     _, channels, steps = x.shape
     n_pad = _padded(len(x))
     h = scratch(groups, channels // groups, steps, n_pad)

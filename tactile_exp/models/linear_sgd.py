@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from tactile_exp.models.numba_setup import announce_compile, numba
+from tactile_exp.models.numba_setup import ensure_compiled, numba
 
 LOSSES = ("logistic", "hinge")  # the registered losses loss_slope computes (others: impl=torch)
 SOFTPLUS_THRESHOLD = 20.0  # torch's F.softplus: the identity above it
@@ -202,7 +202,7 @@ def linear_sgd_epochs(
     if layer.out_features != 1 or layer.weight.device.type != "cpu":
         raise ValueError("the compiled linear SGD trains a one-output layer on CPU")
     check_loss(loss)
-    announce_compile(__name__)
+    ensure_compiled(__name__)
     features = np.ascontiguousarray(X.detach().numpy().reshape(len(X), -1), dtype=np.float32)
     sign = (2.0 * y.detach().numpy() - 1.0).astype(np.float32)
     n, hinge = len(features), loss == "hinge"

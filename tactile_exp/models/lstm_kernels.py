@@ -66,7 +66,7 @@ import numpy as np
 import torch
 
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
-from tactile_exp.models.numba_setup import announce_compile, check_rows, numba
+from tactile_exp.models.numba_setup import check_rows, ensure_compiled, numba
 from tactile_exp.models.scratch import scratch
 from tactile_exp.models.vector_tiles import (
     ADDED,
@@ -551,7 +551,7 @@ def lstm_last_hidden(
     rows = torch.arange(len(x)) if rows is None else rows.to(torch.int64).contiguous()
     check_rows(rows, len(x), "compiled LSTM")
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
-    announce_compile(__name__)
+    ensure_compiled(__name__)
     return LSTMLastHidden.apply(x, rows, *params)
 
 
@@ -615,7 +615,7 @@ def lstm_loss(
     rows = rows.to(torch.int64).contiguous()
     check_rows(rows, len(x), "compiled LSTM")
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
-    announce_compile(__name__)
+    ensure_compiled(__name__)
     return LSTMStep.apply(
         x.contiguous(), rows, y.to(torch.float32).contiguous(), loss, *params, fc.weight,
         fc.bias, out.weight, out.bias,
