@@ -265,7 +265,9 @@ class _Plan:
     layer's taps, built once (``_plan``), and the padded weights, refilled each step (``load``,
     compiled). With the tiles' gradient shares kept and summed compiled, the time a two-thread
     step spends outside the kernels went from 0.76-1.10 ms to 0.69-0.77 ms of ~9 ms (a process per
-    version, alternating, 4 pairs; bench/bench_roofline.py --before: x1.04; 2026-11-27)."""
+    version, alternating, 4 pairs); the step: two threads, median ratio 0.967 (16 pairs, range
+    0.90-1.04) and 0.986 (10 pairs), one thread 0.999 (10 pairs); bench/bench_roofline.py
+    --before: x0.86 to x1.04 in five runs (2026-11-27)."""
 
     def __init__(
         self,

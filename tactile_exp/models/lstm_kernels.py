@@ -26,7 +26,9 @@ same gradients bit for bit (one thread, a process per version, alternating, 8 pa
 2026-11-27). The step's gradients are summed over the chunks and laid out as the parameters' inside
 the compiled step (``_gradient_sums``), one tensor per parameter, its arguments prepared in numpy,
 not torch: the time a two-thread step spends outside ``_train`` went from 0.62-0.79 ms to
-0.61-0.71 ms of ~9 ms (a process per version, alternating, 4 pairs; the bench: x0.99; 2026-11-27).
+0.61-0.71 ms of ~9 ms (a process per version, alternating, 4 pairs), the step as fast as before
+(16 pairs: median ratio 0.998; bench/bench_roofline.py --before: x0.99 to x1.12 in five runs;
+2026-11-27).
 Through autograd (``lstm_last_hidden``: scoring, and training with a loss the step does not
 compute) the forward keeps nothing and the backward recomputes a chunk's forward in cache.
 Keeping every chunk's activations for that backward instead (~63 MB a batch of 1,000) made a
