@@ -365,3 +365,15 @@ def test_a_tile_fits_the_vector_registers(features, width, registers):
     got, vectors = vt._lanes(features)
     assert got == width
     assert vt.ROWS * vectors + vectors + 1 <= registers
+
+
+def test_ordered_sum_is_numpys_sum_over_the_first_axis_to_the_bit():
+    """Partial sums of very different sizes (so that any other order rounds differently): the
+    sum is numpy's ``sum(axis=0)``, bit for bit, and differs from the reversed order's."""
+    rng = np.random.default_rng(3)
+    parts = rng.standard_normal((63, 500)).astype(np.float32)
+    parts *= np.float32(10.0) ** rng.integers(-4, 5, parts.shape).astype(np.float32)
+    out = np.empty(500, np.float32)
+    vt.ordered_sum(parts, out)
+    assert np.array_equal(out, parts.sum(axis=0))
+    assert not np.array_equal(out, parts[::-1].sum(axis=0))

@@ -48,6 +48,7 @@ from tactile_exp.models.vector_tiles import (
     RELU,
     ROWS,
     WIDTH,
+    ordered_sum,
     tap_dots,
     tap_sums,
     transpose_rows,
@@ -215,20 +216,10 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
                            ones, zeros)  # fmt: skip
 
 
-@numba.njit(nogil=True, cache=True)  # no fastmath: the sums' order is kept
-def _tile_sum(parts, out):  # pragma: no cover (compiled)
-    """``out`` (n,) <- ``parts`` (tiles, n) summed over the tiles in order (numpy's
-    ``sum(axis=0)``, to the bit)."""
-    out[:] = parts[0]
-    for tile in range(1, len(parts)):
-        for e in range(len(out)):
-            out[e] += parts[tile, e]
-
-
 def _summed(parts: np.ndarray) -> np.ndarray:
     """``parts`` (tiles, ...) summed over the tiles in order."""
     total = np.empty(parts.shape[1:], np.float32)
-    _tile_sum(parts.reshape(len(parts), -1), total.reshape(-1))
+    ordered_sum(parts.reshape(len(parts), -1), total.reshape(-1))
     return total
 
 

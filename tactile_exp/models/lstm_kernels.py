@@ -77,6 +77,7 @@ from tactile_exp.models.vector_tiles import (
     WIDTH,
     Lanes,
     lanes,
+    ordered_sum,
     tanh_lanes,
     tap_sums,
     transpose_rows,
@@ -427,32 +428,39 @@ def _train(X, rows, y, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_o
 
 
 @numba.njit(**_JIT)
-def _gradient_sums(d_wt, d_fc, d_out, C, H, grads):
-    """``grads`` <- the chunks' gradients summed in chunk order (numpy's ``sum(0)``'s rounding),
-    in the parameters' layout: ``nn.LSTM``'s weight_ih (G, C), weight_hh (G, H), bias_ih,
-    bias_hh (both the gates' summed gradient), then the FC layer's weight (F, H) and bias and the
-    output layer's weight (1, F) and bias."""
-    G, F = 4 * H, d_fc.shape[1]
-    K = C + H
-    total = d_wt[0].copy()
-    fc = d_fc[0].copy()
-    out = d_out[0].copy()
-    for chunk in range(1, d_wt.shape[0]):
-        total += d_wt[chunk]
-        fc += d_fc[chunk]
-        out += d_out[chunk]
+def _summed(parts):
+    """``parts`` (count, ...) summed over the first axis in order (``ordered_sum``)."""
+    total = np.empty(parts.shape[1:], np.float32)
+    ordered_sum(parts.reshape(len(parts), -1), total.reshape(-1))
+    return total
+
+
+@numba.njit(**_JIT)
+def _weight_gradients(d_wt, C, H, grads):
+    """``grads`` <- ``nn.LSTM``'s weight_ih (G, C), weight_hh (G, H), bias_ih and bias_hh (both
+    the gates' summed gradient) gradients, one after another, from the chunks' transposed
+    weight gradients ``d_wt`` (chunks, K', G'), summed in chunk order; returns how many floats
+    that is."""
+    total = _summed(d_wt)
+    G, K = 4 * H, C + H
     for g in range(G):
         for c in range(C):
             grads[g * C + c] = total[c, g]
-    at = G * C
-    for g in range(G):
         for j in range(H):
-            grads[at + g * H + j] = total[C + j, g]
-    at = G * K
-    for g in range(G):
-        grads[at + g] = total[K, g]
-        grads[at + G + g] = total[K, g]
-    at += 2 * G
+            grads[G * C + g * H + j] = total[C + j, g]
+        grads[G * K + g] = total[K, g]
+        grads[G * K + G + g] = total[K, g]
+    return G * K + 2 * G
+
+
+@numba.njit(**_JIT)
+def _gradient_sums(d_wt, d_fc, d_out, C, H, grads):
+    """``grads`` <- the training step's gradients in the parameters' order and layout, the
+    chunks' summed in order: the LSTM's (``_weight_gradients``), then the FC layer's weight
+    (F, H) and bias and the output layer's weight (1, F) and bias."""
+    at = _weight_gradients(d_wt, C, H, grads)
+    fc, out = _summed(d_fc), _summed(d_out)
+    F = len(fc)
     for f in range(F):
         for j in range(H):
             grads[at + f * H + j] = fc[f, j]
@@ -532,14 +540,16 @@ class LSTMLastHidden(torch.autograd.Function):
         steps = x.shape[2] if len(dx) else 1
         d_gates = _gate_gradients(len(arrays[0]), steps, G, d_wt.shape[2])
         _backward(X, rows.numpy(), w.numpy(), bias.numpy(), dh_last, d_wt, dx, *arrays, d_gates)
-        total = d_wt.sum(0)
-        d_w_all = torch.from_numpy(np.ascontiguousarray(total[:K, :G].T))
-        d_b_all = torch.from_numpy(total[K, :G].copy())
-        C = x.shape[1]
+        C, H = x.shape[1], K - x.shape[1]
+        grads = np.empty(G * K + 2 * G, np.float32)
+        _weight_gradients(d_wt, C, H, grads)
+        parts = np.split(grads, [G * C, G * K, G * K + G])
+        shapes = [(G, C), (G, H), (G,), (G,)]  # weight_ih, weight_hh, bias_ih, bias_hh
+        weights = [torch.from_numpy(g.reshape(s)) for g, s in zip(parts, shapes, strict=True)]
         d_x = None
         if ctx.needs_input_grad[0]:
             d_x = torch.zeros_like(x).index_add_(0, rows, torch.from_numpy(dx))
-        return d_x, None, d_w_all[:, :C], d_w_all[:, C:], d_b_all, d_b_all
+        return d_x, None, *weights
 
 
 def lstm_last_hidden(

@@ -17,6 +17,8 @@ every shape against torch).
   vectors along a row's lanes or along time (a convolution's output steps);
 - ``tap_dots``: a convolution's weight gradient, rows of gradients against each tap's input rows,
   the products summed over steps in registers and over lanes at the end;
+- ``ordered_sum``: per-tile (or per-chunk) partial gradients summed in their order, so that a sum
+  does not depend on how many threads made the parts;
 - ``transpose_tile``: a square block of rows transposed in registers (into a kernel's layout);
   ``transpose_rows``: whole rows, tile by tile;
 - ``tanh_lanes``: tanh (or, scaled, the sigmoid) of a block of floats in place, a whole vector at
@@ -233,6 +235,16 @@ def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: A
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+@numba.njit(nogil=True, cache=True)  # no fastmath: the order of the sums is kept
+def ordered_sum(parts, out):  # pragma: no cover (compiled)
+    """``out`` (n,) <- ``parts`` (count, n) summed over the first axis in order (numpy's
+    ``parts.sum(axis=0)``, to the bit)."""
+    out[:] = parts[0]
+    for part in range(1, len(parts)):
+        for e in range(len(out)):
+            out[e] += parts[part, e]
 
 
 @numba.njit(inline="always", nogil=True, cache=True)
