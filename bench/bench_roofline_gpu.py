@@ -1,14 +1,16 @@
 """The ConvNet's and the LSTM's training passes on a CUDA GPU against the GPU's roofline.
 
-The GPU counterpart of ``bench_roofline.py``: the same shapes and the same useful FLOPs and
-memory traffic (imported from it), the passes that ``device=cuda`` trains with (cuDNN's grouped
-``conv1d`` through ``GroupedTemporalConvNet.scores`` with ``impl="torch"``; ``nn.LSTM``), float32
-with TF32 off as training runs them (``train.resolve_device``). In one run, interleaved, best of
+The GPU counterpart of ``bench_roofline.py``: the same shapes and the same useful FLOPs (imported
+from it; a backward's are the forward+backward's less the forward's), the passes that
+``device=cuda`` trains with (cuDNN's grouped ``conv1d`` through
+``GroupedTemporalConvNet.scores`` with ``impl="torch"``; ``nn.LSTM``), float32 with TF32 off as
+training runs them (``train.resolve_device``). In one run, interleaved, best of
 ``--repeats``, each timing closed by ``torch.cuda.synchronize``:
 
 - ceilings: an 8192^3 float32 matrix product (IEEE, TF32 off) and a 1 GiB device-to-device copy
   (bytes read + written per second); a pass's attainable rate is the lower of the product's rate
-  and the copy's times the pass's FLOP per byte (``bench_roofline.conv_gbytes``);
+  and the copy's times the pass's FLOP per byte (``conv_gbytes``: torch runs the ConvNet layer by
+  layer through memory, where the CPU's fused training step keeps a tile's activations in cache);
 - each pass at the paper's batch of 1000 (what a training step runs) and over the whole
   5,300-instance training set in one batch (where a pass has enough work to fill the GPU): at
   1000 rows the passes take tens of microseconds of arithmetic and the step is bound by kernel
@@ -33,6 +35,11 @@ import bench_roofline as cpu  # noqa: E402  (the shapes and FLOP counts)
 
 MATMUL = 8192
 COPY_GIB = 1
+PASSES = tuple(
+    f"{net} {part}"
+    for net in ("convnet", "lstm")
+    for part in ("forward", "backward", "forward+backward")
+)
 SGEMM = f"sgemm {MATMUL}^3 (float32, TF32 off)"
 COPY = f"copy {COPY_GIB} GiB (device to device)"
 
@@ -56,6 +63,31 @@ def ceilings(device: torch.device) -> tuple[dict[str, Callable[[], float]], dict
     timers = {SGEMM: _timed(lambda: torch.mm(a, a)), COPY: _timed(lambda: dst.copy_(src))}
     work = {SGEMM: 2 * MATMUL**3 / 1e9, COPY: 2 * COPY_GIB * 2**30 / 1e9}
     return timers, work
+
+
+def gflop() -> dict[str, float]:
+    """Useful GFLOP per pass of 1000 rows, counted as bench_roofline.py counts them."""
+    flops = {**cpu.conv_gflop(), **cpu.lstm_gflop()}
+    for net in ("convnet", "lstm"):
+        flops[f"{net} backward"] = flops[f"{net} forward+backward"] - flops[f"{net} forward"]
+    return flops
+
+
+def conv_gbytes() -> dict[str, float]:
+    """GB the ConvNet's passes must move to and from GPU memory per 1000 rows, float32: the
+    forward reads the batch and writes the layout's input and each layer's output; the backward
+    reads each back and writes and reads the last layer's gradient (a lower bound: the inner
+    layers' gradients go through memory too)."""
+    rows = cpu.BATCH * 4 / 1e9
+    sizes = [cpu.CHANNELS * cpu.STEPS * rows]  # the layout's input
+    sizes += [cpu.GROUPS * cpu.WIDTH * t_out * rows for *_, t_out in cpu.conv_layers()]
+    forward = sizes[0] + sum(sizes)
+    backward = sum(sizes) + 2 * sizes[-1]
+    return {
+        "convnet forward": forward,
+        "convnet backward": backward,
+        "convnet forward+backward": forward + backward,
+    }
 
 
 def pass_timers(device: torch.device, batch: int) -> dict[str, Callable[[], float]]:
@@ -109,8 +141,8 @@ def main() -> None:
     timers, work = ceilings(device)
     batches = (cpu.BATCH, cpu.N_TRAIN)
     scale = {b: b / cpu.BATCH for b in batches}  # FLOP counts are per 1000 rows
-    flops = {**cpu.conv_gflop(), **cpu.lstm_gflop()}
-    passes = [n for n in flops if "weight gradient" not in n]
+    flops = gflop()
+    passes = list(PASSES)
     for b in batches:
         for name, timer in pass_timers(device, b).items():
             timers[f"{name}, batch {b}"] = timer
@@ -131,7 +163,7 @@ def main() -> None:
         "sgemm float32 (TF32 off), GFLOP/s": round(peak, 1),
         "copy device to device, GB/s": round(bandwidth, 1),
     }
-    gbytes = cpu.conv_gbytes()
+    gbytes = conv_gbytes()
     for b in batches:
         for name in passes:
             key = f"{name}, batch {b}"
