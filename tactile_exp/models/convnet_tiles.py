@@ -152,21 +152,20 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
     c3', t3) the classification layer's weight, flat; ``htaps`` its taps' offsets in a group's
     last activation. ``acts`` (``flat_acts``: the same arrays flat), ``grads``, ``partial``
     (groups, lanes; flat), ``gs``: this task's buffers (``acts``' and ``grads``' padding rows
-    zero). The weights, the
-    input gradients' weights, ``grads``, ``gws`` and ``gbs`` come flat, one array per layer,
-    taken from their tuples once, here, and each layer's pass is a helper called with its arrays:
-    an array taken from a tuple at a layer known only at run time, or a view made in the loops,
-    costs numba two atomic reference counts each time. Against loops over the layers that took
-    them so, a step 3-6% faster on one thread, as fast on two (a process per version,
-    alternating, 6 to 10 pairs, 2026-11-27); the helpers' array arguments still cost ~5% of a
-    step in reference counts (a profile). The classification layer runs on register tiles too:
-    its forward a ``tap_sums`` over its (channel, step) taps (one row of weights, computed as
-    ``ROWS`` equal rows: 4x the multiplies, still ~3x faster than numba's loop over the lanes),
-    its backward per step a ``tap_dots`` (its weights' gradient, the lanes summed in a fixed
-    tree) and a gated ``tap_sums`` (the last layer's output gradient). Alone, one thread, batch
-    1000: 1.2 -> 0.6 ms a step; the step 3-4% faster (a process per version, alternating, one
-    thread 8 pairs, median ratio 0.96, range 0.86-1.01; two threads 18 pairs, 0.97, 0.82-1.05;
-    2026-11-27); the head weights' gradient moved by float rounding (its lanes' sum order)."""
+    zero). The weights, the input gradients' weights, ``grads``, ``gws`` and ``gbs`` come flat, one
+    array per layer, taken from their tuples once, here, and each layer's pass is a helper called
+    with its arrays: an array taken from a tuple at a layer known only at run time, or a view made
+    in the loops, costs numba two atomic reference counts each time. Against loops over the layers
+    that took them so, a step 3-6% faster on one thread, as fast on two (a process per version,
+    alternating, 6 to 10 pairs, 2026-11-27); the helpers' array arguments still cost ~5% of a step
+    in reference counts (a profile). The classification layer runs on register tiles too: its
+    forward a ``tap_sums`` over its (channel, step) taps (one row of weights, computed as ``ROWS``
+    equal rows: 4x the multiplies, still ~3x faster than numba's loop over the lanes), its backward
+    per step a ``tap_dots`` (its weights' gradient, the lanes summed in a fixed tree) and a gated
+    ``tap_sums`` (the last layer's output gradient). Alone, one thread, batch 1000: 1.2 -> 0.6 ms a
+    step; the step 3-4% faster (a process per version, alternating, one thread 8 pairs, median ratio
+    0.96, range 0.86-1.01; two threads 18 pairs, 0.97, 0.82-1.05; 2026-11-27); the head weights'
+    gradient moved by float rounding (its lanes' sum order)."""
     lanes, n_batch = acts[0].shape[3], len(rows)
     scale = np.float32(1.0) / np.float32(n_batch)  # the mean's gradient
     c3, t3 = geo[2, 4], geo[2, 6]
@@ -209,7 +208,7 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
             y3 = a3[at_y:]  # the ReLU's output gates its backward
             for e in range(0, c3, ROWS):  # per step t: the head weights' gradient (a3 . gs
                 for t in range(t3):  # over the lanes), and the last layer's (hw[t] gs, gated)
-                    tap_dots(a3, at_y + ((e * tp3) + pad + t) * lanes, tp3 * lanes, 0, gs, 0,
+                    tap_dots(a3, at_y + (e * tp3 + pad + t) * lanes, tp3 * lanes, 0, gs, 0,
                              jtaps, 1, 0, 1, ghw, at_h + e * t3 + t, t3, lanes)  # fmt: skip
                     tap_sums(hw, g * head + e * t3 + t, t3, 1, gs, 0, jtaps, 1, d2,
                              (e * tp3 + pad + t) * lanes, tp3 * lanes, zeros, 0, 1, lanes, lanes,
