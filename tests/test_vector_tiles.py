@@ -373,7 +373,6 @@ def test_ordered_sum_is_numpys_sum_over_the_first_axis_to_the_bit():
     rng = np.random.default_rng(3)
     parts = rng.standard_normal((63, 500)).astype(np.float32)
     parts *= np.float32(10.0) ** rng.integers(-4, 5, parts.shape).astype(np.float32)
-    out = np.empty(500, np.float32)
-    vt.ordered_sum(parts, out)
+    out = vt.ordered_sum(parts)
     assert np.array_equal(out, parts.sum(axis=0))
     assert not np.array_equal(out, parts[::-1].sum(axis=0))

@@ -223,13 +223,6 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
                            ones, zeros)  # fmt: skip
 
 
-def _summed(parts: np.ndarray) -> np.ndarray:
-    """``parts`` (tiles, ...) summed over the tiles in order."""
-    total = np.empty(parts.shape[1:], np.float32)
-    ordered_sum(parts.reshape(len(parts), -1), total.reshape(-1))
-    return total
-
-
 # (role, shape, padding) -> its buffer; role: the task and which activation or gradient it holds
 _BUFFERS: dict[tuple[tuple[int, int], tuple[int, ...], int], np.ndarray] = {}
 
@@ -428,10 +421,10 @@ def train_step(
                      np.cumsum([p.size for p in params]))  # fmt: skip
     out = [g.reshape(p.shape) for g, p in zip(parts, params, strict=False)] + [parts[-1]]
     for (cout, cin), gw, gb, k in zip(plan.sizes, gws, gbs, range(0, 6, 2), strict=True):
-        out[k][:] = _summed(gw)[:, :cout, :cin].reshape(out[k].shape)
-        out[k + 1][:] = _summed(gb)[:, :cout].reshape(-1)
+        out[k][:] = ordered_sum(gw)[:, :cout, :cin].reshape(out[k].shape)
+        out[k + 1][:] = ordered_sum(gb)[:, :cout].reshape(-1)
     c3 = plan.sizes[2][0]
-    out[6][:] = _summed(ghw)[:, :c3].reshape(1, -1)
+    out[6][:] = ordered_sum(ghw)[:, :c3].reshape(1, -1)
     out[7][:] = ghb.sum(keepdims=True)
     return float(losses.sum(dtype=np.float64)) / len(rows), out
 

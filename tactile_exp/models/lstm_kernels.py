@@ -428,20 +428,12 @@ def _train(X, rows, y, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_o
 
 
 @numba.njit(**_JIT)
-def _summed(parts):
-    """``parts`` (count, ...) summed over the first axis in order (``ordered_sum``)."""
-    total = np.empty(parts.shape[1:], np.float32)
-    ordered_sum(parts.reshape(len(parts), -1), total.reshape(-1))
-    return total
-
-
-@numba.njit(**_JIT)
 def _weight_gradients(d_wt, C, H, grads):
     """``grads`` <- ``nn.LSTM``'s weight_ih (G, C), weight_hh (G, H), bias_ih and bias_hh (both
     the gates' summed gradient) gradients, one after another, from the chunks' transposed
     weight gradients ``d_wt`` (chunks, K', G'), summed in chunk order; returns how many floats
     that is."""
-    total = _summed(d_wt)
+    total = ordered_sum(d_wt)
     G, K = 4 * H, C + H
     for g in range(G):
         for c in range(C):
@@ -459,7 +451,7 @@ def _gradient_sums(d_wt, d_fc, d_out, C, H, grads):
     chunks' summed in order: the LSTM's (``_weight_gradients``), then the FC layer's weight
     (F, H) and bias and the output layer's weight (1, F) and bias."""
     at = _weight_gradients(d_wt, C, H, grads)
-    fc, out = _summed(d_fc), _summed(d_out)
+    fc, out = ordered_sum(d_fc), ordered_sum(d_out)
     F = len(fc)
     for f in range(F):
         for j in range(H):

@@ -36,6 +36,7 @@ AVX2, else 4. ``tap_sums`` sums each lane in the same order at any width (the bi
 
 from __future__ import annotations
 
+import numpy as np
 from llvmlite import binding, ir
 from numba import types
 from numba.core import cgutils
@@ -238,13 +239,17 @@ def transpose_tile(typingctx, src, starts, t, out, out_at, out_step):  # noqa: A
 
 
 @numba.njit(nogil=True, cache=True)  # no fastmath: the order of the sums is kept
-def ordered_sum(parts, out):  # pragma: no cover (compiled)
-    """``out`` (n,) <- ``parts`` (count, n) summed over the first axis in order (numpy's
+def ordered_sum(parts):  # pragma: no cover (compiled)
+    """``parts`` (count, ...) summed over the first axis in order, a new float32 array (numpy's
     ``parts.sum(axis=0)``, to the bit)."""
-    out[:] = parts[0]
-    for part in range(1, len(parts)):
+    rows = parts.reshape(len(parts), -1)
+    total = np.empty(parts.shape[1:], np.float32)
+    out = total.reshape(-1)
+    out[:] = rows[0]
+    for part in range(1, len(rows)):
         for e in range(len(out)):
-            out[e] += parts[part, e]
+            out[e] += rows[part, e]
+    return total
 
 
 @numba.njit(inline="always", nogil=True, cache=True)
