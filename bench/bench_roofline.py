@@ -2,8 +2,8 @@
 beside the same run's sgemm rate.
 
 In one run, interleaved (every repetition times each item once, in turn, so load changes hit all
-of them alike, each timed call after an untimed one: steady rates, as in training; best of
-``--repeats``):
+of them alike, each timed call after untimed ones for 0.2 s: steady rates, as in training; best
+of ``--repeats``):
 
 - sgemm: torch's and numpy's BLAS on a 2000^3 single-precision product (the machine's rate, the
   ceiling the kernels are held against: the larger of the two), and BLAS at the shapes an im2col
@@ -396,22 +396,31 @@ class Package:
 # ``--before``, two processes take turns on the cores, and one's spinning threads took a core
 # from the other's next pass (the ConvNet's backward ran at half speed in the child, the same code
 # on both sides). A pause before each timing lets them sleep first. After a pause the cores run
-# the first pass slower (the ConvNet's training step on one thread: 22.1 ms after 0.3 s idle, 16.5
-# back to back, 17.8 after one untimed step; 2-core Xeon, 2026-11-27), so each timed call follows
-# an untimed one, as a training step follows the one before.
+# slower for a while, however many calls that takes: the ConvNet's training step (two threads,
+# median of 10 rounds) took 26.7, 14.1, 12.2, 11.2, 11.2, 10.2 ms in its first six calls after
+# 0.25 s idle, then ~10 (one thread: 42.1, 25.3, 22.7, 21.3, 20.1, 18.9, then ~19; 2-core Xeon,
+# 2026-11-27), while a 2000^3 sgemm, 50 ms a call, ran at its rate from its second call. So each
+# timed call follows untimed ones for ``WARM_S`` (at least one), as a training step follows the
+# steps before it (with one untimed call the ConvNet's step read 26-32% of sgemm, taking 8.4-8.7
+# ms back to back in the same hour).
 SETTLE_S = 0.25
+WARM_S = 0.2
 
 
 def interleaved(
-    timers: dict[str, Timer], repeats: int, settle_s: float = SETTLE_S
+    timers: dict[str, Timer], repeats: int, settle_s: float = SETTLE_S, warm_s: float = WARM_S
 ) -> dict[str, tuple[float, float]]:
     """Best wall and CPU seconds of each timer: ``repeats`` rounds, each timing a call that
-    follows a pause of ``settle_s`` and one untimed call."""
+    follows a pause of ``settle_s`` and untimed calls for ``warm_s`` (at least one)."""
     best = {name: (float("inf"), float("inf")) for name in timers}
     for _ in range(repeats):
         for name, timer in timers.items():
             time.sleep(settle_s)
-            timer()
+            warm = 0.0
+            while True:
+                warm += timer()[0]
+                if warm >= warm_s:
+                    break
             wall, cpu = timer()
             best[name] = (min(best[name][0], wall), min(best[name][1], cpu))
     return best
@@ -540,8 +549,8 @@ def main() -> None:
         from record import write
 
         notes = (
-            f"best of {args.repeats} interleaved, each timed call after an untimed one, "
-            f"{args.threads} threads, batch {BATCH}; % of "
+            f"best of {args.repeats} interleaved, each timed call after untimed ones for "
+            f"{WARM_S} s, {args.threads} threads, batch {BATCH}; % of "
             "sgemm per CPU s compares FLOPs per CPU second of all threads, steadier than wall "
             "time when other work shares the cores; attainable per CPU s: the lowest of sgemm, "
             "the conv kernels' inner loop on resident rows and memory bandwidth x the pass's "
