@@ -12,7 +12,8 @@ of ``--repeats``):
   recurrence per step): the rate BLAS itself reaches at those shapes, per core;
 - the haptic ConvNet at the paper's size (32 signals x 150 steps, kernels 5, widths 4, strides
   2, batches of 1000 of a 5,300-instance training set; each call takes the next batch of one
-  shuffled epoch, as training does, so no call finds its batch in cache): the forward that
+  shuffled epoch, as training does, so no call finds its batch in cache; the training set where
+  a fit keeps it, on huge pages where the revision puts it there): the forward that
   scores (the whole-batch conv stack + classification layer, no gradient) and the training step,
   forward + backward (``batch_loss``: in tiles of instances, the loss included; a ``--before``
   revision without it runs its own training step);
@@ -279,6 +280,12 @@ def kernel_timers() -> dict[str, Timer]:
 
     torch.manual_seed(0)
     X, y = torch.randn(N_TRAIN, CHANNELS, STEPS), (torch.rand(N_TRAIN) > 0.5).float()
+    try:  # the training set where a fit keeps it (a --before revision may predate that)
+        from tactile_exp.models.scratch import on_huge_pages
+
+        X = torch.from_numpy(on_huge_pages(X.numpy()))
+    except ImportError:
+        pass
     epoch = itertools.cycle(torch.randperm(N_TRAIN).split(BATCH)[: N_TRAIN // BATCH])
 
     def batch() -> torch.Tensor:

@@ -13,6 +13,7 @@ from numba import get_num_threads, set_num_threads
 from tactile_exp.models import convnet_tiles
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
 from tactile_exp.models.losses import LOSSES
+from tactile_exp.models.scratch import HUGE_PAGE
 
 # (instances, batch, channels, steps, groups, kernel_sizes, widths, strides)
 SHAPES = [
@@ -183,7 +184,23 @@ def test_a_tiles_padding_rows_stay_zero_across_steps():
     for g_c, g_t in zip(grads_c, grads_t, strict=True):
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-5)
     pad = 5  # the largest kernel: every time axis's padding on each side
-    kept = list(convnet_tiles._BUFFERS.values())
+    kept = [b for acts, grads in convnet_tiles._BUFFERS.values() for b in (*acts, *grads)]
     assert kept and np.isfinite(got)
     for buffer in kept:  # time is the second axis from the end
         assert not buffer[..., :pad, :].any() and not buffer[..., -pad:, :].any()
+
+
+def test_a_threads_buffers_are_one_block_from_a_huge_page_boundary(monkeypatch):
+    """A thread's activations and gradients (~1.7 MB at the paper's sizes) in one mapping
+    starting on a huge page: on 4 kB pages the step ran ~20% slower."""
+    monkeypatch.setattr(convnet_tiles, "_BUFFERS", {})
+    plan = convnet_tiles._Plan(32, 150, [(128, 1, 5), (128, 4, 5), (128, 4, 5)], 32, (2, 2, 2))
+    acts, grads = convnet_tiles._buffers(0, plan.shapes, plan.pad)
+    arrays = (*acts, *grads)
+    assert [a.shape for a in acts] == plan.shapes and len(grads) == 3
+    assert [g.shape for g in grads] == [s[1:] for s in plan.shapes[1:]]
+    assert arrays[0].ctypes.data % HUGE_PAGE == 0
+    for before, after in zip(arrays, arrays[1:], strict=False):  # back to back, in order
+        assert after.ctypes.data == before.ctypes.data + before.nbytes
+    assert sum(a.nbytes for a in arrays) < HUGE_PAGE and not any(a.any() for a in arrays)
+    assert convnet_tiles._buffers(0, plan.shapes, plan.pad)[0][0] is acts[0]  # kept

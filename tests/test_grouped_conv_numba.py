@@ -6,15 +6,12 @@ The first compiled call in a run compiles the kernels (~35 s on 2 idle cores) in
 
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
-from tactile_exp.models import scratch as scratch_module
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
-from tactile_exp.models.scratch import scratch
 
 # (batch, channels, steps, groups, kernel_sizes, widths, strides)
 SHAPES = [
@@ -80,54 +77,6 @@ def test_forwards_awaiting_their_backward_never_share_pooled_arrays():
         value.backward()
         for g_c, g_t in zip([p.grad for p in net.parameters()], want, strict=True):
             torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-4)
-
-
-def test_scratch_reuses_only_buffers_nothing_holds_for_any_shape_that_fits(monkeypatch):
-    monkeypatch.setattr(scratch_module, "_POOL", [])
-    monkeypatch.setattr(scratch_module, "POOL_BYTES", 2 * 448 + 540)
-    held = scratch(10, 10)  # a buffer of 100 + 100 // 8 = 112 floats (448 bytes)
-    assert held.shape == (10, 10) and held.flags.c_contiguous
-    assert not np.shares_memory(scratch(10, 10), held)  # held by this test: never twice
-    view = held.reshape(-1)
-    address = held.ctypes.data
-    del held
-    assert scratch(10, 10).ctypes.data != address  # a view still holds it
-    del view
-    assert scratch(10, 10).ctypes.data == address  # nothing holds it: reused
-    assert scratch(7, 16).ctypes.data == address  # another shape that fits: the same buffer
-    assert len(scratch_module._POOL) == 2
-    big = scratch(12, 10)  # 120 floats fit in neither: a new buffer of 135 (540 bytes)
-    assert len(scratch_module._POOL) == 3 and scratch_module._POOL[2].size == 135
-    assert scratch(2, 50).ctypes.data == address  # the smallest free buffer that fits
-    big_address = big.ctypes.data
-    del big
-    kept = [scratch(13, 10), scratch(13, 10)]  # 130 floats: the free 135, then a new 146
-    assert kept[0].ctypes.data == big_address and not np.shares_memory(*kept)
-    # the new buffer took the pool past its 1,436 bytes: both free 112s dropped, oldest first
-    assert [a.size for a in scratch_module._POOL] == [135, 146]
-
-
-def test_huge_page_buffers_are_private_aligned_and_never_handed_out_while_a_view_holds_them(
-    monkeypatch,
-):
-    """Buffers from ``HUGE_PAGE`` bytes live in a private mapping of their own (a shared one
-    would be shmem, never on huge pages): a view of one must still keep it from the pool."""
-    monkeypatch.setattr(scratch_module, "_POOL", [])
-    held = scratch(1024, 1024)  # 4 MiB
-    assert held.ctypes.data % scratch_module.HUGE_PAGE == 0
-    held[:] = 1.0
-    address = held.ctypes.data
-    maps = Path("/proc/self/maps").read_text().splitlines()
-    mapping = [
-        m for m in maps if int(m.split("-")[0], 16) <= address < int(m.split()[0].split("-")[1], 16)
-    ]
-    assert len(mapping) == 1 and mapping[0].split()[1] == "rw-p", mapping
-    view = held[3:5]
-    del held
-    again = scratch(1024, 1024)
-    assert again.ctypes.data != address  # the view holds it
-    del again, view
-    assert scratch(1024, 1024).ctypes.data == address
 
 
 @pytest.mark.parametrize("parts", [[(0, 3)], [(0, 1), (1, 3)], [(0, 2), (2, 3)]])

@@ -10,10 +10,17 @@ buffer serves any shape that fits in it (the front of the buffer, contiguous), a
 own split), and exact shapes made every adjective fault in a new set of arrays. One thread per
 process (the kernels parallelise inside numba; Hydra's launchers run jobs in processes).
 
-Buffers of 2 MiB and more are private anonymous mappings that start on a 2 MiB boundary and ask
-for transparent huge pages (``MADV_HUGEPAGE``; honoured when the kernel's setting is ``always``
-or ``madvise``): the kernels step through time in rows ~4 kB apart, one page each with 4 kB
-pages. (A shared mapping, ``mmap``'s default, lives in shmem, where huge pages are off by default.)
+Buffers from ``MAPPED_FROM`` bytes are private anonymous mappings that start on a 2 MiB boundary
+and ask for transparent huge pages (``MADV_HUGEPAGE``; honoured when the kernel's setting is
+``always`` or ``madvise``; ``mapped``): the kernels step through time in rows ~4 kB apart, one
+page each with 4 kB pages, and a virtual machine's TLB misses cost two page walks. (A shared
+mapping, ``mmap``'s default, lives in shmem, where huge pages are off by default.) The training
+set goes there too (``on_huge_pages``), and the ConvNet's per-thread tiles (``convnet_tiles``).
+On huge pages, measured a process per version alternating (2-core Xeon, 2026-11-28): the
+ConvNet's training step at batch 1000 x0.77 on two threads (6 pairs, x0.73-0.81) and x0.80 on
+one (4 pairs); the LSTM's x0.91 on two (6 pairs, noisy: x0.81-1.07) and x0.85 on one (3 pairs);
+with buffers from 256 kB rather than 2 MB mapped, the LSTM's one-thread step (its buffers all
+under 2 MB) a further x0.94 (6 rounds in one process, x0.89-0.96).
 """
 
 from __future__ import annotations
@@ -25,22 +32,44 @@ import numpy as np
 
 POOL_BYTES = 512 * 2**20  # ours: a ConvNet training step, both batch sizes of an epoch
 HUGE_PAGE = 2 * 2**20
+MAPPED_FROM = HUGE_PAGE // 8  # ours: smaller buffers come from malloc (a mapping takes 2 MB)
 HEADROOM = 8  # ours: a new buffer holds 1/8 more than asked (the batch sizes of a job's splits)
 _POOL: list[np.ndarray] = []  # flat float32 buffers, oldest first
 
 
-def _allocate(count: int) -> np.ndarray:
-    """An uninitialised flat float32 buffer, on huge pages from ``HUGE_PAGE`` bytes (see above)."""
-    if 4 * count < HUGE_PAGE or not hasattr(mmap, "MADV_HUGEPAGE"):
+def mapped(count: int) -> np.ndarray:
+    """An uninitialised flat float32 array of ``count`` at the start of a private mapping of its
+    own that asks for huge pages (see above; ``np.empty`` where the system has no such hint)."""
+    if not hasattr(mmap, "MADV_HUGEPAGE"):
         return np.empty(count, np.float32)
+    pages = -(-4 * count // HUGE_PAGE) * HUGE_PAGE  # whole pages: a part page is never huge
     buffer = mmap.mmap(
-        -1, 4 * count + HUGE_PAGE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
-    )  # freed with the last view
+        -1, pages + HUGE_PAGE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
+    )  # freed with the last view; the extra page to start the array on a boundary
     buffer.madvise(mmap.MADV_HUGEPAGE)
     offset = -np.frombuffer(buffer, np.uint8).ctypes.data % HUGE_PAGE
     # Built on the mapping directly: a view's ``base`` is then this array (numpy stops at the
     # first base that is not an array), so the pool's reference count sees every view.
     return np.ndarray(count, np.float32, buffer=buffer, offset=offset)
+
+
+def on_huge_pages(X: np.ndarray) -> np.ndarray:
+    """``X`` as a C-contiguous float32 copy on huge pages (``mapped``) from ``HUGE_PAGE`` bytes,
+    else as ``np.ascontiguousarray``: a training set whose batches the kernels read row by row
+    at random. On 4 kB pages each instance's rows (19 kB at the paper's sizes) cost the core
+    TLB misses as well as cache misses."""
+    if 4 * X.size < HUGE_PAGE:
+        return np.ascontiguousarray(X, dtype=np.float32)
+    copy = mapped(X.size).reshape(X.shape)
+    copy[...] = X
+    return copy
+
+
+def _allocate(count: int) -> np.ndarray:
+    """An uninitialised flat float32 buffer, on huge pages from ``MAPPED_FROM`` bytes (above)."""
+    if 4 * count < MAPPED_FROM:
+        return np.empty(count, np.float32)
+    return mapped(count)
 
 
 def _free(i: int) -> bool:

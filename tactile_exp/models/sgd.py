@@ -44,6 +44,7 @@ from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.losses import LOSSES
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
+from tactile_exp.models.scratch import on_huge_pages
 from tactile_exp.train import (
     caffe_xavier_,
     resolve_device,
@@ -157,6 +158,8 @@ class SGDModel(Model):
                 f"the model was fitted on rows of shape {self.input_shape_}"
             )
         X = self._preprocess(X)
+        if self.device_.type == "cpu":  # batches read in place, at random: see on_huge_pages
+            return torch.from_numpy(on_huge_pages(X))
         return torch.as_tensor(np.ascontiguousarray(X, dtype=np.float32), device=self.device_)
 
     @contextmanager
