@@ -32,9 +32,9 @@ def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
 
 @numba.njit
 def _tap_dots(d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc, acc_at, acc_row,
-              lanes):  # fmt: skip
+              lanes, sums, sums_at):  # fmt: skip
     vt.tap_dots(d.reshape(-1), d_at, d_row, d_step, x.reshape(-1), x_at, taps, count, x_step,
-                steps, acc.reshape(-1), acc_at, acc_row, lanes)  # fmt: skip
+                steps, acc.reshape(-1), acc_at, acc_row, lanes, sums, sums_at)  # fmt: skip
 
 
 @numba.njit
@@ -221,7 +221,8 @@ def test_tap_sums_are_the_same_at_every_vector_width():
 def test_tap_dots_add_each_rows_dot_products_with_each_taps_rows(count):
     """Four gradient rows (every 3rd step of a (rows, steps, lanes) block) against the input
     rows of ``count`` taps (stride 2 in steps), over 2 vectors of lanes of 3: added to what the
-    accumulator holds, nothing else written."""
+    accumulator holds, nothing else written; and, where asked, the rows' own sums (a bias's
+    gradient) beside them, to the bit what the products with a row of ones give."""
     rng = np.random.default_rng(count)
     lanes, width, steps = 2 * vt.WIDTH, 3 * vt.WIDTH, 7
     d = rng.standard_normal((vt.ROWS, 3 * steps, width), dtype=np.float32)
@@ -229,8 +230,22 @@ def test_tap_dots_add_each_rows_dot_products_with_each_taps_rows(count):
     taps = np.array([5, 0, 8, 2, 1, 3][:count], np.int64) * width  # the taps' first rows
     acc = rng.standard_normal((vt.ROWS + 1, 9), dtype=np.float32)
     before = acc.copy()
+    sums = rng.standard_normal(vt.ROWS + 2, dtype=np.float32)
+    sums_before = sums.copy()
     _tap_dots(d, 0, d.shape[1] * width, 3 * width, x, 0, taps, count, 2 * width, steps, acc,
-              9 + 1, 9, lanes)  # fmt: skip
+              9 + 1, 9, lanes, sums, -1)  # fmt: skip
+    np.testing.assert_array_equal(sums, sums_before)  # no row sums asked for: untouched
+    acc[...] = before
+    _tap_dots(d, 0, d.shape[1] * width, 3 * width, x, 0, taps, count, 2 * width, steps, acc,
+              9 + 1, 9, lanes, sums, 1)  # fmt: skip
+    # the rows' own sums: the products' with a row of ones for input, to the bit
+    ones, row_sums = np.ones((1, width), np.float32), sums_before.copy()
+    _tap_dots(d, 0, d.shape[1] * width, 3 * width, ones, 0, np.zeros(1, np.int64), 1, 0, steps,
+              row_sums, 1, 1, lanes, sums, -1)  # fmt: skip
+    np.testing.assert_array_equal(sums, row_sums)
+    np.testing.assert_array_equal(sums[[0, -1]], sums_before[[0, -1]])  # only rows 1 to 4
+    own = d[:, 3 * np.arange(steps), :lanes].astype(np.float64).sum(axis=(1, 2))
+    np.testing.assert_allclose(sums[1:-1], sums_before[1:-1] + own, rtol=1e-5, atol=1e-5)
     expected = before.astype(np.float64)
     for r in range(vt.ROWS):
         for q in range(count):
@@ -337,7 +352,7 @@ def test_tiles_refuse_arrays_they_cannot_address():
     with pytest.raises(TypingError, match="taps must be an int64 array"):
         _tap_sums(w, x, order.astype(np.int32), 1, out, x.shape[1], bias, vt.WIDTH, vt.PLAIN, out)
     with pytest.raises(TypingError, match="tap_dots: taps must be an int64 array"):
-        _tap_dots(w, 0, 1, 1, x, 0, order.astype(np.int32), 1, 1, 1, out, 0, 1, vt.WIDTH)
+        _tap_dots(w, 0, 1, 1, x, 0, order.astype(np.int32), 1, 1, 1, out, 0, 1, vt.WIDTH, out, -1)
 
 
 @pytest.mark.parametrize(

@@ -108,7 +108,7 @@ def _conv_forward(geo, layer, pad, lanes, g, w, b, taps, fin, fout):  # pragma: 
 
 @numba.njit(inline="always", **_JIT)
 def _conv_backward(geo, layer, pad, lanes, g, at, fin, fd, fdin, gw, gb, bw, btaps, bcount, jtaps,
-                   ones, zeros):  # fmt: skip  # pragma: no cover (compiled)
+                   zeros):  # fmt: skip  # pragma: no cover (compiled)
     """Convolution ``layer`` of group ``g`` backward from its output's gradient ``fd`` (ReLU's
     backward applied): its weights' and biases' gradients into ``gw`` and ``gb`` (flat, this
     group's at ``at`` x their size) and, but for the first layer, its input's gradient through
@@ -122,14 +122,11 @@ def _conv_backward(geo, layer, pad, lanes, g, at, fin, fd, fdin, gw, gb, bw, bta
         gb[at_gb + q] = 0.0
     for e in range(0, cout, ROWS):
         for i in range(cin):
-            for j in range(0, k, DOT_TAPS):
+            for j in range(0, k, DOT_TAPS):  # the bias's gradient with the first taps'
                 tap_dots(fd, (e * tpo + pad) * lanes, tpo * lanes, lanes, fin,
                          at_in + (i * tpi + pad - left + j) * lanes, jtaps, min(DOT_TAPS, k - j),
-                         s * lanes, steps, gw, at_gw + (e * cin + i) * k + j, cin * k,
-                         lanes)  # fmt: skip
-    for e in range(0, cout, ROWS):  # the bias's gradient: a tap on a row of ones
-        tap_dots(fd, (e * tpo + pad) * lanes, tpo * lanes, lanes, ones, 0, jtaps, 1, 0, steps, gb,
-                 at_gb + e, 1, lanes)  # fmt: skip
+                         s * lanes, steps, gw, at_gw + (e * cin + i) * k + j, cin * k, lanes, gb,
+                         at_gb + e if i == 0 and j == 0 else -1)  # fmt: skip
     if layer > 0:  # the input of the first needs no gradient
         most = geo[layer, 7]
         for phase in range(s):  # the input steps u * s + phase, each a slot
@@ -144,7 +141,7 @@ def _conv_backward(geo, layer, pad, lanes, g, at, fin, fd, fdin, gw, gb, bw, bta
 @numba.njit(**_JIT)
 def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, bwts, jtaps,
            htaps, acts, flat_acts, grads, hinge, gws, gbs, ghw, ghb, losses, partial, gs, zeros,
-           ones, start, stop):  # fmt: skip  # pragma: no cover (compiled)
+           start, stop):  # fmt: skip  # pragma: no cover (compiled)
     """Tiles ``start`` to ``stop`` of the batch ``rows``: each tile's summed loss into
     ``losses[tile]`` and its share of every gradient into ``gws``, ``gbs``, ``ghw``, ``ghb``
     (indexed by tile). ``geo[layer]``: kernel, stride, left padding, input and output channels
@@ -210,18 +207,19 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
             for e in range(0, c3, ROWS):  # per step t: the head weights' gradient (a3 . gs
                 for t in range(t3):  # over the lanes), and the last layer's (hw[t] gs, gated)
                     tap_dots(a3, at_y + (e * tp3 + pad + t) * lanes, tp3 * lanes, 0, gs, 0,
-                             jtaps, 1, 0, 1, ghw, at_h + e * t3 + t, t3, lanes)  # fmt: skip
+                             jtaps, 1, 0, 1, ghw, at_h + e * t3 + t, t3, lanes, ghw,
+                             -1)  # fmt: skip
                     tap_sums(hw, g * head + e * t3 + t, t3, 1, gs, 0, jtaps, 1, d2,
                              (e * tp3 + pad + t) * lanes, tp3 * lanes, zeros, 0, 1, lanes, lanes,
                              GATED, y3)  # fmt: skip
             at = tile * groups + g
             _conv_backward(geo, 2, pad, lanes, g, at, a2, d2, d1, gw2, gb2, bw2, bt2, bc2, jtaps,
-                           ones, zeros)  # fmt: skip
+                           zeros)  # fmt: skip
             _conv_backward(geo, 1, pad, lanes, g, at, a1, d1, d0, gw1, gb1, bw1, bt1, bc1, jtaps,
-                           ones, zeros)  # fmt: skip
+                           zeros)  # fmt: skip
             # the first layer's input gradient arguments are not used: any of the right types
             _conv_backward(geo, 0, pad, lanes, g, at, a0, d0, d0, gw0, gb0, bw1, bt1, bc1, jtaps,
-                           ones, zeros)  # fmt: skip
+                           zeros)  # fmt: skip
 
 
 Arrays = tuple[np.ndarray, ...]
@@ -408,7 +406,7 @@ def train_step(
     losses = np.empty(tiles, np.float32)
     partial = [np.empty(groups * TILE_LANES, np.float32) for _ in range(threads)]
     gs = [np.empty(TILE_LANES, np.float32) for _ in range(threads)]
-    zeros, ones = np.zeros(ROWS, np.float32), np.ones(TILE_LANES, np.float32)
+    zeros = np.zeros(ROWS, np.float32)
 
     def flat(arrays):  # the kernels index these by their flat offsets
         return tuple(a.reshape(-1) for a in arrays)
@@ -419,7 +417,7 @@ def train_step(
                plan.hw.reshape(-1), np.float32(head_bias), tuple(plan.ftaps), tuple(plan.btaps),
                tuple(plan.bcount), flat(plan.bwts), plan.jtaps, plan.htaps, acts,
                flat(acts), flat(grads), loss == "hinge", flat(gws), flat(gbs),
-               ghw.reshape(-1), ghb, losses, partial[slot], gs[slot], zeros, ones, start,
+               ghw.reshape(-1), ghb, losses, partial[slot], gs[slot], zeros, start,
                stop)  # fmt: skip
 
     _in_parallel(task, tiles)
