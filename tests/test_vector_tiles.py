@@ -32,9 +32,9 @@ def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
 
 @numba.njit
 def _tap_dots(d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc, acc_at, acc_row,
-              lanes, sums, sums_at):  # fmt: skip
+              lanes, own, own_at):  # fmt: skip
     vt.tap_dots(d.reshape(-1), d_at, d_row, d_step, x.reshape(-1), x_at, taps, count, x_step,
-                steps, acc.reshape(-1), acc_at, acc_row, lanes, sums, sums_at)  # fmt: skip
+                steps, acc.reshape(-1), acc_at, acc_row, lanes, own, own_at)  # fmt: skip
 
 
 @numba.njit

@@ -429,22 +429,22 @@ def _hsum(builder, vector):
 
 @intrinsic
 def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc,
-             acc_at, acc_row, lanes, sums, sums_at):  # fmt: skip  # noqa: ARG001
+             acc_at, acc_row, lanes, own, own_at):  # fmt: skip  # noqa: ARG001
     """For the ``ROWS`` rows r and the taps q < ``count`` (at most ``DOT_TAPS``):
     ``acc[acc_at + r * acc_row + q] += sum_m sum_{s < steps} d[d_at + r * d_row + s * d_step
     + m] * x[x_at + taps[q] + s * x_step + m]`` over the lanes m < ``lanes`` (a multiple of
     ``WIDTH``): a convolution's weight gradient, its output-gradient rows against the input rows
-    of each tap; and where ``sums_at >= 0``, the rows' own sums, ``sums[sums_at + r] += sum_m
+    of each tap; and where ``own_at >= 0``, the rows' own sums, ``own[own_at + r] += sum_m
     sum_s d[...]`` (its bias's gradient), in the same pass: ``ROWS`` more running sums beside the
     products' instead of a pass of its own, whose four dependent chains waited on each add. Each
     vector of lanes sums over the steps in registers (one ``fma`` per term, steps in order; an
     add for a row's own sum, which is an ``fma`` with 1), the vectors are added in order, then
     their lanes in a fixed tree: the same result at any thread count."""
-    _check("tap_dots", d=d, x=x, acc=acc, sums=sums)
+    _check("tap_dots", d=d, x=x, acc=acc, own=own)
     if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
         raise TypingError(f"tap_dots: taps must be an int64 array, got {taps}")
     i = types.intp
-    sig = types.void(d, i, i, i, x, i, taps, i, i, i, acc, i, i, i, sums, i)
+    sig = types.void(d, i, i, i, x, i, taps, i, i, i, acc, i, i, i, own, i)
 
     def codegen(context, builder, signature, args):
         d_p, x_p = (
@@ -453,8 +453,8 @@ def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, st
         )
         acc_p = builder.gep(_data(context, builder, signature.args[10], args[10]), [args[11]])
         taps_p = _data(context, builder, signature.args[6], args[6])
-        sums_p = _data(context, builder, signature.args[14], args[14])
-        d_r, d_s, q_n, x_s, s_n, a_r, m_n, sums_at = (args[n] for n in (2, 3, 7, 8, 9, 12, 13, 15))
+        own_p = _data(context, builder, signature.args[14], args[14])
+        d_r, d_s, q_n, x_s, s_n, a_r, m_n, own_at = (args[n] for n in (2, 3, 7, 8, 9, 12, 13, 15))
         fma, zero = _fma(builder), ir.Constant(_VEC, [0.0] * WIDTH)
 
         def const(n):
@@ -470,11 +470,11 @@ def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, st
         def body(taps_n, summed):
             offsets = [builder.load(builder.gep(taps_p, [const(q)])) for q in range(taps_n)]
             used = [r * DOT_TAPS + q for r in range(ROWS) for q in range(taps_n)]
-            own = [ROWS * DOT_TAPS + r for r in range(ROWS)] if summed else []
-            for slot in used + own:
+            mine = [ROWS * DOT_TAPS + r for r in range(ROWS)] if summed else []
+            for slot in used + mine:
                 builder.store(zero, totals[slot])
             with cgutils.for_range_slice(builder, const(0), m_n, const(WIDTH)) as (m, _):
-                for slot in used + own:
+                for slot in used + mine:
                     builder.store(zero, sums[slot])
                 with cgutils.for_range(builder, s_n) as loop:
                     s = loop.index
@@ -492,9 +492,9 @@ def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, st
                         for r in range(ROWS):
                             slot = sums[r * DOT_TAPS + q]
                             builder.store(builder.call(fma, [ds[r], xv, builder.load(slot)]), slot)
-                    for r, slot in enumerate(own):
+                    for r, slot in enumerate(mine):
                         builder.store(builder.fadd(builder.load(sums[slot]), ds[r]), sums[slot])
-                for slot in used + own:
+                for slot in used + mine:
                     part = builder.load(sums[slot])
                     builder.store(builder.fadd(builder.load(totals[slot]), part), totals[slot])
             targets = [
@@ -503,14 +503,14 @@ def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, st
                 for r in range(ROWS) for q in range(taps_n)
             ]  # fmt: skip
             targets += [
-                (builder.gep(sums_p, [builder.add(sums_at, const(r))]), totals[slot])
-                for r, slot in enumerate(own)
+                (builder.gep(own_p, [builder.add(own_at, const(r))]), totals[slot])
+                for r, slot in enumerate(mine)
             ]
             for where, total in targets:
                 value = _hsum(builder, builder.load(total))
                 builder.store(builder.fadd(builder.load(where), value), where)
 
-        summed = builder.icmp_signed(">=", sums_at, const(0))
+        summed = builder.icmp_signed(">=", own_at, const(0))
         for taps_n in range(1, DOT_TAPS + 1):
             chosen = builder.icmp_signed("==", q_n, const(taps_n))
             with builder.if_then(builder.and_(chosen, summed)):
