@@ -129,3 +129,28 @@ print(before == signatures(), *(before[name] for name in entry))
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout.split()
     assert out == ["True"] + ["1"] * 8  # the entry points compiled by warm_up, nothing after it
+
+
+@pytest.mark.parametrize("count", [1, 2, 5, 63, 64])
+def test_in_parallel_runs_every_index_once_this_threads_part_the_largest(count):
+    """The parts cover ``range(count)`` once each, in order by slot; where they cannot be equal
+    this thread's (slot 0, started first) is the larger, so it is the one that finishes last."""
+    import threading
+
+    from numba import get_num_threads, set_num_threads
+
+    from tactile_exp.models.grouped_conv_numba import _in_parallel
+
+    threads = get_num_threads()
+    set_num_threads(2)
+    try:
+        calls = []
+        _in_parallel(lambda slot, a, b: calls.append((slot, a, b, threading.get_ident())), count)
+    finally:
+        set_num_threads(threads)
+    calls.sort()
+    assert [c[0] for c in calls] == list(range(len(calls))) and len(calls) == min(count, 2)
+    assert [i for _, a, b, _ in calls for i in range(a, b)] == list(range(count))
+    sizes = [b - a for _, a, b, _ in calls]
+    assert sizes[0] == max(sizes) and max(sizes) - min(sizes) <= 1
+    assert calls[0][3] == threading.get_ident()  # slot 0 ran here

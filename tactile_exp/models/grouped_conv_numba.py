@@ -422,9 +422,12 @@ def into_layout(grad, out, start, stop):  # pragma: no cover (compiled)
 def _in_parallel(task: Callable[[int, int, int], None], count: int) -> None:
     """``task(slot, start, stop)`` over ``range(count)`` cut into ``numba.get_num_threads()``
     contiguous parts (slot: the part's index), run side by side: this thread takes the first,
-    a pool's threads the others (the kernels release the GIL)."""
+    a pool's threads the others (the kernels release the GIL). Where the parts cannot be equal
+    the first is the larger: a pool thread starts ~0.05 ms after this one, and this one,
+    finishing last, need not be woken (the ConvNet's 63 tiles at batch 1000, two threads, ~0.21
+    ms each: this thread had waited ~0.3 ms for the pool's 32)."""
     parts = max(1, min(count, numba.get_num_threads()))
-    bounds = [count * k // parts for k in range(parts + 1)]
+    bounds = [count - count * (parts - k) // parts for k in range(parts + 1)]
     others = [_threads().submit(task, k, bounds[k], bounds[k + 1]) for k in range(1, parts)]
     task(0, bounds[0], bounds[1])
     for done in others:
