@@ -425,7 +425,8 @@ def _in_parallel(task: Callable[[int, int, int], None], count: int) -> None:
     a pool's threads the others (the kernels release the GIL). Where the parts cannot be equal
     the first is the larger: a pool thread starts ~0.05 ms after this one, and this one,
     finishing last, need not be woken (the ConvNet's 63 tiles at batch 1000, two threads, ~0.21
-    ms each: this thread had waited ~0.3 ms for the pool's 32)."""
+    ms each: with the pool's part the larger, this thread waited ~0.3 ms for the pool's 32;
+    2-core Xeon, 2026-11-28)."""
     parts = max(1, min(count, numba.get_num_threads()))
     bounds = [count - count * (parts - k) // parts for k in range(parts + 1)]
     others = [_threads().submit(task, k, bounds[k], bounds[k + 1]) for k in range(1, parts)]
