@@ -132,7 +132,7 @@ def test_compiled_training_does_not_depend_on_torch_threads(name):
 
 def test_a_cpu_fit_reads_its_training_set_from_huge_pages(monkeypatch):
     """The kernels read each batch's rows in place, scattered over the training set: on 4 kB
-    pages the ConvNet's step ran ~8% slower (``scratch.on_huge_pages``)."""
+    pages the ConvNet's step ran ~8% slower (``scratch.on_huge_pages``). Scoring does not copy."""
     real, copies = sgd.on_huge_pages, []
     monkeypatch.setattr(sgd, "on_huge_pages", lambda X: copies.append(real(X)) or copies[-1])
     rng = np.random.default_rng(0)
@@ -144,3 +144,5 @@ def test_a_cpu_fit_reads_its_training_set_from_huge_pages(monkeypatch):
     (copy,) = copies
     assert copy.ctypes.data % HUGE_PAGE == 0  # 2.3 MB as float32: on huge pages
     np.testing.assert_array_equal(copy, model._preprocess(X).astype(np.float32))
+    model.decision_function(X)  # scoring reads rows in order: no copy
+    assert len(copies) == 1

@@ -148,7 +148,10 @@ class SGDModel(Model):
         scores, loss_fn = self._train_scores(body, classifier), LOSSES[loss]
         return lambda X, y, index: loss_fn(scores(X, index), y[index])
 
-    def _tensor(self, X: np.ndarray) -> torch.Tensor:
+    def _tensor(self, X: np.ndarray, *, training: bool = False) -> torch.Tensor:
+        """``X`` preprocessed, as the body takes it; a training set on the CPU is copied onto
+        huge pages, as its batches are read row by row at random (``scratch.on_huge_pages``),
+        where scoring reads rows in order."""
         if self.body_ is None or self.classifier_ is None:
             raise RuntimeError(f"{type(self).__name__} is not fitted; call fit first")
         X = np.asarray(X)
@@ -158,7 +161,7 @@ class SGDModel(Model):
                 f"the model was fitted on rows of shape {self.input_shape_}"
             )
         X = self._preprocess(X)
-        if self.device_.type == "cpu":  # batches read in place, at random: see on_huge_pages
+        if training and self.device_.type == "cpu":
             return torch.from_numpy(on_huge_pages(X))
         return torch.as_tensor(np.ascontiguousarray(X, dtype=np.float32), device=self.device_)
 
@@ -200,7 +203,7 @@ class SGDModel(Model):
         self.body_ = body.to(self.device_)
         self.classifier_ = classifier.to(self.device_)
         self.input_shape_ = X.shape[1:]
-        Xt = self._tensor(X)
+        Xt = self._tensor(X, training=True)
         yt = torch.as_tensor(np.asarray(train.y), dtype=torch.float32, device=self.device_)
 
         schedule = self.schedule
