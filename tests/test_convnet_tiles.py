@@ -159,14 +159,23 @@ def test_a_larger_batch_then_a_smaller_one_again():
         torch.testing.assert_close(c, d, rtol=1e-4, atol=1e-5)
 
 
-def test_rows_outside_the_input_are_refused():
+def test_rows_outside_the_input_are_refused_by_the_thread_that_reads_them(monkeypatch):
+    """The kernel checks each tile's rows before it reads them: a bad row in the last tile, run
+    by a pool thread (three parts), is refused, and the next step runs."""
+    monkeypatch.setattr(convnet_tiles.numba, "get_num_threads", lambda: 3)
     net, head = _net(32, 30, 32, (5, 3, 3), (4, 4, 4), (2, 2, 2), seed=4)
-    X, y = torch.randn(10, 32, 30), torch.zeros(10)
-    with pytest.raises(IndexError, match=r"rows must lie in \[0, 10\)"):
-        convnet_tiles.tiled_loss(
-            X, torch.tensor([3, 10]), y, net.weights, net.biases, head,
-            loss="logistic", groups=32, strides=(2, 2, 2),
-        )  # fmt: skip
+    X, y = torch.randn(40, 32, 30), torch.zeros(40)
+
+    def step(rows: torch.Tensor) -> torch.Tensor:
+        return convnet_tiles.tiled_loss(X, rows, y, net.weights, net.biases, head,
+                                        loss="logistic", groups=32, strides=(2, 2, 2))  # fmt: skip
+
+    for bad in (40, -1):
+        rows = torch.arange(40)
+        rows[-1] = bad
+        with pytest.raises(IndexError, match=r"rows must lie in \[0, len\(X\)\), the rows of X"):
+            step(rows)
+    assert torch.isfinite(step(torch.arange(40)))
 
 
 def test_a_tiles_padding_rows_stay_zero_across_steps():
@@ -184,23 +193,29 @@ def test_a_tiles_padding_rows_stay_zero_across_steps():
     for g_c, g_t in zip(grads_c, grads_t, strict=True):
         torch.testing.assert_close(g_c, g_t, rtol=1e-4, atol=1e-5)
     pad = 5  # the largest kernel: every time axis's padding on each side
-    kept = [b for acts, grads in convnet_tiles._BUFFERS.values() for b in (*acts, *grads)]
+    kept = [b for mine in convnet_tiles._BUFFERS.values() for b in (*mine.acts, *mine.grads)]
     assert kept and np.isfinite(got)
     for buffer in kept:  # time is the second axis from the end
         assert not buffer[..., :pad, :].any() and not buffer[..., -pad:, :].any()
 
 
 def test_a_threads_buffers_are_one_block_from_a_huge_page_boundary(monkeypatch):
-    """A thread's activations and gradients (~1.7 MB at the paper's sizes) in one mapping
-    starting on a huge page: on 4 kB pages the step ran ~20% slower."""
+    """A thread's activations, gradients and a tile's scores and loss gradients (~1.7 MB at the
+    paper's sizes) in one mapping starting on a huge page: on 4 kB pages the step ran ~20%
+    slower. The flat arrays are the shaped ones, flat."""
     monkeypatch.setattr(convnet_tiles, "_BUFFERS", {})
     plan = convnet_tiles._Plan(32, 150, [(128, 1, 5), (128, 4, 5), (128, 4, 5)], 32, (2, 2, 2))
-    acts, grads = convnet_tiles._buffers(0, plan.shapes, plan.pad)
-    arrays = (*acts, *grads)
-    assert [a.shape for a in acts] == plan.shapes and len(grads) == 3
-    assert [g.shape for g in grads] == [s[1:] for s in plan.shapes[1:]]
+    mine = convnet_tiles._buffers(0, plan.shapes, plan.pad)
+    lanes = plan.shapes[0][3]
+    arrays = (*mine.acts, *mine.grads, mine.partial, mine.gs)
+    assert [a.shape for a in mine.acts] == plan.shapes and len(mine.grads) == 3
+    assert [g.shape for g in mine.grads] == [s[1:] for s in plan.shapes[1:]]
+    assert mine.partial.shape == (32 * lanes,) and mine.gs.shape == (lanes,)
+    for shaped, flat in zip((*mine.acts, *mine.grads), (*mine.flat_acts, *mine.flat_grads),
+                            strict=True):  # fmt: skip
+        assert flat.ndim == 1 and np.shares_memory(flat, shaped) and flat.size == shaped.size
     assert arrays[0].ctypes.data % HUGE_PAGE == 0
     for before, after in zip(arrays, arrays[1:], strict=False):  # back to back, in order
         assert after.ctypes.data == before.ctypes.data + before.nbytes
     assert sum(a.nbytes for a in arrays) < HUGE_PAGE and not any(a.any() for a in arrays)
-    assert convnet_tiles._buffers(0, plan.shapes, plan.pad)[0][0] is acts[0]  # kept
+    assert convnet_tiles._buffers(0, plan.shapes, plan.pad).acts[0] is mine.acts[0]  # kept

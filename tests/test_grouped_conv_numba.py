@@ -6,6 +6,7 @@ The first compiled call in a run compiles the kernels (~35 s on 2 idle cores) in
 
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -153,3 +154,22 @@ def test_in_parallel_runs_every_index_once_this_threads_part_the_largest(count, 
     sizes = [b - a for _, a, b, _ in calls]
     assert sizes[0] == max(sizes) and max(sizes) - min(sizes) <= 1
     assert calls[0][3] == threading.get_ident()  # slot 0 ran here
+
+
+def test_in_parallel_returns_only_when_every_part_has_finished(monkeypatch):
+    """A part that fails here leaves no other still running when the error reaches the caller
+    (it would write into buffers the next call hands out)."""
+    from tactile_exp.models import grouped_conv_numba as kernels
+
+    monkeypatch.setattr(kernels.numba, "get_num_threads", lambda: 2)
+    finished = []
+
+    def task(slot: int, start: int, stop: int) -> None:
+        if slot == 0:
+            raise RuntimeError("part 0 failed")
+        time.sleep(0.2)
+        finished.append(slot)
+
+    with pytest.raises(RuntimeError, match="part 0 failed"):
+        kernels._in_parallel(task, 4)
+    assert finished == [1]

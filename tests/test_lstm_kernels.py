@@ -12,11 +12,12 @@ from sklearn.metrics import roc_auc_score
 from test_models import easy_case
 from torch import nn
 
-from tactile_exp.models import MODELS
+from tactile_exp.models import MODELS, lstm_kernels
 from tactile_exp.models.haptic_lstm import LSTMBody
 from tactile_exp.models.losses import LOSSES
 from tactile_exp.models.lstm_kernels import CHUNK, lstm_last_hidden, lstm_loss
 from tactile_exp.models.schedule import Schedule
+from tactile_exp.models.scratch import HUGE_PAGE
 
 
 @pytest.mark.parametrize(
@@ -150,6 +151,32 @@ def test_the_training_steps_gradients_scale_with_the_loss():
     _, quarters = _step("compiled", "hinge", rows, scale=0.25)
     for one, quarter in zip(ones, quarters, strict=True):
         assert one.abs().max() > 0 and torch.equal(quarter, 0.25 * one)
+
+
+def test_a_steps_arrays_are_kept_on_huge_pages_their_constant_rows_intact(monkeypatch):
+    """The chunks' arrays are one block from a huge page boundary, handed out again on the next
+    call; after training steps and a backward with the input's gradient (which writes every
+    step's gate gradients), the bias's row of ones and the zero rows past it, and the gate
+    gradients' rows past the gates, are as made, and the next step still equals torch's."""
+    monkeypatch.setattr(lstm_kernels, "_KEPT", {})
+    rows = torch.arange(CHUNK + 9)
+    first = _step("compiled", "hinge", rows)
+    x = torch.randn(CHUNK + 9, 32, 150, requires_grad=True)
+    lstm_last_hidden(x, nn.LSTM(32, 10, batch_first=True)).sum().backward()
+    again, grads = _step("compiled", "hinge", rows)
+    want, wanted = _step("torch", "hinge", rows)
+    assert again == first[0] and again == pytest.approx(want, rel=1e-5)
+    for a, b in zip(grads, wanted, strict=True):
+        assert float((a - b).abs().max()) <= 2e-5 * float(b.abs().max())
+    inputs, acts, c_prev, tanh_c = lstm_kernels._activations(CHUNK + 9, 150, 42, 40)
+    assert inputs.ctypes.data % HUGE_PAGE == 0
+    for before, after in zip((inputs, acts, c_prev), (acts, c_prev, tanh_c), strict=True):
+        assert after.ctypes.data == before.ctypes.data + before.nbytes  # one block
+    assert (inputs[:, :, 42] == 1).all() and not inputs[:, :, 43:].any()
+    assert lstm_kernels._activations(CHUNK + 9, 150, 42, 40)[0] is inputs  # kept
+    d_gates = [a for key, (a, *_) in lstm_kernels._KEPT.items() if key[0] == "gate gradients"]
+    assert {a.shape[1] for a in d_gates} == {1, 150}  # a step's, and every step's
+    assert all(not a[:, :, 40:].any() for a in d_gates)
 
 
 @pytest.mark.skipif(numba_config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")

@@ -257,6 +257,61 @@ def test_tap_dots_add_each_rows_dot_products_with_each_taps_rows(count):
     np.testing.assert_array_equal(acc[untouched], before[untouched])
 
 
+@numba.njit
+def _head_backward(w, x, y, rows, row_step, steps, out, acc, pad):
+    vt.head_backward(w, 0, x, 0, y, pad, rows, row_step, steps, out, pad, acc, 1)
+
+
+@numba.njit
+def _head_backward_per_step(w, x, y, rows, row_step, steps, out, acc, pad):
+    """What ``head_backward`` replaces: per step, a ``tap_dots`` and a gated ``tap_sums``."""
+    taps, zeros = np.zeros(1, np.int64), np.zeros(vt.ROWS, np.float32)
+    for r in range(0, rows, vt.ROWS):
+        for s in range(steps):
+            o = pad + r * row_step + s * vt.WIDTH
+            acc[1 + r * steps + s : 1 + (r + vt.ROWS) * steps : steps] = 0
+            vt.tap_dots(y, o, row_step, 0, x, 0, taps, 1, 0, 1, acc, 1 + r * steps + s, steps,
+                        vt.WIDTH, acc, -1)  # fmt: skip
+            vt.tap_sums(w, r * steps + s, steps, 1, x, 0, taps, 1, out, o, row_step, zeros, 0, 1,
+                        vt.WIDTH, vt.WIDTH, vt.GATED, y)  # fmt: skip
+
+
+@pytest.mark.parametrize("steps", [1, 3, 19, vt.WIDTH])
+def test_head_backward_is_the_per_step_tiles_to_the_bit(steps):
+    """A one-output layer's weight gradient (lanes summed by one shuffle tree for ``WIDTH``
+    sums) and its input's gradient through the ReLU: the bits of a ``tap_dots`` and a gated
+    ``tap_sums`` per (row, step), with fewer sums than a vector, a last part vector and none;
+    rows ``pad`` apart and 2 padding rows around them untouched; numpy's values; a gate of 0,
+    below 0 or NaN shuts a lane."""
+    rng = np.random.default_rng(steps)
+    rows, pad, gap = 2 * vt.ROWS, 3 * vt.WIDTH, 2 * vt.WIDTH
+    row_step = steps * vt.WIDTH + gap
+    y = rng.standard_normal(2 * pad + rows * row_step, dtype=np.float32)
+    y *= np.float32(10.0) ** rng.integers(-3, 4, y.shape).astype(np.float32)
+    y[rng.random(y.shape) < 0.1] = 0.0
+    y[pad + 1] = np.nan
+    x = rng.standard_normal(vt.WIDTH, dtype=np.float32)
+    w = rng.standard_normal(rows * steps, dtype=np.float32)
+    got_out, got_acc = np.full_like(y, 7.0), np.full(rows * steps + 2, 7.0, np.float32)
+    want_out, want_acc = got_out.copy(), got_acc.copy()
+    _head_backward(w, x, y, rows, row_step, steps, got_out, got_acc, pad)
+    _head_backward_per_step(w, x, y, rows, row_step, steps, want_out, want_acc, pad)
+    assert got_out.tobytes() == want_out.tobytes() and got_acc.tobytes() == want_acc.tobytes()
+    assert got_acc[0] == got_acc[-1] == 7.0
+    read = pad + np.arange(rows)[:, None, None] * row_step + np.arange(steps * vt.WIDTH)
+    read = read.reshape(rows, steps, vt.WIDTH)
+    untouched = np.ones_like(y, bool)
+    untouched[read] = False
+    assert (got_out[untouched] == 7.0).all()
+    ys = y[read].astype(np.float64)
+    sums = np.where(np.isnan(ys), 0, ys) @ x.astype(np.float64)
+    finite = ~np.isnan(ys).any(axis=2)
+    np.testing.assert_allclose(got_acc[1:-1][finite.ravel()], sums[finite], rtol=1e-5, atol=1e-4)
+    assert np.isnan(got_acc[1])  # the NaN's sum
+    gated = np.where(ys > 0, w.reshape(rows, steps, 1) * x.astype(np.float64), 0)
+    np.testing.assert_allclose(got_out[read], gated, rtol=1e-6, atol=1e-30)
+
+
 def test_tanh_lanes_is_tanh_and_the_sigmoid_within_the_approximations_error():
     x = np.linspace(-12, 12, 50 * vt.WIDTH, dtype=np.float32)
     x[7] = np.nan
@@ -391,3 +446,20 @@ def test_ordered_sum_is_numpys_sum_over_the_first_axis_to_the_bit():
     out = vt.ordered_sum(parts)
     assert np.array_equal(out, parts.sum(axis=0))
     assert not np.array_equal(out, parts[::-1].sum(axis=0))
+
+
+def test_pairwise_sum_is_numpys_sum_to_the_bit():
+    """Every length to 400 (below 8, the eight running sums, the halves) and two larger, values of
+    very different sizes: numpy's ``sum()`` in float32 and ``sum(dtype=np.float64)`` to the bit,
+    a zero's sign included; a plain running sum differs on some of them."""
+    rng = np.random.default_rng(4)
+    differs = 0
+    for n in [*range(400), 1000, 5000]:
+        a = (rng.standard_normal(n) * np.exp(rng.uniform(-8, 8, n))).astype(np.float32)
+        for zero, dtype in ((np.float32(0), np.float32), (np.float64(0), np.float64)):
+            got = dtype(vt.pairwise_sum(a, zero))
+            assert got.tobytes() == a.sum(dtype=dtype).tobytes(), (n, dtype)
+        differs += vt.ordered_sum(a.reshape(n, 1))[0] != a.sum() if n else 0
+    assert differs > 100
+    minus = np.full(9, -0.0, np.float32)
+    assert np.float32(vt.pairwise_sum(minus, np.float32(0))).tobytes() == minus.sum().tobytes()

@@ -33,7 +33,9 @@ kernels through autograd: bench/bench_roofline.py --before.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -41,7 +43,7 @@ from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.grouped_conv_numba import _in_parallel, conv_out_len
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
-from tactile_exp.models.numba_setup import check_rows, ensure_compiled, numba
+from tactile_exp.models.numba_setup import ensure_compiled, numba
 from tactile_exp.models.scratch import mapped
 from tactile_exp.models.vector_tiles import (
     DOT_TAPS,
@@ -50,7 +52,8 @@ from tactile_exp.models.vector_tiles import (
     RELU,
     ROWS,
     WIDTH,
-    ordered_sum,
+    head_backward,
+    pairwise_sum,
     tap_dots,
     tap_sums,
     transpose_rows,
@@ -66,7 +69,11 @@ _JIT = dict(nogil=True, cache=True, fastmath={"reassoc", "contract", "nsz", "arc
 def _gather(X, rows, m0, n, groups, pad, a0):  # pragma: no cover (compiled)
     """a0[c % groups, c // groups, pad + t, m] = X[rows[m0 + m], c, t] for the tile's ``n``
     instances (zeros in the lanes past them), in ``WIDTH`` x ``WIDTH`` register transposes
-    (``transpose_rows``); one value at a time only in a part tile or below ``WIDTH`` steps."""
+    (``transpose_rows``); one value at a time only in a part tile or below ``WIDTH`` steps.
+    Each row index is checked first: the transposes read without bounds checks."""
+    for m in range(m0, m0 + n):
+        if not 0 <= rows[m] < len(X):
+            raise IndexError("tiled ConvNet step: rows must lie in [0, len(X)), the rows of X")
     channels, steps = X.shape[1], X.shape[2]
     lanes, tp, c_in = a0.shape[3], a0.shape[2], a0.shape[1]
     flat_x, flat0 = X.reshape(-1), a0.reshape(-1)
@@ -138,32 +145,50 @@ def _conv_backward(geo, layer, pad, lanes, g, at, fin, fd, fdin, gw, gb, bw, bta
                          fin[at_in:])  # fmt: skip
 
 
+@numba.njit(nogil=True, cache=True)  # no fastmath: the tiles' shares summed in their order
+def _add_shares(shares, start, stop, sums, first):  # pragma: no cover (compiled)
+    """``sums[k]`` (+)= the shares of tiles ``start`` to ``stop`` of every gradient ``k``
+    (``shares[k]``: tiles x size), in tile order; ``first``: the sums start from tile
+    ``start``'s. In two parts, the first tiles' then the rest's, it is ``ordered_sum``."""
+    for k in range(len(shares)):
+        part, total = shares[k], sums[k]
+        if first:
+            total[:] = part[start]
+        for tile in range(start + 1 if first else start, stop):
+            for e in range(len(total)):
+                total[e] += part[tile, e]
+
+
 @numba.njit(**_JIT)
-def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, bwts, jtaps,
-           htaps, acts, flat_acts, grads, hinge, gws, gbs, ghw, ghb, losses, partial, gs, zeros,
+def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, bwts, jtaps,
+           htaps, acts, flat_acts, grads, hinge, ghb, losses, partial, gs, zeros, shares, sums,
            start, stop):  # fmt: skip  # pragma: no cover (compiled)
-    """Tiles ``start`` to ``stop`` of the batch ``rows``: each tile's summed loss into
-    ``losses[tile]`` and its share of every gradient into ``gws``, ``gbs``, ``ghw``, ``ghb``
-    (indexed by tile). ``geo[layer]``: kernel, stride, left padding, input and output channels
-    (padded), input and output steps, and the input gradient's taps per input channel (output
-    channels x kernel). ``hw`` (groups, c3', t3) and its tiles' shares ``ghw`` (tiles, groups,
-    c3', t3) the classification layer's weight, flat; ``htaps`` its taps' offsets in a group's
-    last activation. ``acts`` (``flat_acts``: the same arrays flat), ``grads``, ``partial``
-    (groups, lanes; flat), ``gs``: this task's buffers (``acts``' and ``grads``' padding rows
-    zero). The weights, the input gradients' weights, ``grads``, ``gws`` and ``gbs`` come flat, one
-    array per layer, taken from their tuples once, here, and each layer's pass is a helper called
-    with its arrays: an array taken from a tuple at a layer known only at run time, or a view made
-    in the loops, costs numba two atomic reference counts each time. Against loops over the layers
-    that took them so, a step 3-6% faster on one thread, as fast on two (a process per version,
-    alternating, 6 to 10 pairs, 2026-11-27); the helpers' array arguments still cost ~5% of a step
-    in reference counts (a profile). The classification layer runs on register tiles too: its
-    forward a ``tap_sums`` over its (channel, step) taps (one row of weights, computed as ``ROWS``
-    equal rows: 4x the multiplies, still ~3x faster than numba's loop over the lanes), its backward
-    per step a ``tap_dots`` (its weights' gradient, the lanes summed in a fixed tree) and a gated
-    ``tap_sums`` (the last layer's output gradient). Alone, one thread, batch 1000: 1.2 -> 0.6 ms a
-    step; the step 3-4% faster (a process per version, alternating, one thread 8 pairs, median ratio
-    0.96, range 0.86-1.01; two threads 18 pairs, 0.97, 0.82-1.05; 2026-11-27); the head weights'
-    gradient moved by float rounding (its lanes' sum order)."""
+    """Tiles ``start`` to ``stop`` of the batch ``rows`` (0/1 labels ``y`` per row of ``X``), each
+    tile's rows checked to lie in ``X`` first: each tile's summed loss into ``losses[tile]`` and its
+    share of every gradient into ``shares`` (each gradient's, tiles x its padded size: the three
+    weights', the three biases', the classification layer's weight's) and ``ghb``; from tile 0, each
+    tile's shares added to ``sums`` (``_add_shares``) while in cache. ``geo[layer]``: kernel,
+    stride, left padding, input and output channels (padded), input and output steps, and the input
+    gradient's taps per input channel (output channels x kernel). ``hw`` (groups, c3', t3) the
+    classification layer's weight, flat; ``htaps`` its taps' offsets in a group's last activation.
+    ``acts`` (``flat_acts``: the same arrays flat), ``grads``, ``partial`` (groups, lanes; flat),
+    ``gs``: this task's buffers (``acts``' and ``grads``' padding rows zero). The weights, the input
+    gradients' weights, ``grads`` and the shares come flat, one array per layer, taken from their
+    tuples once, here, and each layer's pass is a helper called with its arrays: an array taken from
+    a tuple at a layer known only at run time, or a view made in the loops, costs numba two atomic
+    reference counts each time. Against loops over the layers that took them so, a step 3-6% faster
+    on one thread, as fast on two (a process per version, alternating, 6 to 10 pairs, 2026-11-27);
+    the helpers' array arguments still cost ~5% of a step in reference counts (a profile). The
+    classification layer runs on register tiles too: its forward a ``tap_sums`` over its (channel,
+    step) taps (one row of weights, computed as ``ROWS`` equal rows: 4x the multiplies, still ~3x
+    faster than numba's loop over the lanes); its backward, per group, a ``head_backward`` (its
+    weights' gradient, the lanes of ``WIDTH`` sums added by one shuffle tree, and the last layer's
+    output gradient through the ReLU). Against numba's loops, one thread, batch 1000: 1.2 -> 0.6 ms
+    a step for the layer, the step 3-4% faster (a process per version, alternating, one thread 8
+    pairs, median ratio 0.96, range 0.86-1.01; two threads 18 pairs, 0.97, 0.82-1.05; 2026-11-27).
+    Against a ``tap_dots`` and a gated ``tap_sums`` per step (the same bits): the step 1-2% faster
+    (a process per version, alternating: two threads 10 pairs, median ratio 0.987, range 0.94-1.05;
+    one thread 6 pairs, 0.98, 0.93-1.06; 2026-11-28)."""
     lanes, n_batch = acts[0].shape[3], len(rows)
     scale = np.float32(1.0) / np.float32(n_batch)  # the mean's gradient
     c3, t3 = geo[2, 4], geo[2, 6]
@@ -173,8 +198,9 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
     b0, b1, b2 = bs
     t0, t1, t2 = ftaps
     d0, d1, d2 = grads
-    gw0, gw1, gw2 = gws
-    gb0, gb1, gb2 = gbs
+    gw0, gw1, gw2 = shares[0].reshape(-1), shares[1].reshape(-1), shares[2].reshape(-1)
+    gb0, gb1, gb2 = shares[3].reshape(-1), shares[4].reshape(-1), shares[5].reshape(-1)
+    ghw = shares[6].reshape(-1)
     bw1, bw2, bt1, bt2, bc1, bc2 = bwts[1], bwts[2], btaps[1], btaps[2], bcount[1], bcount[2]
     for tile in range(start, stop):
         m0 = tile * lanes
@@ -194,24 +220,17 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
             score = partial[m]
             for g in range(1, groups):  # the groups' shares in order, then the bias
                 score += partial[g * lanes + m]
-            f = sign[rows[m0 + m]]
+            f = np.float32(2.0) * y[rows[m0 + m]] - np.float32(1.0)  # the label as +-1
             loss, slope = loss_slope(f * (score + hb), hinge, np.float32(1.0))
             total += loss
             gs[m] = f * slope * scale
         losses[tile], ghb[tile] = total, gs.sum()
         for g in range(groups - 1, -1, -1):  # the last groups' activations are still in cache
             at_h, at_y = (tile * groups + g) * head, g * c3 * tp3 * lanes
-            for q in range(head):
-                ghw[at_h + q] = 0.0
-            y3 = a3[at_y:]  # the ReLU's output gates its backward
-            for e in range(0, c3, ROWS):  # per step t: the head weights' gradient (a3 . gs
-                for t in range(t3):  # over the lanes), and the last layer's (hw[t] gs, gated)
-                    tap_dots(a3, at_y + (e * tp3 + pad + t) * lanes, tp3 * lanes, 0, gs, 0,
-                             jtaps, 1, 0, 1, ghw, at_h + e * t3 + t, t3, lanes, ghw,
-                             -1)  # fmt: skip
-                    tap_sums(hw, g * head + e * t3 + t, t3, 1, gs, 0, jtaps, 1, d2,
-                             (e * tp3 + pad + t) * lanes, tp3 * lanes, zeros, 0, 1, lanes, lanes,
-                             GATED, y3)  # fmt: skip
+            # the classification layer's backward: its weights' gradient (a3 . gs over the
+            # lanes, per channel and step) and the last layer's output gradient (hw gs, gated)
+            head_backward(hw, g * head, gs, 0, a3, at_y + pad * lanes, c3, tp3 * lanes, t3, d2,
+                          pad * lanes, ghw, at_h)  # fmt: skip
             at = tile * groups + g
             _conv_backward(geo, 2, pad, lanes, g, at, a2, d2, d1, gw2, gb2, bw2, bt2, bc2, jtaps,
                            zeros)  # fmt: skip
@@ -220,28 +239,47 @@ def _tiles(X, rows, sign, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount
             # the first layer's input gradient arguments are not used: any of the right types
             _conv_backward(geo, 0, pad, lanes, g, at, a0, d0, d0, gw0, gb0, bw1, bt1, bc1, jtaps,
                            zeros)  # fmt: skip
+        if start == 0:  # the first tiles: their shares summed while in cache
+            _add_shares(shares, tile, tile + 1, sums, tile == 0)
 
 
 Arrays = tuple[np.ndarray, ...]
-# (thread slot, activations' shapes, padding) -> that slot's activations and gradients
-_BUFFERS: dict[tuple[int, tuple[tuple[int, ...], ...], int], tuple[Arrays, Arrays]] = {}
 
 
-def _buffers(slot: int, shapes: Sequence[tuple[int, ...]], pad: int) -> tuple[Arrays, Arrays]:
-    """The zeroed activations (one per shape) and output gradients (a group's, one per layer)
-    of a thread's tiles, kept from step to step (the kernels never write their ``pad`` rows at
-    either end of time, so they stay zero), cut from one block on huge pages (``mapped``): a
-    tile's ~1.7 MB at the paper's sizes in one 2 MB page instead of ~420 pages of 4 kB, more than
-    the core's TLB holds."""
+class Buffers(NamedTuple):
+    """A thread's arrays for its tiles (``_buffers``)."""
+
+    acts: Arrays  # the input and each layer's output, (groups, channels, time, lanes)
+    grads: Arrays  # each layer's output gradient, a group's, (channels, time, lanes)
+    flat_acts: Arrays  # the same arrays flat, as the kernels index them
+    flat_grads: Arrays
+    partial: np.ndarray  # the groups' shares of a tile's scores, (groups x lanes,)
+    gs: np.ndarray  # the tile's loss gradients, (lanes,)
+
+
+# (thread slot, activations' shapes, padding) -> that slot's buffers
+_BUFFERS: dict[tuple[int, tuple[tuple[int, ...], ...], int], Buffers] = {}
+
+
+def _buffers(slot: int, shapes: Sequence[tuple[int, ...]], pad: int) -> Buffers:
+    """A thread's arrays for its tiles, kept from step to step, zeroed when made (the kernels
+    never write the ``pad`` rows at either end of time, so they stay zero), cut from one block
+    on huge pages (``mapped``): a tile's ~1.7 MB at the paper's sizes in one 2 MB page instead
+    of ~420 pages of 4 kB, more than the core's TLB holds."""
     key = (slot, tuple(shapes), pad)
     if key not in _BUFFERS:
-        layout = [*shapes, *(shape[1:] for shape in shapes[1:])]
+        groups, lanes = shapes[0][0], shapes[0][3]
+        layout = [*shapes, *(shape[1:] for shape in shapes[1:]), (groups * lanes,), (lanes,)]
         sizes = [int(np.prod(shape)) for shape in layout]
         block = mapped(sum(sizes))
         block[:] = 0
-        parts = np.split(block, np.cumsum(sizes)[:-1])
-        arrays = [part.reshape(shape) for part, shape in zip(parts, layout, strict=True)]
-        _BUFFERS[key] = tuple(arrays[: len(shapes)]), tuple(arrays[len(shapes) :])
+        flat = np.split(block, np.cumsum(sizes)[:-1])
+        arrays = [part.reshape(shape) for part, shape in zip(flat, layout, strict=True)]
+        n = len(shapes)
+        _BUFFERS[key] = Buffers(
+            tuple(arrays[:n]), tuple(arrays[n : 2 * n - 1]), tuple(flat[:n]),
+            tuple(flat[n : 2 * n - 1]), flat[-2], flat[-1],
+        )  # fmt: skip
     return _BUFFERS[key]
 
 
@@ -250,10 +288,11 @@ _SHARES: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}
 
 
 def _shares(gradient: int, tiles: int, shape: tuple[int, ...]) -> np.ndarray:
-    """(tiles, *shape) for every tile's share of a gradient (the kernels write it whole), kept
-    from step to step: a fresh one faults in ~2 MB of pages every step at the paper's sizes."""
+    """(tiles, size of ``shape``) for every tile's share of a gradient (the kernels write it
+    whole), kept from step to step: a fresh one faults in ~2 MB of pages every step at the
+    paper's sizes."""
     if len(_SHARES.get((gradient, shape), ())) < tiles:
-        _SHARES[gradient, shape] = np.empty((tiles, *shape), np.float32)
+        _SHARES[gradient, shape] = np.empty((tiles, int(np.prod(shape))), np.float32)
     return _SHARES[gradient, shape][:tiles]
 
 
@@ -268,7 +307,14 @@ class _Plan:
     step spends outside the kernels went from 0.76-1.10 ms to 0.69-0.77 ms of ~9 ms (a process per
     version, alternating, 4 pairs); the step: two threads, median ratio 0.967 (16 pairs, range
     0.90-1.04) and 0.986 (10 pairs), one thread 0.999 (10 pairs); bench/bench_roofline.py
-    --before: x0.86 to x1.04 in five runs (2026-11-27)."""
+    --before: x0.86 to x1.04 in five runs (2026-11-27). What runs between two steps' kernels
+    runs from cold caches (the tiles fill L2), ~20-50 us a numpy or torch call: the shares are
+    summed in the kernels (``_tiles`` the first thread's, as it goes; ``_finish`` the rest, the
+    gradients laid out as the parameters), the labels' signs and the rows' check are the
+    kernels', and ``_tiles``' arguments are the plan's and the buffers': outside
+    ``_in_parallel`` 0.26-0.36 -> 0.13-0.16 ms a two-thread step, outside ``train_step`` 0.22-0.32
+    -> 0.18-0.23 ms (2 runs each); the step, a process per version alternating, 10 pairs: median
+    ratio 0.966, range 0.92-1.03 (2026-11-28)."""
 
     def __init__(
         self,
@@ -321,7 +367,30 @@ class _Plan:
         # the head's taps: (channel, step) of the last activation, from its first real step
         self.htaps = np.array([(e * rows[3] + t) * lanes for e in range(outs[2])
                                for t in range(lengths[3])], np.int64)  # fmt: skip
-        self.sizes = [(shape[0] // groups, shape[1]) for shape in shapes]
+        # The tiles' gradient shares summed, padded as the weights, in one block ``totals``
+        # (``sums``: each gradient's part, the weights', the biases', the head's); ``take``: where
+        # each parameter's entries lie in it, the parameters in order; ``cuts``: each gradient's
+        # slice of a step's output and its shape (the head bias's last).
+        padded = [*self.ws, *self.bs, self.hw]
+        ats = list(itertools.pairwise(np.cumsum([0, *(a.size for a in padded)])))
+        self.totals = np.zeros(ats[-1][1], np.float32)
+        self.sums = tuple(self.totals[a:b] for a, b in ats)
+        spots = [np.arange(a, b).reshape(p.shape) for (a, b), p in zip(ats, padded, strict=True)]
+        kept = []
+        for layer, shape in enumerate(shapes):
+            cout, cin = shape[0] // groups, shape[1]
+            kept += [spots[layer][:, :cout, :cin], spots[3 + layer][:, :cout]]
+        kept.append(spots[6][:, : shapes[2][0] // groups])
+        self.take = np.concatenate([spot.ravel() for spot in kept])
+        given = [*(s for shape in shapes for s in (shape, shape[:1])), (1, kept[-1].size), (1,)]
+        ends = np.cumsum([int(np.prod(shape)) for shape in given])
+        self.cuts = [(end - int(np.prod(shape)), end, shape)
+                     for end, shape in zip(ends, given, strict=True)]  # fmt: skip
+        # ``_tiles``' arguments from the plan, flat (the weights refilled in place by ``load``)
+        self.args = (self.geo, tuple(a.reshape(-1) for a in self.ws),
+                     tuple(a.reshape(-1) for a in self.bs), self.hw.reshape(-1))  # fmt: skip
+        self.taps = (tuple(self.ftaps), tuple(self.btaps), tuple(self.bcount),
+                     tuple(a.reshape(-1) for a in self.bwts), self.jtaps, self.htaps)  # fmt: skip
 
     def load(
         self, weights: Sequence[np.ndarray], biases: Sequence[np.ndarray], head: np.ndarray
@@ -377,10 +446,25 @@ def _plan(
     return _PLANS[key]
 
 
+@numba.njit(nogil=True, cache=True)
+def _finish(shares, start, stop, sums, totals, take, ghb, losses, out):  # pragma: no cover
+    """The shares of tiles ``start`` to ``stop`` added to the sums (``_add_shares``), the sums'
+    entries ``take`` into ``out`` with the head bias's gradient (numpy's sum of the tiles')
+    last; returns the summed loss (numpy's float64 sum of the tiles')."""
+    _add_shares(shares, start, stop, sums, False)
+    for q in range(len(take)):
+        out[q] = totals[take[q]]
+    out[len(take)] = pairwise_sum(ghb, np.float32(0.0))
+    return pairwise_sum(losses, np.float64(0.0))
+
+
+_ZEROS = np.zeros(ROWS, np.float32)  # the biases of passes that have none
+
+
 def train_step(
     X: np.ndarray,
     rows: np.ndarray,
-    sign: np.ndarray,
+    y: np.ndarray,
     weights: Sequence[np.ndarray],
     biases: Sequence[np.ndarray],
     head_weight: np.ndarray,
@@ -390,49 +474,32 @@ def train_step(
     strides: Sequence[int],
     loss: str,
 ) -> tuple[float, list[np.ndarray]]:
-    """The mean ``loss`` of the rows ``rows`` of ``X`` (n, C, T) with labels ``sign`` (+-1 per
-    row of ``X``) and its gradients: (w1, b1, w2, b2, w3, b3, head weight, head bias), shaped
-    as the parameters."""
+    """The mean ``loss`` of the rows ``rows`` of ``X`` (n, C, T) with 0/1 labels ``y`` (float32,
+    one per row of ``X``) and its gradients: (w1, b1, w2, b2, w3, b3, head weight, head bias),
+    shaped as the parameters. Every tile's gradient shares are summed in tile order: the first
+    thread's tiles as soon as it has run them, while the others run theirs."""
     if loss not in LOSSES:
         raise ValueError(f"the tiled ConvNet step computes {', '.join(LOSSES)}, not {loss!r}")
     ensure_compiled(__name__)  # before the first kernel call (``_plan``'s)
     plan = _plan(X.shape[1], X.shape[2], weights, biases, head_weight, groups, strides)
     tiles = -(-len(rows) // TILE_LANES)
-    threads = numba.get_num_threads()
-    buffers = [_buffers(slot, plan.shapes, plan.pad) for slot in range(threads)]
-    gws = tuple(_shares(k, tiles, w.shape) for k, w in enumerate(plan.ws))
-    gbs = tuple(_shares(3 + k, tiles, b.shape) for k, b in enumerate(plan.bs))
-    ghw, ghb = _shares(6, tiles, plan.hw.shape), np.empty(tiles, np.float32)
-    losses = np.empty(tiles, np.float32)
-    partial = [np.empty(groups * TILE_LANES, np.float32) for _ in range(threads)]
-    gs = [np.empty(TILE_LANES, np.float32) for _ in range(threads)]
-    zeros = np.zeros(ROWS, np.float32)
-
-    def flat(arrays):  # the kernels index these by their flat offsets
-        return tuple(a.reshape(-1) for a in arrays)
+    padded = (*plan.ws, *plan.bs, plan.hw)  # the gradients' padded shapes
+    shares = tuple(_shares(k, tiles, a.shape) for k, a in enumerate(padded))
+    ghb, losses = np.empty(tiles, np.float32), np.empty(tiles, np.float32)
+    summed = []  # the tiles the first thread summed
 
     def task(slot: int, start: int, stop: int) -> None:
-        acts, grads = buffers[slot]
-        _tiles(X, rows, sign, groups, plan.pad, plan.geo, flat(plan.ws), flat(plan.bs),
-               plan.hw.reshape(-1), np.float32(head_bias), tuple(plan.ftaps), tuple(plan.btaps),
-               tuple(plan.bcount), flat(plan.bwts), plan.jtaps, plan.htaps, acts,
-               flat(acts), flat(grads), loss == "hinge", flat(gws), flat(gbs),
-               ghw.reshape(-1), ghb, losses, partial[slot], gs[slot], zeros, start,
-               stop)  # fmt: skip
+        mine = _buffers(slot, plan.shapes, plan.pad)
+        _tiles(X, rows, y, groups, plan.pad, *plan.args, np.float32(head_bias), *plan.taps,
+               mine.acts, mine.flat_acts, mine.flat_grads, loss == "hinge", ghb, losses,
+               mine.partial, mine.gs, _ZEROS, shares, plan.sums, start, stop)  # fmt: skip
+        if start == 0:
+            summed.append(stop)
 
     _in_parallel(task, tiles)
-    params = [p for pair in zip(weights, biases, strict=True) for p in pair] + [head_weight]
-    # one flat array for the gradients, cut into the parameters' shapes and the head's bias
-    parts = np.split(np.empty(sum(p.size for p in params) + 1, np.float32),
-                     np.cumsum([p.size for p in params]))  # fmt: skip
-    out = [g.reshape(p.shape) for g, p in zip(parts, params, strict=False)] + [parts[-1]]
-    for (cout, cin), gw, gb, k in zip(plan.sizes, gws, gbs, range(0, 6, 2), strict=True):
-        out[k][:] = ordered_sum(gw)[:, :cout, :cin].reshape(out[k].shape)
-        out[k + 1][:] = ordered_sum(gb)[:, :cout].reshape(-1)
-    c3 = plan.sizes[2][0]
-    out[6][:] = ordered_sum(ghw)[:, :c3].reshape(1, -1)
-    out[7][:] = ghb.sum(keepdims=True)
-    return float(losses.sum(dtype=np.float64)) / len(rows), out
+    out = np.empty(len(plan.take) + 1, np.float32)
+    total = _finish(shares, summed[0], tiles, plan.sums, plan.totals, plan.take, ghb, losses, out)
+    return total / len(rows), [out[a:b].reshape(shape) for a, b, shape in plan.cuts]
 
 
 class TiledStep(torch.autograd.Function):
@@ -441,11 +508,10 @@ class TiledStep(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, X, rows, y, loss, groups, strides, head_weight, head_bias, *params):
-        sign = 2 * y.numpy() - 1  # float32, +-1
         value, grads = train_step(
             X.numpy(),
             rows.numpy(),
-            sign,
+            y.numpy(),
             [p.detach().numpy() for p in params[0::2]],
             [p.detach().numpy() for p in params[1::2]],
             head_weight.detach().numpy(),
@@ -481,13 +547,12 @@ def tiled_loss(
 ) -> torch.Tensor:
     """``losses.LOSSES[loss](head(grouped_conv_stack(X[rows])).squeeze(1), y[rows])`` for float32
     CPU ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, with its gradient: one
-    compiled pass per step (the rows read in place)."""
-    check_rows(rows, len(X), "tiled ConvNet step")
+    compiled pass per step (the rows read in place, each checked to lie in ``X``)."""
     params = [p for pair in zip(weights, biases, strict=True) for p in pair]
     return TiledStep.apply(
         X.contiguous(),
         rows.to(torch.int64).contiguous(),
-        y.to(torch.float32),
+        y.to(torch.float32).contiguous(),
         loss,
         groups,
         tuple(strides),

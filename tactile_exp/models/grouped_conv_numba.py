@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 import torch
@@ -430,7 +430,10 @@ def _in_parallel(task: Callable[[int, int, int], None], count: int) -> None:
     parts = max(1, min(count, numba.get_num_threads()))
     bounds = [count - count * (parts - k) // parts for k in range(parts + 1)]
     others = [_threads().submit(task, k, bounds[k], bounds[k + 1]) for k in range(1, parts)]
-    task(0, bounds[0], bounds[1])
+    try:
+        task(0, bounds[0], bounds[1])
+    finally:  # none of the parts still runs when this returns or raises
+        wait(others)
     for done in others:
         done.result()
 

@@ -14,7 +14,7 @@ loss and back through all of it), so the backward reads the chunk's forward from
 outlives the chunk and nothing runs twice (1.71x faster than the autograd path below,
 bench/bench_roofline.py --before, two threads). It keeps only the current step's gate gradients (the
 step's weight and state gradients use them at once; a chunk's all, 1.8 MB, only the input's gradient
-needs), takes its arrays from the scratch pool (fresh ones, ~4 MB a thread, cost a page fault per
+needs), keeps its arrays from call to call (fresh ones, ~4 MB a thread, cost a page fault per
 4 KB every step) and runs its elementwise loops, the cell update and the gates' gradients, as whole
 vectors (``vector_tiles.lanes``: numba's loops over that many arrays stayed scalar or behind alias
 checks): together 1.11x (bench/bench_roofline.py --before, both sides in child processes, two
@@ -28,7 +28,13 @@ the compiled step (``_gradient_sums``), one tensor per parameter, its arguments 
 not torch: the time a two-thread step spends outside ``_train`` went from 0.62-0.79 ms to
 0.61-0.71 ms of ~9 ms (a process per version, alternating, 4 pairs), the step as fast as before
 (16 pairs: median ratio 0.998; bench/bench_roofline.py --before: x0.99 to x1.12 in five runs;
-2026-11-27).
+2026-11-27). What runs between two steps' kernels runs from cold caches (a kernel's chunks fill
+L2), ~20-50 us a torch or numpy call: ``_train`` also checks the rows, joins the gate weights and
+sums the loss, and the arrays are kept from call to call in one block on huge pages rather than
+taken from the scratch pool and refilled (its ones and zero rows) each step: outside ``_train``
+0.39-0.49 -> 0.25-0.28 ms a two-thread step (3 runs each); the step's time, a process per
+version alternating, 16 pairs, median ratio 0.84 (0.68-1.02): from the pool it took 8.7-8.9 or
+11-12 ms from run to run, kept 8.1-9.5 (2026-11-28).
 Through autograd (``lstm_last_hidden``: scoring, and training with a loss the step does not
 compute) the forward keeps nothing and the backward recomputes a chunk's forward in cache.
 Keeping every chunk's activations for that backward instead (~63 MB a batch of 1,000) made a
@@ -64,12 +70,14 @@ numba's compiled-code cache: see ``numba_setup``.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import torch
 
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
 from tactile_exp.models.numba_setup import check_rows, ensure_compiled, numba
-from tactile_exp.models.scratch import scratch
+from tactile_exp.models.scratch import mapped
 from tactile_exp.models.vector_tiles import (
     ADDED,
     PLAIN,
@@ -78,6 +86,7 @@ from tactile_exp.models.vector_tiles import (
     Lanes,
     lanes,
     ordered_sum,
+    pairwise_sum,
     tanh_lanes,
     tap_sums,
     transpose_rows,
@@ -351,19 +360,26 @@ def _backward(X, rows, w, bias, dh_last, d_wt, dx, inputs, acts, c_prev, tanh_c,
 
 
 @numba.njit(parallel=True, **_JIT)
-def _train(X, rows, y, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_out, losses,
-           inputs, acts, c_prev, tanh_c, d_gates, grads):  # fmt: skip
+def _train(X, rows, y, w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_out,
+           losses, inputs, acts, c_prev, tanh_c, d_gates, grads):  # fmt: skip
     """One training step of LSTM -> FC(F) + ReLU -> FC(1) -> loss, a chunk at a time: its
     forward, the two layers, each instance's loss (0/1 labels ``y`` per row of ``X``; the mean
     over the batch) and back through all of it, the chunk's activations still in cache (no
-    forward run again). ``w`` (G, K) and ``bias`` as ``_forward``'s; ``fc_w``, ``fc_b`` the FC
-    layer's; ``out_w`` (F,) and ``out_b`` (1,) the output layer's. Per chunk: ``d_wt`` as
-    ``_backward``'s, ``d_fc`` (F, H + 1) the FC layer's weight and bias gradients, ``d_out``
-    (F + 1) the output layer's, ``losses`` its summed loss. The arrays after them as
-    ``_backward``'s. ``grads`` <- the chunks' gradients summed (``_gradient_sums``)."""
-    G, K = w.shape
-    H = G // 4
-    C = K - H
+    forward run again). ``w_ih``, ``w_hh``, ``b_ih``, ``b_hh``: ``nn.LSTM``'s parameters;
+    ``fc_w``, ``fc_b`` the FC layer's; ``out_w`` (F,) and ``out_b`` (1,) the output layer's. Per
+    chunk: ``d_wt`` as ``_backward``'s, ``d_fc`` (F, H + 1) the FC layer's weight and bias
+    gradients, ``d_out`` (F + 1) the output layer's, ``losses`` its summed loss. The arrays after
+    them as ``_backward``'s. ``grads`` <- the chunks' gradients summed (``_gradient_sums``).
+    Returns the summed loss (numpy's float64 sum of the chunks'). Every row index is checked
+    first: the gathers read without bounds checks."""
+    for r in rows:
+        if not 0 <= r < len(X):
+            raise IndexError("compiled LSTM: rows must lie in [0, len(X)), the rows of X")
+    (G, C), H = w_ih.shape, w_hh.shape[1]
+    K = C + H
+    w = np.empty((G, K), np.float32)  # as ``_forward``'s
+    w[:, :C], w[:, C:] = w_ih, w_hh
+    bias = b_ih + b_hh
     n_chunks = d_wt.shape[0]
     parts = len(inputs)
     F = fc_w.shape[0]
@@ -425,6 +441,7 @@ def _train(X, rows, y, w, bias, fc_w, fc_b, out_w, out_b, hinge, d_wt, d_fc, d_o
                 w, inputs[p], acts[p], c_prev[p], tanh_c[p], h, c, d_gates[p], d_wt[chunk]
             )
     _gradient_sums(d_wt, d_fc, d_out, C, H, grads)
+    return pairwise_sum(losses, np.float64(0.0))
 
 
 @numba.njit(**_JIT)
@@ -474,30 +491,38 @@ def _padded(K: int, G: int) -> tuple[int, int]:
     return -(-(K + 1) // ROWS) * ROWS, -(-G // WIDTH) * WIDTH
 
 
+# (which, shapes) -> arrays kept from call to call (``_activations``, ``_gate_gradients``)
+_KEPT: dict[tuple[str, int, int, int, int], tuple[np.ndarray, ...]] = {}
+
+
 def _activations(n_rows: int, T: int, K: int, G: int) -> tuple[np.ndarray, ...]:
-    """Each thread's arrays for a chunk's forward, one row per thread, from the scratch pool
-    (fresh ones, ~4 MB a thread, cost a page fault per 4 KB every step): inputs (T, K', CHUNK)
+    """Each thread's arrays for a chunk's forward, one row per thread, kept from call to call
+    (fresh ones, ~4 MB a thread, cost a page fault per 4 KB every step; the kernels write no
+    row they read as constant), in one block on huge pages (``mapped``): inputs (T, K', CHUNK)
     with the bias's row of ones (its gradient is the gate gradients' sum) and zero rows past
     it, activations (T, G, CHUNK), c_{t-1} and tanh(c_t) (T, H, CHUNK)."""
-    parts, (K_pad, _), H = _parts(n_rows), _padded(K, G), G // 4
-    inputs = scratch(parts, T, K_pad, CHUNK)
-    inputs[:, :, K:] = 0
-    inputs[:, :, K] = 1
-    return (
-        inputs,
-        scratch(parts, T, G, CHUNK),
-        scratch(parts, T, H, CHUNK),
-        scratch(parts, T, H, CHUNK),
-    )
+    threads, (K_pad, _), H = _parts(n_rows), _padded(K, G), G // 4
+    key = ("activations", threads, T, K, G)
+    if key not in _KEPT:
+        shapes = [(threads, T, rows, CHUNK) for rows in (K_pad, G, H, H)]
+        sizes = np.cumsum([int(np.prod(shape)) for shape in shapes])
+        block = mapped(int(sizes[-1]))
+        parts = np.split(block, sizes[:-1])
+        arrays = [a.reshape(shape) for a, shape in zip(parts, shapes, strict=True)]
+        arrays[0][:, :, K:] = 0
+        arrays[0][:, :, K] = 1
+        _KEPT[key] = tuple(arrays)
+    return _KEPT[key]
 
 
 def _gate_gradients(threads: int, steps: int, G: int, G_pad: int) -> np.ndarray:
-    """Each thread's gate gradients (threads, steps, G_pad, CHUNK) from the scratch pool, the rows
-    past the G gates zero: every step's for the input's gradient, else one step's (what a step's
-    weight and state gradients use at once; 12 KB, in L1, against the chunk's 1.8 MB)."""
-    d_gates = scratch(threads, steps, G_pad, CHUNK)
-    d_gates[:, :, G:] = 0
-    return d_gates
+    """Each thread's gate gradients (threads, steps, G_pad, CHUNK), kept from call to call, the
+    rows past the G gates zero: every step's for the input's gradient, else one step's (what a
+    step's weight and state gradients use at once; 12 KB, in L1, against the chunk's 1.8 MB)."""
+    key = ("gate gradients", threads, steps, G, G_pad)
+    if key not in _KEPT:
+        _KEPT[key] = (np.zeros((threads, steps, G_pad, CHUNK), np.float32),)
+    return _KEPT[key][0]
 
 
 class LSTMLastHidden(torch.autograd.Function):
@@ -573,21 +598,22 @@ class LSTMStep(torch.autograd.Function):
         d_fc = np.empty((n_chunks, F, H + 1), np.float32)
         d_out = np.empty((n_chunks, F + 1), np.float32)
         losses = np.empty(n_chunks, np.float32)
-        grads = np.empty(sum(p.numel() for p in params), np.float32)
+        sizes = [p.numel() for p in params]
+        grads = np.empty(sum(sizes), np.float32)
         arrays = _activations(len(rows), x.shape[2], x.shape[1] + H, G)
         w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w, out_b = (p.detach().numpy() for p in params)
-        _train(
-            x.detach().numpy(), rows.numpy(), y.numpy(), np.concatenate((w_ih, w_hh), axis=1),
-            b_ih + b_hh, fc_w, fc_b, out_w.reshape(-1), out_b, loss == "hinge",
-            d_wt, d_fc, d_out, losses, *arrays,
+        total = _train(
+            x.detach().numpy(), rows.numpy(), y.numpy(), w_ih, w_hh, b_ih, b_hh, fc_w, fc_b,
+            out_w.reshape(-1), out_b, loss == "hinge", d_wt, d_fc, d_out, losses, *arrays,
             _gate_gradients(len(arrays[0]), 1, G, G_pad), grads,
         )  # fmt: skip
         # one tensor per parameter (autograd then takes it as ``.grad`` without a copy)
-        parts = np.split(grads, np.cumsum([p.numel() for p in params[:-1]]))
+        ends = itertools.accumulate(sizes)
         ctx.grads = [
-            torch.from_numpy(g.reshape(p.shape)) for g, p in zip(parts, params, strict=True)
+            torch.from_numpy(grads[end - size : end].reshape(p.shape))
+            for end, size, p in zip(ends, sizes, params, strict=True)
         ]
-        return torch.tensor(float(losses.sum(dtype=np.float64)) / len(rows), dtype=torch.float32)
+        return torch.tensor(total / len(rows), dtype=torch.float32)
 
     @staticmethod
     def backward(ctx, grad):  # type: ignore[override]
@@ -616,8 +642,7 @@ def lstm_loss(
         raise ValueError(f"the compiled LSTM step computes {', '.join(LOSSES)}, not {loss!r}")
     if x.device.type != "cpu" or x.dtype != torch.float32:
         raise ValueError(f"compiled LSTM: expects float32 CPU input, got {x.dtype} on {x.device}")
-    rows = rows.to(torch.int64).contiguous()
-    check_rows(rows, len(x), "compiled LSTM")
+    rows = rows.to(torch.int64).contiguous()  # each checked to lie in ``x`` by ``_train``
     params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
     ensure_compiled(__name__)
     return LSTMStep.apply(

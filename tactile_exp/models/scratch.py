@@ -1,4 +1,4 @@
-"""Reusable float32 scratch arrays for the compiled CPU kernels of the haptic ConvNet and LSTM.
+"""Reusable float32 scratch arrays for the compiled CPU kernels of the haptic ConvNet.
 
 A training step at batch 1000 needs 100-150 MB of activations and gradients. Freshly allocated
 memory is page-faulted and zeroed by the OS on its first touch, every step, which cost more than
@@ -12,15 +12,16 @@ process (the kernels parallelise inside numba; Hydra's launchers run jobs in pro
 
 Buffers from ``MAPPED_FROM`` bytes are private anonymous mappings that start on a 2 MiB boundary
 and ask for transparent huge pages (``MADV_HUGEPAGE``; honoured when the kernel's setting is
-``always`` or ``madvise``; ``mapped``): the kernels step through time in rows ~4 kB apart, one
-page each with 4 kB pages, and a virtual machine's TLB misses cost two page walks. (A shared
-mapping, ``mmap``'s default, lives in shmem, where huge pages are off by default.) The training
-set goes there too (``on_huge_pages``), and the ConvNet's per-thread tiles (``convnet_tiles``).
-On huge pages, measured a process per version alternating (2-core Xeon, 2026-11-28): the
-ConvNet's training step at batch 1000 x0.77 on two threads (6 pairs, x0.73-0.81) and x0.80 on
-one (4 pairs); the LSTM's x0.91 on two (6 pairs, noisy: x0.81-1.07) and x0.85 on one (3 pairs);
-with buffers from 256 kB rather than 2 MB mapped, the LSTM's one-thread step (its buffers all
-under 2 MB) a further x0.94 (6 rounds in one process, x0.89-0.96).
+``always`` or ``madvise``; ``mapped``): the kernels step through time in rows ~4 kB apart, one page
+each with 4 kB pages, and a virtual machine's TLB misses cost two page walks. (A shared mapping,
+``mmap``'s default, lives in shmem, where huge pages are off by default.) The training set goes
+there too (``on_huge_pages``), the ConvNet's per-thread tiles (``convnet_tiles``) and the LSTM's
+per-thread chunks (``lstm_kernels``, which keep theirs from call to call). On huge pages, measured
+a process per version alternating (2-core Xeon, 2026-11-28): the ConvNet's training step at batch
+1000 x0.77 on two threads (6 pairs, x0.73-0.81) and x0.80 on one (4 pairs); the LSTM's x0.91 on two
+(6 pairs, noisy: x0.81-1.07) and x0.85 on one (3 pairs); with buffers from 256 kB rather than 2 MB
+mapped, the LSTM's one-thread step (its buffers, from this pool then, all under 2 MB) a further
+x0.94 (6 rounds in one process, x0.89-0.96).
 """
 
 from __future__ import annotations
