@@ -16,10 +16,13 @@ of ``--repeats``):
   a fit keeps it, on huge pages where the revision puts it there): the forward that
   scores (the whole-batch conv stack + classification layer, no gradient) and the training step,
   forward + backward (``batch_loss``: in tiles of instances, the loss included; a ``--before``
-  revision without it runs its own training step);
+  revision without it runs its own training step), the parameters' gradients set to None
+  first, as training's ``zero_grad(set_to_none=True)`` does (a backward into gradients left
+  from the last call would add to them: eight additions training does not run);
 - the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): the forward that scores
   (``lstm_last_hidden``) and the training step, forward + backward through the recurrence, both
-  FC layers and the loss (``lstm_loss``; a ``--before`` revision without it runs its own).
+  FC layers and the loss (``lstm_loss``; a ``--before`` revision without it runs its own), its
+  gradients set to None first as the ConvNet's.
 
 - what the ConvNet's shapes permit (``attainable``): with 4 output channels per group no pass is
   a large matrix product, so beside sgemm the bench measures two ceilings of its own and holds
@@ -294,6 +297,12 @@ def kernel_timers() -> dict[str, Timer]:
     net = GroupedTemporalConvNet(CHANNELS, STEPS, impl="compiled")
     head = torch.nn.Linear(net.n_features, 1)
     body, out = LSTMBody(CHANNELS, HIDDEN, impl="compiled"), torch.nn.Linear(HIDDEN, 1)
+    conv_params = [*net.parameters(), *head.parameters()]
+    lstm_params = [*body.parameters(), *out.parameters()]
+
+    def no_grads(params: list[torch.nn.Parameter]) -> None:  # as the optimiser's zero_grad
+        for p in params:
+            p.grad = None
 
     def conv_forward() -> None:
         with torch.no_grad():
@@ -301,6 +310,7 @@ def kernel_timers() -> dict[str, Timer]:
 
     def conv_both() -> None:
         rows = batch()
+        no_grads(conv_params)
         if hasattr(net, "batch_loss"):
             net.batch_loss(X, y, head, "logistic", rows).backward()
         else:  # a --before revision from before the tiled step: its training step
@@ -312,6 +322,7 @@ def kernel_timers() -> dict[str, Timer]:
 
     def lstm_both() -> None:
         rows = batch()
+        no_grads(lstm_params)
         if hasattr(lstm_kernels, "lstm_loss"):
             lstm_kernels.lstm_loss(X, rows, y, body.lstm, body.fc, out, loss="logistic").backward()
         else:  # a --before revision from before the fused step: its training step
