@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_exp.models import scratch as scratch_module
-from tactile_exp.models.scratch import mapped, on_huge_pages, scratch
+from tactile_exp.models.scratch import HUGE_PAGE, carved, mapped, on_huge_pages, scratch
 
 
 def _mapping(address: int) -> tuple[int, int, str]:
@@ -100,3 +100,12 @@ def test_a_training_set_is_copied_onto_huge_pages_from_one_page_else_left_as_it_
     np.testing.assert_array_equal(copy, big[:, :, ::2].astype(np.float32))
     small = rng.standard_normal((10, 32, 60)).astype(np.float32)  # 77 kB
     assert on_huge_pages(small) is small
+
+
+def test_carved_arrays_are_zeroed_back_to_back_from_a_huge_page_boundary():
+    arrays = carved([(2, 3), (5,), (4, 1, 2)])
+    assert [a.shape for a in arrays] == [(2, 3), (5,), (4, 1, 2)]
+    assert all(a.dtype == np.float32 and a.flags.c_contiguous and not a.any() for a in arrays)
+    assert arrays[0].ctypes.data % HUGE_PAGE == 0
+    for before, after in zip(arrays, arrays[1:], strict=False):
+        assert after.ctypes.data == before.ctypes.data + before.nbytes

@@ -44,7 +44,7 @@ from torch.autograd.function import once_differentiable
 from tactile_exp.models.grouped_conv_numba import _in_parallel, conv_out_len
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
 from tactile_exp.models.numba_setup import ensure_compiled, numba
-from tactile_exp.models.scratch import mapped
+from tactile_exp.models.scratch import carved
 from tactile_exp.models.vector_tiles import (
     DOT_TAPS,
     GATED,
@@ -265,16 +265,13 @@ def _buffers(slot: int, shapes: Sequence[tuple[int, ...]], pad: int) -> Buffers:
     """A thread's arrays for its tiles, kept from step to step, zeroed when made (the kernels
     never write the ``pad`` rows at either end of time, so they stay zero), cut from one block
     on huge pages (``mapped``): a tile's ~1.7 MB at the paper's sizes in one 2 MB page instead
-    of ~420 pages of 4 kB, more than the core's TLB holds."""
+    of ~420 pages of 4 kB, more than the core's TLB holds (``carved``)."""
     key = (slot, tuple(shapes), pad)
     if key not in _BUFFERS:
         groups, lanes = shapes[0][0], shapes[0][3]
         layout = [*shapes, *(shape[1:] for shape in shapes[1:]), (groups * lanes,), (lanes,)]
-        sizes = [int(np.prod(shape)) for shape in layout]
-        block = mapped(sum(sizes))
-        block[:] = 0
-        flat = np.split(block, np.cumsum(sizes)[:-1])
-        arrays = [part.reshape(shape) for part, shape in zip(flat, layout, strict=True)]
+        arrays = carved(layout)
+        flat = [a.reshape(-1) for a in arrays]
         n = len(shapes)
         _BUFFERS[key] = Buffers(
             tuple(arrays[:n]), tuple(arrays[n : 2 * n - 1]), tuple(flat[:n]),

@@ -77,7 +77,7 @@ import torch
 
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
 from tactile_exp.models.numba_setup import check_rows, ensure_compiled, numba
-from tactile_exp.models.scratch import mapped
+from tactile_exp.models.scratch import carved
 from tactile_exp.models.vector_tiles import (
     ADDED,
     PLAIN,
@@ -498,19 +498,14 @@ _KEPT: dict[tuple[str, int, int, int, int], tuple[np.ndarray, ...]] = {}
 def _activations(n_rows: int, T: int, K: int, G: int) -> tuple[np.ndarray, ...]:
     """Each thread's arrays for a chunk's forward, one row per thread, kept from call to call
     (fresh ones, ~4 MB a thread, cost a page fault per 4 KB every step; the kernels write no
-    row they read as constant), in one block on huge pages (``mapped``): inputs (T, K', CHUNK)
+    row they read as constant), in one block on huge pages (``carved``): inputs (T, K', CHUNK)
     with the bias's row of ones (its gradient is the gate gradients' sum) and zero rows past
     it, activations (T, G, CHUNK), c_{t-1} and tanh(c_t) (T, H, CHUNK)."""
     threads, (K_pad, _), H = _parts(n_rows), _padded(K, G), G // 4
     key = ("activations", threads, T, K, G)
     if key not in _KEPT:
-        shapes = [(threads, T, rows, CHUNK) for rows in (K_pad, G, H, H)]
-        sizes = np.cumsum([int(np.prod(shape)) for shape in shapes])
-        block = mapped(int(sizes[-1]))
-        parts = np.split(block, sizes[:-1])
-        arrays = [a.reshape(shape) for a, shape in zip(parts, shapes, strict=True)]
-        arrays[0][:, :, K:] = 0
-        arrays[0][:, :, K] = 1
+        arrays = carved([(threads, T, rows, CHUNK) for rows in (K_pad, G, H, H)])
+        arrays[0][:, :, K] = 1  # the rows past it stay zero
         _KEPT[key] = tuple(arrays)
     return _KEPT[key]
 

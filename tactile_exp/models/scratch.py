@@ -1,4 +1,4 @@
-"""Reusable float32 scratch arrays for the compiled CPU kernels of the haptic ConvNet.
+"""Reusable float32 scratch arrays for the compiled CPU kernels of the haptic ConvNet and LSTM.
 
 A training step at batch 1000 needs 100-150 MB of activations and gradients. Freshly allocated
 memory is page-faulted and zeroed by the OS on its first touch, every step, which cost more than
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import mmap
 import sys
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -52,6 +53,17 @@ def mapped(count: int) -> np.ndarray:
     # Built on the mapping directly: a view's ``base`` is then this array (numpy stops at the
     # first base that is not an array), so the pool's reference count sees every view.
     return np.ndarray(count, np.float32, buffer=buffer, offset=offset)
+
+
+def carved(shapes: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
+    """Zeroed C-contiguous float32 arrays of ``shapes``, back to back in one mapping on huge
+    pages (``mapped``): a kernel's per-thread arrays, kept from call to call, that it reads and
+    writes together."""
+    sizes = [int(np.prod(shape)) for shape in shapes]
+    block = mapped(sum(sizes))
+    block[:] = 0
+    parts = np.split(block, np.cumsum(sizes)[:-1])
+    return [part.reshape(shape) for part, shape in zip(parts, shapes, strict=True)]
 
 
 def on_huge_pages(X: np.ndarray) -> np.ndarray:
