@@ -173,6 +173,9 @@ def test_weights_file_and_fitted_mean(dataset, cache_dir, tmp_path):
 
 
 def test_objects_without_photographs_are_left_out(dataset, cache_dir, tmp_path, caplog):
+    """Also after the same data file was checked with all its photographs in this process: the
+    trunk's in-memory cache tells the photograph folders apart."""
+    _small_visual(cache_dir).check(dataset)
     photos = dataset.photographs()
     dropped = sorted(photos)[:3]
     folder = tmp_path / "photographs"

@@ -143,14 +143,17 @@ class Visual(Modality):
             trunk.features(self._layout_mean())  # one trunk pass for every adjective, up front
 
     def trunk(self, dataset: Any) -> Any:
-        """The photographs of ``dataset`` and their trunk features (cached when checked)."""
+        """The photographs of ``dataset`` and their trunk features (cached when checked, keyed
+        by the photographs' paths too: one data file can be read with another photograph folder)."""
         from tactile_exp.preprocess.visual import (
             VisualFeatures,
             compute_visual_arrays,
             load_visual_arrays,
         )
 
-        key = (dataset.identity(), self.size, self.weights, self.layout, self.seed, self.cache_dir)
+        photos = tuple((obj, tuple(paths)) for obj, paths in sorted(dataset.photographs().items()))
+        key = (dataset.identity(), photos, self.size, self.weights, self.layout, self.seed,
+               self.cache_dir)  # fmt: skip
         if key not in _TRUNKS:
             if self.cache_dir is None:
                 arrays = compute_visual_arrays(dataset, self.size)
