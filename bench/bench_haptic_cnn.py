@@ -4,7 +4,7 @@ Everything is measured in one run, the two implementations interleaved, so the r
 on a shared machine. Prints:
 1. the first-use compile time (a fresh numba cache in a subprocess) and the cached load time;
 2. training throughput (forward, backward, SGD step; default architecture, batch 1000) of both
-   through the same step as ``HapticCNN`` (``net.batch_loss``: compiled, the whole step, loss
+   through the same step as ``HapticCNN`` (``net.batch_step``: compiled, the whole step, loss
    included, in tiles of instances in cache), in wall and CPU time per step, and the ratio;
 3. each whole-batch layer kernel's GFLOP/s at batch 1000 (the stack that scores), the tiled
    training step's, beside torch's dense matmul (sgemm) rate;
@@ -62,9 +62,8 @@ def sgd_step(impl: str) -> Callable[[], None]:
 
     def step() -> None:  # HapticCNN's stage 1 step (compiled: in tiles, the loss included)
         rows = torch.randperm(N_TRAIN)[:BATCH]
-        loss = net.batch_loss(X, y, head, "logistic", rows)
         optimiser.zero_grad()
-        loss.backward()
+        net.batch_step(X, y, head, "logistic", rows)
         optimiser.step()
 
     return step
@@ -179,7 +178,7 @@ def kernel_rates(repeats: int) -> None:
     head = torch.nn.Linear(net.n_features, 1)
 
     def tiled() -> None:
-        net.batch_loss(x, y, head, "logistic", torch.randperm(N_TRAIN)[:BATCH]).backward()
+        net.batch_step(x, y, head, "logistic", torch.randperm(N_TRAIN)[:BATCH])
 
     whole = best_time(tiled, (), repeats)
     print(f"   {'tiled training step, fwd + bwd':32s} {rate(step_gflop, whole)}")
@@ -202,7 +201,7 @@ def compile_time(figures: dict[str, float]) -> float:
         "net = GroupedTemporalConvNet(32, 20); x = torch.randn(3, 32, 20); "
         "head = torch.nn.Linear(net.n_features, 1); y = torch.tensor([0.0, 1.0, 1.0]); "
         "start = time.perf_counter(); net(x).sum().backward(); "
-        "net.batch_loss(x, y, head, 'logistic', torch.arange(3)).backward(); "
+        "net.batch_step(x, y, head, 'logistic', torch.arange(3)); "
         "print(time.perf_counter() - start)"
     )
     with tempfile.TemporaryDirectory() as cache:

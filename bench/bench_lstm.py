@@ -83,19 +83,19 @@ def kernels(which: str) -> Iterator[None]:
         return
     model = haptic_lstm.HapticLSTM
     package, threads = haptic_lstm.lstm_last_hidden, sgd.SGDModel._torch_threads
-    objective = model._train_objective
+    step = model._train_step
 
     def before(x: torch.Tensor, lstm: torch.nn.LSTM, rows: torch.Tensor | None = None):
         return lstm_before.lstm_last_hidden(x if rows is None else x[rows], lstm)
 
     haptic_lstm.lstm_last_hidden = before
     sgd.SGDModel._torch_threads = lambda self: nullcontext()
-    model._train_objective = sgd.SGDModel._train_objective  # the loss on the scores, as then
+    model._train_step = sgd.SGDModel._train_step  # the loss on the scores, as then
     try:
         yield
     finally:
         haptic_lstm.lstm_last_hidden, sgd.SGDModel._torch_threads = package, threads
-        model._train_objective = objective
+        model._train_step = step
 
 
 def train(

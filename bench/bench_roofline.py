@@ -15,13 +15,13 @@ of ``--repeats``):
   shuffled epoch, as training does, so no call finds its batch in cache; the training set where
   a fit keeps it, on huge pages where the revision puts it there): the forward that
   scores (the whole-batch conv stack + classification layer, no gradient) and the training step,
-  forward + backward (``batch_loss``: in tiles of instances, the loss included; a ``--before``
+  forward + backward (``batch_step``: in tiles of instances, the loss included; a ``--before``
   revision without it runs its own training step), the parameters' gradients set to None
   first, as training's ``zero_grad(set_to_none=True)`` does (a backward into gradients left
   from the last call would add to them: eight additions training does not run);
 - the haptic LSTM (hidden 10, 32 inputs, 150 steps, batch 1000): the forward that scores
   (``lstm_last_hidden``) and the training step, forward + backward through the recurrence, both
-  FC layers and the loss (``lstm_loss``; a ``--before`` revision without it runs its own), its
+  FC layers and the loss (``lstm_step``; a ``--before`` revision without it runs its own), its
   gradients set to None first as the ConvNet's.
 
 - what the ConvNet's shapes permit (``attainable``): with 4 output channels per group no pass is
@@ -311,7 +311,9 @@ def kernel_timers() -> dict[str, Timer]:
     def conv_both() -> None:
         rows = batch()
         no_grads(conv_params)
-        if hasattr(net, "batch_loss"):
+        if hasattr(net, "batch_step"):
+            net.batch_step(X, y, head, "logistic", rows)
+        elif hasattr(net, "batch_loss"):  # a --before revision whose step ran through autograd
             net.batch_loss(X, y, head, "logistic", rows).backward()
         else:  # a --before revision from before the tiled step: its training step
             LOSSES["logistic"](net.scores(X, head, rows=rows), y[rows]).backward()
@@ -323,7 +325,9 @@ def kernel_timers() -> dict[str, Timer]:
     def lstm_both() -> None:
         rows = batch()
         no_grads(lstm_params)
-        if hasattr(lstm_kernels, "lstm_loss"):
+        if hasattr(lstm_kernels, "lstm_step"):
+            lstm_kernels.lstm_step(X, rows, y, body.lstm, body.fc, out, loss="logistic")
+        elif hasattr(lstm_kernels, "lstm_loss"):  # a --before revision: through autograd
             lstm_kernels.lstm_loss(X, rows, y, body.lstm, body.fc, out, loss="logistic").backward()
         else:  # a --before revision from before the fused step: its training step
             LOSSES["logistic"](out(body(X, rows)).squeeze(1), y[rows]).backward()

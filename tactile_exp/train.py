@@ -1,6 +1,6 @@
 """The SGD loop shared by every trained model (T3), device resolution and seeding.
 
-Kept free of the model registry (a batch's loss arrives as a callable) so models can import it
+Kept free of the model registry (a batch's step arrives as a callable) so models can import it
 without an import cycle; the two-stage schedule that uses it lives in ``models/sgd.py``
 (``SGDModel``).
 """
@@ -8,7 +8,7 @@ without an import cycle; the two-stage schedule that uses it lives in ``models/s
 from __future__ import annotations
 
 import random
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Sequence
 
 import numpy as np
 import torch
@@ -77,8 +77,35 @@ def validate_losses(*, loss: str, pretrain_loss: str | None, known_losses: Colle
         raise ValueError(f"pretrain_loss must be one of {losses} or None, got {pretrain_loss!r}")
 
 
+# (X, y, the batch's row index) -> the batch's mean loss, detached, its gradient added to the
+# parameters' ``.grad`` (``sgd_epochs``)
+Step = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
+
+
+def autograd_step(loss_of: Step) -> Step:
+    """The step of a loss autograd differentiates: ``loss_of(X, y, index)`` and its backward."""
+
+    def step(X: torch.Tensor, y: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        value = loss_of(X, y, index)
+        value.backward()
+        return value.detach()
+
+    return step
+
+
+def add_gradients(params: Sequence[torch.Tensor], grads: Sequence[torch.Tensor]) -> None:
+    """Each gradient added to its parameter's ``.grad`` as autograd's backward adds it: taken
+    as it is where ``.grad`` is None (no copy), else added in place."""
+    with torch.no_grad():
+        for param, grad in zip(params, grads, strict=True):
+            if param.grad is None:
+                param.grad = grad
+            else:
+                param.grad.add_(grad)
+
+
 def sgd_epochs(
-    objective: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor],
+    step: Step,
     params: list[nn.Parameter],
     X: torch.Tensor,
     y: torch.Tensor,
@@ -92,9 +119,11 @@ def sgd_epochs(
 ) -> list[float]:
     """Minibatch SGD with momentum over shuffled ``X``; returns the mean loss of each epoch.
 
-    ``objective(X, y, index)`` gives the mean loss of the rows ``index`` of ``X``: a model may
-    read them in place rather than from a copied batch, and compute the loss with its scores
-    (the compiled haptic ConvNet and LSTM do both)."""
+    ``step(X, y, index)`` returns the mean loss of the rows ``index`` of ``X``, detached, with
+    its gradient added to the parameters' ``.grad``: ``autograd_step`` of a loss, or one pass
+    that computes both, reading the rows in place rather than from a copied batch (the compiled
+    haptic ConvNet's and LSTM's: no autograd graph around a kernel that already has the
+    gradients)."""
     optimiser = torch.optim.SGD(params, lr=lr, momentum=momentum)
     n = len(X)
     curve = []
@@ -103,11 +132,10 @@ def sgd_epochs(
         total = torch.zeros((), device=X.device)
         for start in range(0, n, batch_size):
             index = order[start : start + batch_size]
-            value = objective(X, y, index)
             optimiser.zero_grad(set_to_none=True)
-            value.backward()
+            value = step(X, y, index)
             optimiser.step()
-            total += value.detach() * len(index)
+            total += value * len(index)
         curve.append(float(total) / n)
         if report is not None:
             report(curve[-1])

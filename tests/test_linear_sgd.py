@@ -9,7 +9,7 @@ from torch import nn
 from tactile_exp.models import MODELS, linear_sgd
 from tactile_exp.models.linear_sgd import linear_sgd_epochs
 from tactile_exp.models.losses import LOSSES
-from tactile_exp.train import caffe_xavier_, sgd_epochs
+from tactile_exp.train import autograd_step, caffe_xavier_, sgd_epochs
 
 
 def _train(impl: str, X, y, *, loss: str, gram: bool | None = None, **schedule):
@@ -20,7 +20,7 @@ def _train(impl: str, X, y, *, loss: str, gram: bool | None = None, **schedule):
     generator = torch.Generator().manual_seed(5)
     if impl == "torch":
         curve = sgd_epochs(
-            lambda F, y, index: LOSSES[loss](layer(F[index]).squeeze(1), y[index]),
+            autograd_step(lambda F, y, index: LOSSES[loss](layer(F[index]).squeeze(1), y[index])),
             list(layer.parameters()),
             X,
             y,

@@ -15,7 +15,7 @@ from torch import nn
 from tactile_exp.models import MODELS, lstm_kernels
 from tactile_exp.models.haptic_lstm import LSTMBody
 from tactile_exp.models.losses import LOSSES
-from tactile_exp.models.lstm_kernels import CHUNK, lstm_last_hidden, lstm_loss
+from tactile_exp.models.lstm_kernels import CHUNK, lstm_last_hidden, lstm_step
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.scratch import HUGE_PAGE
 
@@ -109,19 +109,21 @@ def test_results_do_not_depend_on_the_thread_count():
         assert torch.equal(a, b)
 
 
-def _step(impl, loss, rows, n=400, channels=32, steps=150, hidden=10, width=10, scale=1.0):
+def _step(impl, loss, rows, n=400, channels=32, steps=150, hidden=10, width=10, again=False):
     """The training step's loss and the gradients of every parameter (LSTM, FC, output layer)
-    at the model's init, the rows ``rows`` of ``n`` instances, back from ``scale`` x the loss."""
+    at the model's init, the rows ``rows`` of ``n`` instances; ``again``: a second step on the
+    same batch before the gradients are read."""
     torch.manual_seed(0)
     body = LSTMBody(channels, hidden, width, impl="compiled")
     out = nn.Linear(width, 1)
     x, y = torch.randn(n, channels, steps), (torch.rand(n) > 0.5).float()
-    if impl == "compiled":
-        value = lstm_loss(x, rows, y, body.lstm, body.fc, out, loss=loss)
-    else:
-        h = body.lstm(x[rows].transpose(1, 2))[1][0][-1]
-        value = LOSSES[loss](out(body.fc(h).relu()).squeeze(1), y[rows])
-    (scale * value).backward()
+    for _ in range(2 if again else 1):
+        if impl == "compiled":
+            value = lstm_step(x, rows, y, body.lstm, body.fc, out, loss=loss)
+        else:
+            h = body.lstm(x[rows].transpose(1, 2))[1][0][-1]
+            value = LOSSES[loss](out(body.fc(h).relu()).squeeze(1), y[rows])
+            value.backward()
     return value.item(), [p.grad.clone() for p in [*body.parameters(), *out.parameters()]]
 
 
@@ -143,14 +145,18 @@ def test_the_training_step_equals_torch(loss, sizes):
         assert float((a - b).abs().max()) <= 2e-5 * scale, name
 
 
-def test_the_training_steps_gradients_scale_with_the_loss():
-    """Back from 0.25 x the loss, every gradient is 0.25 x its gradient from the loss (exactly:
-    a power of two), each parameter's its own tensor."""
+def test_the_training_step_adds_its_gradients_to_those_present():
+    """As autograd's backward: a step's gradients are added to the parameters' ``.grad`` (a
+    second step on the same batch doubles each, exactly: x + x = 2x), and the loss it returns
+    is detached."""
     rows = torch.arange(CHUNK + 9)
     _, ones = _step("compiled", "hinge", rows)
-    _, quarters = _step("compiled", "hinge", rows, scale=0.25)
-    for one, quarter in zip(ones, quarters, strict=True):
-        assert one.abs().max() > 0 and torch.equal(quarter, 0.25 * one)
+    _, twos = _step("compiled", "hinge", rows, again=True)
+    for one, two in zip(ones, twos, strict=True):
+        assert one.abs().max() > 0 and torch.equal(two, 2 * one)
+    layers = (nn.LSTM(4, 2, batch_first=True), nn.Linear(2, 3), nn.Linear(3, 1))
+    value = lstm_step(torch.randn(2, 4, 3), torch.tensor([1]), torch.ones(2), *layers, loss="hinge")
+    assert value.ndim == 0 and not value.requires_grad
 
 
 def test_a_steps_arrays_are_kept_on_huge_pages_their_constant_rows_intact(monkeypatch):
@@ -228,9 +234,9 @@ def test_impl_choice():
     layers = (nn.LSTM(4, 2, batch_first=True), nn.Linear(2, 3), nn.Linear(3, 1))
     x, y = torch.zeros(2, 4, 3), torch.zeros(2)
     with pytest.raises(IndexError, match="rows must lie in"):
-        lstm_loss(x, torch.tensor([2]), y, *layers, loss="hinge")
+        lstm_step(x, torch.tensor([2]), y, *layers, loss="hinge")
     with pytest.raises(ValueError, match="computes logistic, hinge, not 'squared'"):
-        lstm_loss(x, torch.tensor([1]), y, *layers, loss="squared")
+        lstm_step(x, torch.tensor([1]), y, *layers, loss="squared")
 
 
 def test_warm_up_compiles_every_signature_training_and_scoring_use():

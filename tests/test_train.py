@@ -6,7 +6,14 @@ import pytest
 import torch
 
 from tactile_exp.models.losses import LOSSES
-from tactile_exp.train import resolve_device, seed_everything, sgd_epochs, validate_losses
+from tactile_exp.train import (
+    add_gradients,
+    autograd_step,
+    resolve_device,
+    seed_everything,
+    sgd_epochs,
+    validate_losses,
+)
 
 GOOD = dict(
     loss="hinge",
@@ -68,7 +75,7 @@ def test_sgd_epochs_lowers_the_loss_and_reports_each_epoch():
     layer = torch.nn.Linear(5, 1)
     reported = []
     curve = sgd_epochs(
-        lambda X, y, index: LOSSES["logistic"](layer(X[index]).squeeze(1), y[index]),
+        autograd_step(lambda X, y, index: LOSSES["logistic"](layer(X[index]).squeeze(1), y[index])),
         list(layer.parameters()),
         X,
         y,
@@ -93,7 +100,7 @@ def test_sgd_epochs_batch_larger_than_data_is_one_full_batch():
     before = loss(layer(X).squeeze(1), y)
     gw, gb = torch.autograd.grad(before, [layer.weight, layer.bias])
     curve = sgd_epochs(
-        lambda X, y, index: loss(layer(X[index]).squeeze(1), y[index]),
+        autograd_step(lambda X, y, index: loss(layer(X[index]).squeeze(1), y[index])),
         list(layer.parameters()),
         X,
         y,
@@ -123,3 +130,25 @@ def test_a_cuda_device_turns_tf32_off(monkeypatch):
     finally:
         for f, value in zip(flags, before, strict=True):
             f.fp32_precision = value
+
+
+def test_add_gradients_adds_as_autograds_backward_does():
+    """Where ``.grad`` is None the gradient is taken as it is (no copy: the step's own tensor),
+    else added in place; the sum equals autograd's accumulation of two backwards."""
+    torch.manual_seed(0)
+    layer = torch.nn.Linear(3, 1)
+    X, y = torch.randn(8, 3), torch.rand(8)
+    loss = LOSSES["logistic"]
+    params = list(layer.parameters())
+    first = torch.autograd.grad(loss(layer(X).squeeze(1), y), params)
+    second = torch.autograd.grad(loss(2 * layer(X).squeeze(1), y), params)
+    add_gradients(params, first)
+    assert all(p.grad is g for p, g in zip(params, first, strict=True))
+    kept = [g.clone() for g in first]
+    add_gradients(params, second)
+    layer.zero_grad()
+    loss(layer(X).squeeze(1), y).backward()
+    loss(2 * layer(X).squeeze(1), y).backward()
+    for p, a, b in zip(params, kept, second, strict=True):
+        assert p.grad.abs().max() > 0
+        torch.testing.assert_close(a + b, p.grad, rtol=0, atol=0)

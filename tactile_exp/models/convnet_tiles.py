@@ -39,7 +39,6 @@ from typing import NamedTuple
 
 import numpy as np
 import torch
-from torch.autograd.function import once_differentiable
 
 from tactile_exp.models.grouped_conv_numba import _in_parallel, conv_out_len
 from tactile_exp.models.linear_sgd import LOSSES, loss_slope
@@ -58,6 +57,7 @@ from tactile_exp.models.vector_tiles import (
     tap_sums,
     transpose_rows,
 )
+from tactile_exp.train import add_gradients
 
 TILE_LANES = WIDTH  # instances per tile, one vector: see the module docstring for wider tiles
 # Reassociation lets the reductions over lanes vectorise; no nnan/ninf, so NaNs propagate.
@@ -499,38 +499,7 @@ def train_step(
     return total / len(rows), [out[a:b].reshape(shape) for a, b, shape in plan.cuts]
 
 
-class TiledStep(torch.autograd.Function):
-    """The mean loss of a batch, its gradients computed with it by ``train_step`` and handed to
-    autograd (scaled by the loss's incoming gradient) in the backward."""
-
-    @staticmethod
-    def forward(ctx, X, rows, y, loss, groups, strides, head_weight, head_bias, *params):
-        value, grads = train_step(
-            X.numpy(),
-            rows.numpy(),
-            y.numpy(),
-            [p.detach().numpy() for p in params[0::2]],
-            [p.detach().numpy() for p in params[1::2]],
-            head_weight.detach().numpy(),
-            float(head_bias),
-            groups=groups,
-            strides=strides,
-            loss=loss,
-        )
-        ctx.grads = [torch.from_numpy(g) for g in grads]
-        return torch.tensor(value, dtype=torch.float32)
-
-    @staticmethod
-    @once_differentiable
-    def backward(ctx, grad):
-        *convs, grad_head, grad_bias = ctx.grads
-        del ctx.grads
-        if grad.item() != 1.0:  # x * 1 == x: the usual ``loss.backward()`` skips 8 products
-            *convs, grad_head, grad_bias = (g * grad for g in (*convs, grad_head, grad_bias))
-        return (None,) * 6 + (grad_head, grad_bias, *convs)
-
-
-def tiled_loss(
+def tiled_step(
     X: torch.Tensor,
     rows: torch.Tensor,
     y: torch.Tensor,
@@ -543,20 +512,27 @@ def tiled_loss(
     strides: Sequence[int],
 ) -> torch.Tensor:
     """``losses.LOSSES[loss](head(grouped_conv_stack(X[rows])).squeeze(1), y[rows])`` for float32
-    CPU ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, with its gradient: one
-    compiled pass per step (the rows read in place, each checked to lie in ``X``)."""
-    params = [p for pair in zip(weights, biases, strict=True) for p in pair]
-    return TiledStep.apply(
-        X.contiguous(),
-        rows.to(torch.int64).contiguous(),
-        y.to(torch.float32).contiguous(),
-        loss,
-        groups,
-        tuple(strides),
-        head.weight,
-        head.bias,
-        *params,
+    CPU ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, returned detached, its
+    gradients added to the parameters' ``.grad`` (``train.add_gradients``; ``X`` gets none): one
+    compiled pass per step (the rows read in place, each checked to lie in ``X``), with no
+    autograd graph around it. Through an autograd function, its apply and backward (cold after
+    the kernels) made a step 8% slower (0.5 ms of ~6.5, two threads, 50 steps of each interleaved
+    in one process, three processes; 2-core Xeon, 2026-11-28)."""
+    value, grads = train_step(
+        X.detach().contiguous().numpy(),
+        rows.to(torch.int64).contiguous().numpy(),
+        y.to(torch.float32).contiguous().numpy(),
+        [w.detach().numpy() for w in weights],
+        [b.detach().numpy() for b in biases],
+        head.weight.detach().numpy(),
+        float(head.bias.detach()),
+        groups=groups,
+        strides=strides,
+        loss=loss,
     )
+    params = [*(p for pair in zip(weights, biases, strict=True) for p in pair), *head.parameters()]
+    add_gradients(params, [torch.from_numpy(g) for g in grads])
+    return torch.tensor(value, dtype=torch.float32)
 
 
 def warm_up() -> None:
@@ -568,5 +544,5 @@ def warm_up() -> None:
     biases = [torch.zeros(4 * groups, requires_grad=True) for _ in weights]
     head = torch.nn.Linear(4 * groups * 5, 1)
     for loss in LOSSES:
-        tiled_loss(x, torch.arange(3), torch.tensor([0.0, 1.0, 1.0]), weights, biases, head,
-                   loss=loss, groups=groups, strides=(2, 2, 2)).backward()  # fmt: skip
+        tiled_step(x, torch.arange(3), torch.tensor([0.0, 1.0, 1.0]), weights, biases, head,
+                   loss=loss, groups=groups, strides=(2, 2, 2))  # fmt: skip

@@ -6,13 +6,14 @@ layers through numba kernels over a batch-innermost layout (``grouped_conv_numba
 magnitude faster on CPU; ``impl="torch"`` runs the plain ``F.conv1d(groups=...)``; ``impl="auto"``
 (default) picks compiled on CPU and torch on GPU (the kernels are CPU only). Both agree to float
 rounding (tests; ``bench/bench_haptic_cnn.py`` measures the speed). Training goes through
-``GroupedTemporalConvNet.batch_loss``, which compiled runs the whole step, the classification layer
-and the loss included, in tiles of instances that stay in cache (``convnet_tiles``).
+``GroupedTemporalConvNet.batch_step``, which compiled runs the whole step, the classification
+layer, the loss and the gradients included, in tiles of instances that stay in cache
+(``convnet_tiles``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,7 @@ from tactile_exp.models.losses import LOSSES
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import IMPLS, SGDModel
-from tactile_exp.train import caffe_xavier_
+from tactile_exp.train import Step, caffe_xavier_
 
 
 def _conv_out_len(length: int, kernel: int, stride: int) -> int:
@@ -94,18 +95,19 @@ class GroupedTemporalConvNet(nn.Module):
             self.impl == "auto" and x.device.type == "cpu" and not x.requires_grad
         )
 
-    def batch_loss(
+    def batch_step(
         self, x: torch.Tensor, y: torch.Tensor, head: nn.Linear, loss: str, rows: torch.Tensor
     ) -> torch.Tensor:
-        """``LOSSES[loss](head(self(x[rows])).squeeze(1), y[rows])``: the training step's loss.
-        Compiled, for a one-output ``head`` and a loss the tiled step computes, one pass
-        computes it and its gradients a tile of instances at a time in cache, reading the rows
-        in place (``convnet_tiles``)."""
+        """The training step (``train.sgd_epochs``): ``LOSSES[loss](head(self(x[rows]))
+        .squeeze(1), y[rows])``, returned detached, its gradients added to the ``.grad`` of this
+        net's and ``head``'s parameters. Compiled, for a one-output ``head`` and a loss the tiled
+        step computes, one pass computes both a tile of instances at a time in cache, reading
+        the rows in place (``convnet_tiles``); otherwise autograd."""
         if head.out_features == 1 and self._compiled(x):
             from tactile_exp.models import convnet_tiles  # numba: lazy
 
             if loss in convnet_tiles.LOSSES:
-                return convnet_tiles.tiled_loss(
+                return convnet_tiles.tiled_step(
                     x.float(),
                     rows,
                     y,
@@ -116,7 +118,9 @@ class GroupedTemporalConvNet(nn.Module):
                     groups=self.groups,
                     strides=self.strides,
                 )
-        return LOSSES[loss](head(self(x[rows])).squeeze(1), y[rows])
+        value = LOSSES[loss](head(self(x[rows])).squeeze(1), y[rows])
+        value.backward()
+        return value.detach()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self._compiled(x):
@@ -215,7 +219,5 @@ class HapticCNN(SGDModel):
         self.conv3_shape_ = net.out_shape
         return net, net.n_features
 
-    def _train_objective(
-        self, body: nn.Module, classifier: nn.Linear, loss: str
-    ) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
-        return lambda X, y, index: body.batch_loss(X, y, classifier, loss, index)
+    def _train_step(self, body: nn.Module, classifier: nn.Linear, loss: str) -> Step:
+        return lambda X, y, index: body.batch_step(X, y, classifier, loss, index)

@@ -15,11 +15,11 @@ import torch
 from torch import nn
 
 from tactile_exp.models.lstm_kernels import LOSSES as LSTM_LOSSES
-from tactile_exp.models.lstm_kernels import lstm_last_hidden, lstm_loss
+from tactile_exp.models.lstm_kernels import lstm_last_hidden, lstm_step
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import SGDModel
-from tactile_exp.train import caffe_xavier_
+from tactile_exp.train import Step, caffe_xavier_
 
 
 class LSTMBody(nn.Module):
@@ -102,17 +102,15 @@ class HapticLSTM(SGDModel):
     ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
         return lambda X, index: classifier(body(X, index)).squeeze(1)
 
-    def _train_objective(
-        self, body: nn.Module, classifier: nn.Linear, loss: str
-    ) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
+    def _train_step(self, body: nn.Module, classifier: nn.Linear, loss: str) -> Step:
         """Compiled, with a loss the step computes: one pass per batch through the recurrence,
-        both FC layers and the loss, each chunk's forward kept in cache for its backward
-        (``lstm_kernels.lstm_loss``); otherwise the loss on ``_train_scores``."""
+        both FC layers, the loss and back, each chunk's forward kept in cache for its backward
+        (``lstm_kernels.lstm_step``); otherwise the loss on ``_train_scores`` through autograd."""
         if body.impl == "compiled" and loss in LSTM_LOSSES:
-            return lambda X, y, index: lstm_loss(
+            return lambda X, y, index: lstm_step(
                 X, index, y, body.lstm, body.fc, classifier, loss=loss
             )
-        return super()._train_objective(body, classifier, loss)
+        return super()._train_step(body, classifier, loss)
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
         impl = self.impl

@@ -9,7 +9,7 @@ and writes is one contiguous block of each array. The forward runs step by step,
 projection, recurrence and cell update on data in L1. The backward sums the weight gradient step by
 step as it goes (a step's inputs times its gate gradients, ~20 KB, in L1), not over the whole chunk
 at the end (~3 MB of operands). Chunks run in parallel on numba's threads. A training step runs a
-chunk at a time through everything (``lstm_loss``: the recurrence, both FC layers, each instance's
+chunk at a time through everything (``lstm_step``: the recurrence, both FC layers, each instance's
 loss and back through all of it), so the backward reads the chunk's forward from cache: nothing
 outlives the chunk and nothing runs twice (1.71x faster than the autograd path below,
 bench/bench_roofline.py --before, two threads). It keeps only the current step's gate gradients (the
@@ -92,6 +92,7 @@ from tactile_exp.models.vector_tiles import (
     transpose_rows,
     transpose_tile,
 )
+from tactile_exp.train import add_gradients
 
 # error_model="numpy": no ZeroDivisionError check inside the loops, which blocks vectorisation.
 _JIT = dict(fastmath=True, error_model="numpy", cache=True)
@@ -579,47 +580,7 @@ def lstm_last_hidden(
     return LSTMLastHidden.apply(x, rows, *params)
 
 
-class LSTMStep(torch.autograd.Function):
-    """The mean loss of a batch through LSTM -> FC + ReLU -> FC(1), its gradients computed with
-    it by ``_train`` and handed to autograd (scaled by the loss's incoming gradient) in the
-    backward."""
-
-    @staticmethod
-    def forward(ctx, x, rows, y, loss, *params):  # type: ignore[override]
-        (G, H), F = params[1].shape, params[4].shape[0]  # weight_hh, the FC layer's weight
-        n_chunks = (len(rows) + CHUNK - 1) // CHUNK
-        K_pad, G_pad = _padded(x.shape[1] + H, G)
-        d_wt = np.empty((n_chunks, K_pad, G_pad), np.float32)
-        d_fc = np.empty((n_chunks, F, H + 1), np.float32)
-        d_out = np.empty((n_chunks, F + 1), np.float32)
-        losses = np.empty(n_chunks, np.float32)
-        sizes = [p.numel() for p in params]
-        grads = np.empty(sum(sizes), np.float32)
-        arrays = _activations(len(rows), x.shape[2], x.shape[1] + H, G)
-        w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w, out_b = (p.detach().numpy() for p in params)
-        total = _train(
-            x.detach().numpy(), rows.numpy(), y.numpy(), w_ih, w_hh, b_ih, b_hh, fc_w, fc_b,
-            out_w.reshape(-1), out_b, loss == "hinge", d_wt, d_fc, d_out, losses, *arrays,
-            _gate_gradients(len(arrays[0]), 1, G, G_pad), grads,
-        )  # fmt: skip
-        # one tensor per parameter (autograd then takes it as ``.grad`` without a copy)
-        ends = itertools.accumulate(sizes)
-        ctx.grads = [
-            torch.from_numpy(grads[end - size : end].reshape(p.shape))
-            for end, size, p in zip(ends, sizes, params, strict=True)
-        ]
-        return torch.tensor(total / len(rows), dtype=torch.float32)
-
-    @staticmethod
-    def backward(ctx, grad):  # type: ignore[override]
-        grads = ctx.grads
-        del ctx.grads
-        if grad.item() != 1.0:  # x * 1 == x: the usual ``loss.backward()`` skips 8 products
-            grads = [g * grad for g in grads]
-        return (None, None, None, None, *grads)
-
-
-def lstm_loss(
+def lstm_step(
     x: torch.Tensor,
     rows: torch.Tensor,
     y: torch.Tensor,
@@ -631,19 +592,38 @@ def lstm_loss(
 ) -> torch.Tensor:
     """``losses.LOSSES[loss](out(fc(h_T).relu()).squeeze(1), y[rows])``, h_T the last hidden state
     of ``lstm`` over ``x[rows]`` (float32 CPU (n, C, T), 0/1 labels ``y``), to float rounding,
-    with its gradient: one compiled pass per step, each chunk's forward kept in cache for its
-    backward."""
+    returned detached, its gradients added to the parameters' ``.grad``
+    (``train.add_gradients``; ``x`` gets none): one compiled pass per step, each chunk's forward
+    kept in cache for its backward, with no autograd graph around it (as the ConvNet's
+    ``convnet_tiles.tiled_step``)."""
     if loss not in LOSSES:
         raise ValueError(f"the compiled LSTM step computes {', '.join(LOSSES)}, not {loss!r}")
     if x.device.type != "cpu" or x.dtype != torch.float32:
         raise ValueError(f"compiled LSTM: expects float32 CPU input, got {x.dtype} on {x.device}")
-    rows = rows.to(torch.int64).contiguous()  # each checked to lie in ``x`` by ``_train``
-    params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
     ensure_compiled(__name__)
-    return LSTMStep.apply(
-        x.contiguous(), rows, y.to(torch.float32).contiguous(), loss, *params, fc.weight,
-        fc.bias, out.weight, out.bias,
+    params = (lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0, fc.weight,
+              fc.bias, out.weight, out.bias)  # fmt: skip
+    (G, H), F = params[1].shape, params[4].shape[0]  # weight_hh, the FC layer's weight
+    rows = rows.to(torch.int64).contiguous()  # each checked to lie in ``x`` by ``_train``
+    n_chunks = (len(rows) + CHUNK - 1) // CHUNK
+    K_pad, G_pad = _padded(x.shape[1] + H, G)
+    d_wt = np.empty((n_chunks, K_pad, G_pad), np.float32)
+    d_fc = np.empty((n_chunks, F, H + 1), np.float32)
+    d_out = np.empty((n_chunks, F + 1), np.float32)
+    losses = np.empty(n_chunks, np.float32)
+    sizes = [p.numel() for p in params]
+    grads = np.empty(sum(sizes), np.float32)
+    arrays = _activations(len(rows), x.shape[2], x.shape[1] + H, G)
+    w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w, out_b = (p.detach().numpy() for p in params)
+    total = _train(
+        x.detach().contiguous().numpy(), rows.numpy(), y.to(torch.float32).contiguous().numpy(),
+        w_ih, w_hh, b_ih, b_hh, fc_w, fc_b, out_w.reshape(-1), out_b, loss == "hinge", d_wt, d_fc,
+        d_out, losses, *arrays, _gate_gradients(len(arrays[0]), 1, G, G_pad), grads,
     )  # fmt: skip
+    ends = itertools.accumulate(sizes)  # one tensor per parameter, taken as its ``.grad``
+    add_gradients(params, [torch.from_numpy(grads[end - size : end].reshape(p.shape))
+                           for end, size, p in zip(ends, sizes, params, strict=True)])  # fmt: skip
+    return torch.tensor(total / len(rows), dtype=torch.float32)
 
 
 def warm_up() -> None:
@@ -657,4 +637,4 @@ def warm_up() -> None:
     lstm_last_hidden(x.requires_grad_(), lstm).sum().backward()
     fc, out, y = torch.nn.Linear(2, 3), torch.nn.Linear(3, 1), torch.tensor([0.0, 1.0, 1.0])
     for loss in LOSSES:
-        lstm_loss(x.detach(), torch.tensor([0, 2, 4]), y, lstm, fc, out, loss=loss).backward()
+        lstm_step(x.detach(), torch.tensor([0, 2, 4]), y, lstm, fc, out, loss=loss)

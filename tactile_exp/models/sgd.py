@@ -46,6 +46,8 @@ from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.scratch import on_huge_pages
 from tactile_exp.train import (
+    Step,
+    autograd_step,
     caffe_xavier_,
     resolve_device,
     seed_everything,
@@ -140,13 +142,12 @@ class SGDModel(Model):
         overrides it."""
         return lambda X, index: classifier(body(X[index])).squeeze(1)
 
-    def _train_objective(
-        self, body: nn.Module, classifier: nn.Linear, loss: str
-    ) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
-        """Stage 1's mean loss of a batch, (X, y, batch's row index) -> loss: ``loss`` on
-        ``_train_scores``; a body that computes the loss with its scores overrides it."""
+    def _train_step(self, body: nn.Module, classifier: nn.Linear, loss: str) -> Step:
+        """Stage 1's step on a batch (``train.sgd_epochs``): ``loss`` on ``_train_scores``
+        through autograd; a body that computes the loss and its gradients in one pass overrides
+        it."""
         scores, loss_fn = self._train_scores(body, classifier), LOSSES[loss]
-        return lambda X, y, index: loss_fn(scores(X, index), y[index])
+        return autograd_step(lambda X, y, index: loss_fn(scores(X, index), y[index]))
 
     def _tensor(self, X: np.ndarray, *, training: bool = False) -> torch.Tensor:
         """``X`` preprocessed, as the body takes it; a training set on the CPU is copied onto
@@ -235,7 +236,7 @@ class SGDModel(Model):
             )
         else:
             train_loss = sgd_epochs(
-                self._train_objective(body_, classifier_, stage1_loss),
+                self._train_step(body_, classifier_, stage1_loss),
                 [*body_.parameters(), *classifier_.parameters()],
                 Xt,
                 yt,
@@ -282,7 +283,9 @@ class SGDModel(Model):
                 return linear_sgd.linear_sgd_epochs(self.classifier_, F, y, loss=loss, **schedule)
         loss_fn, layer = LOSSES[loss], self.classifier_
         return sgd_epochs(
-            lambda features, y, index: loss_fn(layer(features[index]).squeeze(1), y[index]),
+            autograd_step(
+                lambda features, y, index: loss_fn(layer(features[index]).squeeze(1), y[index])
+            ),
             list(self.classifier_.parameters()),
             F,
             y,
