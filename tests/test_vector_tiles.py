@@ -463,3 +463,23 @@ def test_pairwise_sum_is_numpys_sum_to_the_bit():
     assert differs > 100
     minus = np.full(9, -0.0, np.float32)
     assert np.float32(vt.pairwise_sum(minus, np.float32(0))).tobytes() == minus.sum().tobytes()
+
+
+@numba.njit
+def _borrowed_sum_and_fill(a, value):
+    view = vt.borrowed(a)
+    total = view.sum()
+    part = view[1:]  # a slice of a borrowed array, passed on
+    part[:] = value
+    return total, view.shape[0], view.strides[0]
+
+
+def test_borrowed_is_the_same_array_without_an_owner():
+    """A borrowed array reads the same data with the same shape and strides, and writes land
+    in the original (a view of it); anything but an array is refused when compiled."""
+    a = np.arange(10, dtype=np.float32)[::2]  # strided: the strides are carried over
+    total, length, stride = _borrowed_sum_and_fill(a, np.float32(7.0))
+    assert (total, length, stride) == (20.0, 5, 8)
+    assert a.tolist() == [0.0, 7.0, 7.0, 7.0, 7.0]
+    with pytest.raises(TypingError, match="borrowed: expects an array"):
+        numba.njit(lambda x: vt.borrowed(x))(1.0)

@@ -51,6 +51,7 @@ from tactile_exp.models.vector_tiles import (
     RELU,
     ROWS,
     WIDTH,
+    borrowed,
     head_backward,
     pairwise_sum,
     tap_dots,
@@ -177,8 +178,10 @@ def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, b
     tuples once, here, and each layer's pass is a helper called with its arrays: an array taken from
     a tuple at a layer known only at run time, or a view made in the loops, costs numba two atomic
     reference counts each time. Against loops over the layers that took them so, a step 3-6% faster
-    on one thread, as fast on two (a process per version, alternating, 6 to 10 pairs, 2026-11-27);
-    the helpers' array arguments still cost ~5% of a step in reference counts (a profile). The
+    on one thread, as fast on two (a process per version, alternating, 6 to 10 pairs, 2026-11-27).
+    The helpers' array arguments cost ~5% of a step in reference counts (a profile), now borrowed:
+    a step 3% faster on one thread (5 pairs, median ratio 0.97), 1.6% on two (10 pairs, 0.984,
+    range 0.94-1.01; 2026-11-28). The
     classification layer runs on register tiles too: its forward a ``tap_sums`` over its (channel,
     step) taps (one row of weights, computed as ``ROWS`` equal rows: 4x the multiplies, still ~3x
     faster than numba's loop over the lanes); its backward, per group, a ``head_backward`` (its
@@ -191,21 +194,30 @@ def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, b
     one thread 6 pairs, 0.98, 0.93-1.06; 2026-11-28)."""
     lanes, n_batch = acts[0].shape[3], len(rows)
     scale = np.float32(1.0) / np.float32(n_batch)  # the mean's gradient
+    # Every array the tiles' loops pass on, borrowed (``vector_tiles.borrowed``): no atomic
+    # reference counts, most on arrays the other threads share.
+    X, rows, y, geo, hw = borrowed(X), borrowed(rows), borrowed(y), borrowed(geo), borrowed(hw)
+    jtaps, htaps, zeros = borrowed(jtaps), borrowed(htaps), borrowed(zeros)
+    ghb, losses, partial, gs = borrowed(ghb), borrowed(losses), borrowed(partial), borrowed(gs)
     c3, t3 = geo[2, 4], geo[2, 6]
     tp3, head = t3 + 2 * pad, c3 * t3  # the last activation's rows per channel, the head's taps
-    a0, a1, a2, a3 = flat_acts
-    w0, w1, w2 = ws
-    b0, b1, b2 = bs
-    t0, t1, t2 = ftaps
-    d0, d1, d2 = grads
-    gw0, gw1, gw2 = shares[0].reshape(-1), shares[1].reshape(-1), shares[2].reshape(-1)
-    gb0, gb1, gb2 = shares[3].reshape(-1), shares[4].reshape(-1), shares[5].reshape(-1)
-    ghw = shares[6].reshape(-1)
-    bw1, bw2, bt1, bt2, bc1, bc2 = bwts[1], bwts[2], btaps[1], btaps[2], bcount[1], bcount[2]
+    x0 = borrowed(acts[0])
+    a0, a1 = borrowed(flat_acts[0]), borrowed(flat_acts[1])
+    a2, a3 = borrowed(flat_acts[2]), borrowed(flat_acts[3])
+    w0, w1, w2 = borrowed(ws[0]), borrowed(ws[1]), borrowed(ws[2])
+    b0, b1, b2 = borrowed(bs[0]), borrowed(bs[1]), borrowed(bs[2])
+    t0, t1, t2 = borrowed(ftaps[0]), borrowed(ftaps[1]), borrowed(ftaps[2])
+    d0, d1, d2 = borrowed(grads[0]), borrowed(grads[1]), borrowed(grads[2])
+    gw0, gw1 = borrowed(shares[0].reshape(-1)), borrowed(shares[1].reshape(-1))
+    gw2, gb0 = borrowed(shares[2].reshape(-1)), borrowed(shares[3].reshape(-1))
+    gb1, gb2 = borrowed(shares[4].reshape(-1)), borrowed(shares[5].reshape(-1))
+    ghw = borrowed(shares[6].reshape(-1))
+    bw1, bw2, bt1 = borrowed(bwts[1]), borrowed(bwts[2]), borrowed(btaps[1])
+    bt2, bc1, bc2 = borrowed(btaps[2]), borrowed(bcount[1]), borrowed(bcount[2])
     for tile in range(start, stop):
         m0 = tile * lanes
         n = min(lanes, n_batch - m0)
-        _gather(X, rows, m0, n, groups, pad, acts[0])
+        _gather(X, rows, m0, n, groups, pad, x0)
         for g in range(groups):
             _conv_forward(geo, 0, pad, lanes, g, w0, b0, t0, a0, a1)
             _conv_forward(geo, 1, pad, lanes, g, w1, b1, t1, a1, a2)

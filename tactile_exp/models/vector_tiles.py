@@ -95,6 +95,28 @@ def _data(context, builder, ty, value):
 _VEC = ir.VectorType(ir.FloatType(), WIDTH)  # the vector type of every tile
 
 
+@intrinsic
+def borrowed(typingctx, array):  # noqa: ARG001
+    """``array`` with no owner: the same data, shape and strides, a null meminfo. numba counts
+    a reference each time an array is bound to a new name (a helper's argument, an unpacked
+    tuple, a slice), an atomic add on its meminfo, and on an array both threads read the two
+    cores pass that cache line back and forth; a borrowed array's counts only test for null.
+    For a kernel whose caller keeps ``array`` alive while it runs."""
+    if not isinstance(array, types.Array):
+        raise TypingError(f"borrowed: expects an array, got {array}")
+
+    def codegen(context, builder, signature, args):
+        source = context.make_array(signature.args[0])(context, builder, args[0])
+        view = context.make_array(signature.return_type)(context, builder)
+        for field in ("data", "shape", "strides", "itemsize", "nitems"):
+            setattr(view, field, getattr(source, field))
+        view.meminfo = cgutils.get_null_value(view.meminfo.type)
+        view.parent = cgutils.get_null_value(view.parent.type)
+        return view._getvalue()
+
+    return array(array), codegen
+
+
 def _fma(builder):
     """``llvm.fma`` on vectors: a * b + c with one rounding per lane."""
     signature = ir.FunctionType(_VEC, [_VEC, _VEC, _VEC])
