@@ -82,7 +82,9 @@ def validate_losses(*, loss: str, pretrain_loss: str | None, known_losses: Colle
 Step = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
 
 
-def autograd_step(loss_of: Step) -> Step:
+def autograd_step(
+    loss_of: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor],
+) -> Step:
     """The step of a loss autograd differentiates: ``loss_of(X, y, index)`` and its backward."""
 
     def step(X: torch.Tensor, y: torch.Tensor, index: torch.Tensor) -> torch.Tensor:

@@ -527,9 +527,10 @@ def tiled_step(
     CPU ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, returned detached, its
     gradients added to the parameters' ``.grad`` (``train.add_gradients``; ``X`` gets none): one
     compiled pass per step (the rows read in place, each checked to lie in ``X``), with no
-    autograd graph around it. Through an autograd function, its apply and backward (cold after
-    the kernels) made a step 8% slower (0.5 ms of ~6.5, two threads, 50 steps of each interleaved
-    in one process, three processes; 2-core Xeon, 2026-11-28)."""
+    autograd graph around it: through an autograd function, its apply and backward (cold after
+    the kernels) took 0.5 ms more of a ~6.5 ms step (two threads, 50 steps each way alternating
+    in one process, three processes), and bench/bench_roofline.py --before, its steps back to
+    back, gave the step without it 1.03x faster (2-core Xeon, 2026-11-28)."""
     value, grads = train_step(
         X.detach().contiguous().numpy(),
         rows.to(torch.int64).contiguous().numpy(),
