@@ -179,19 +179,19 @@ def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, b
     a tuple at a layer known only at run time, or a view made in the loops, costs numba two atomic
     reference counts each time. Against loops over the layers that took them so, a step 3-6% faster
     on one thread, as fast on two (a process per version, alternating, 6 to 10 pairs, 2026-11-27).
-    The helpers' array arguments cost ~5% of a step in reference counts (a profile), now borrowed:
-    a step 3% faster on one thread (5 pairs, median ratio 0.97), 1.6% on two (10 pairs, 0.984,
-    range 0.94-1.01; 2026-11-28). The
-    classification layer runs on register tiles too: its forward a ``tap_sums`` over its (channel,
-    step) taps (one row of weights, computed as ``ROWS`` equal rows: 4x the multiplies, still ~3x
-    faster than numba's loop over the lanes); its backward, per group, a ``head_backward`` (its
-    weights' gradient, the lanes of ``WIDTH`` sums added by one shuffle tree, and the last layer's
-    output gradient through the ReLU). Against numba's loops, one thread, batch 1000: 1.2 -> 0.6 ms
-    a step for the layer, the step 3-4% faster (a process per version, alternating, one thread 8
-    pairs, median ratio 0.96, range 0.86-1.01; two threads 18 pairs, 0.97, 0.82-1.05; 2026-11-27).
-    Against a ``tap_dots`` and a gated ``tap_sums`` per step (the same bits): the step 1-2% faster
-    (a process per version, alternating: two threads 10 pairs, median ratio 0.987, range 0.94-1.05;
-    one thread 6 pairs, 0.98, 0.93-1.06; 2026-11-28)."""
+    The helpers take borrowed arrays (``vector_tiles.borrowed``): their reference counts cost ~5% of
+    a step (a profile); borrowed, a step is 3% faster on one thread (5 pairs, median ratio 0.97),
+    1.6% on two (10 pairs, 0.984, range 0.94-1.01; 2026-11-28). The classification layer runs on
+    register tiles too: its forward a ``tap_sums`` over its (channel, step) taps (one row of
+    weights, computed as ``ROWS`` equal rows: 4x the multiplies, still ~3x faster than numba's loop
+    over the lanes); its backward, per group, a ``head_backward`` (its weights' gradient, the lanes
+    of ``WIDTH`` sums added by one shuffle tree, and the last layer's output gradient through the
+    ReLU). Against numba's loops, one thread, batch 1000: 1.2 -> 0.6 ms a step for the layer, the
+    step 3-4% faster (a process per version, alternating, one thread 8 pairs, median ratio 0.96,
+    range 0.86-1.01; two threads 18 pairs, 0.97, 0.82-1.05; 2026-11-27). Against a ``tap_dots`` and
+    a gated ``tap_sums`` per step (the same bits): the step 1-2% faster (a process per version,
+    alternating: two threads 10 pairs, median ratio 0.987, range 0.94-1.05; one thread 6 pairs,
+    0.98, 0.93-1.06; 2026-11-28)."""
     lanes, n_batch = acts[0].shape[3], len(rows)
     scale = np.float32(1.0) / np.float32(n_batch)  # the mean's gradient
     # Every array the tiles' loops pass on, borrowed (``vector_tiles.borrowed``): no atomic
