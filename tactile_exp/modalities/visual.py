@@ -171,9 +171,10 @@ class Visual(Modality):
 
         return tuple(round(float(m), 4) for m in LAYOUT_MEAN_RGB[self.layout])
 
-    def photographs(self, trials: Trials) -> np.ndarray:
-        """Rows (of the data set's photograph arrays) of ``trials``' objects, in view order."""
-        arrays = self.trunk(trials.dataset).arrays
+    @staticmethod
+    def _rows(arrays: Any, trials: Trials) -> np.ndarray:
+        """The rows of ``arrays`` (``trunk(dataset).arrays``, passed in: each ``trunk`` call lists
+        the photograph folder) that hold ``trials``' objects' photographs, in view order."""
         rows = []
         for obj in sorted(trials.objects):
             views = np.flatnonzero(arrays.object_id == obj)
@@ -192,14 +193,14 @@ class Visual(Modality):
         else:
             arrays = self.trunk(trials.dataset).arrays
             self.mean_ = tuple(
-                round(float(m), 4) for m in arrays.channel_mean(self.photographs(trials))
+                round(float(m), 4) for m in arrays.channel_mean(self._rows(arrays, trials))
             )
         return self
 
     def transform(self, trials: Trials) -> Instances:
         trunk = self.trunk(trials.dataset)
         arrays = trunk.arrays
-        rows = self.photographs(trials)
+        rows = self._rows(arrays, trials)
         obj = arrays.object_id[rows]
         labels = trials.object_labels()
         y = np.array([labels[o] for o in obj], dtype=np.int64)
