@@ -151,30 +151,24 @@ def _one_torch_thread() -> Iterator[None]:
         torch.set_num_threads(threads)
 
 
-def _product_on_one_thread(a: torch.Tensor, b: torch.Tensor, out: torch.Tensor) -> None:
-    """``out = a @ b`` on this thread alone. A thread that a pool starts runs its BLAS on the
-    process's default thread count (OMP_NUM_THREADS, else every core), not on its caller's
-    (``_one_torch_thread``), and MKL's sums depend on that count: left so, row M's Gram matrix
-    differs in its last bits between a job on two threads and one on one, and three of the
-    row's 24 AUCs with it (2-core Xeon, 2026-11-28)."""
-    torch.set_num_threads(1)
-    torch.matmul(a, b, out=out)
-
-
 _LAST_GRAM: list[tuple[weakref.ref, int, np.ndarray]] = []  # (features tensor, its version, G)
 
 
 def _gram(X: torch.Tensor, rows: torch.Tensor) -> np.ndarray:
     """G = rows rows^T for the float32 ``rows`` of the features tensor ``X``: the two halves of
-    its rows on two threads, each product on one BLAS thread (``_product_on_one_thread``). Kept
+    its rows on two threads, each product on one BLAS thread (see ``_one_torch_thread``). Kept
     for the next call on the same ``X`` while it lives unmodified (torch's version counter)."""
     if _LAST_GRAM and _LAST_GRAM[0][0]() is X and _LAST_GRAM[0][1] == X._version:
         return _LAST_GRAM[0][2]
     n = len(rows)
     G = torch.empty(n, n)
     halves = (slice(0, n // 2), slice(n // 2, n))
-    with ThreadPoolExecutor(2) as pool:
-        for done in [pool.submit(_product_on_one_thread, rows[h], rows.T, G[h]) for h in halves]:
+    # A pool's thread runs its BLAS on the process's default thread count (OMP_NUM_THREADS, else
+    # every core), not on the caller's: left so, row M's Gram matrix differs in its last bits
+    # between a job on two threads and one on one, and three of the row's 24 AUCs with it
+    # (2-core Xeon, 2026-11-28). Each thread sets its own count to one as it starts.
+    with ThreadPoolExecutor(2, initializer=torch.set_num_threads, initargs=(1,)) as pool:
+        for done in [pool.submit(torch.matmul, rows[h], rows.T, out=G[h]) for h in halves]:
             done.result()
     _LAST_GRAM[:] = [(weakref.ref(X), X._version, G.numpy())]
     return _LAST_GRAM[0][2]
