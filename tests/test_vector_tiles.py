@@ -31,10 +31,9 @@ def _tap_sums(w, x, taps, count, out, out_step, bias, lanes, mode, gate):
 
 
 @numba.njit
-def _tap_dots(d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc, acc_at, acc_row,
-              lanes, own, own_at):  # fmt: skip
+def _tap_dots(d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc, acc_at, own):
     vt.tap_dots(d.reshape(-1), d_at, d_row, d_step, x.reshape(-1), x_at, taps, count, x_step,
-                steps, acc.reshape(-1), acc_at, acc_row, lanes, own, own_at)  # fmt: skip
+                steps, acc.reshape(-1), acc_at, own)  # fmt: skip
 
 
 @numba.njit
@@ -218,43 +217,40 @@ def test_tap_sums_are_the_same_at_every_vector_width():
 
 
 @pytest.mark.parametrize("count", range(1, vt.DOT_TAPS + 1))
-def test_tap_dots_add_each_rows_dot_products_with_each_taps_rows(count):
+def test_tap_dots_store_each_rows_dot_products_with_each_taps_rows(count):
     """Four gradient rows (every 3rd step of a (rows, steps, lanes) block) against the input
-    rows of ``count`` taps (stride 2 in steps), over 2 vectors of lanes of 3: added to what the
-    accumulator holds, nothing else written; and, where asked, the rows' own sums (a bias's
-    gradient) beside them, to the bit what the products with a row of ones give."""
+    rows of ``count`` taps (stride 2 in steps), over the first vector of lanes of 3: stored
+    together, row by row, nothing past them written; and, where asked, the rows' own sums (a
+    bias's gradient) after them, to the bit what the products with a row of ones give."""
     rng = np.random.default_rng(count)
-    lanes, width, steps = 2 * vt.WIDTH, 3 * vt.WIDTH, 7
+    width, steps = 3 * vt.WIDTH, 7
     d = rng.standard_normal((vt.ROWS, 3 * steps, width), dtype=np.float32)
     x = rng.standard_normal((2 * steps + 9, width), dtype=np.float32)
     taps = np.array([5, 0, 8, 2, 1, 3][:count], np.int64) * width  # the taps' first rows
-    acc = rng.standard_normal((vt.ROWS + 1, 9), dtype=np.float32)
+    products, summed = vt.ROWS * count, vt.ROWS * (count + 1)
+    acc = rng.standard_normal(summed + 2, dtype=np.float32)
     before = acc.copy()
-    sums = rng.standard_normal(vt.ROWS + 2, dtype=np.float32)
-    sums_before = sums.copy()
-    _tap_dots(d, 0, d.shape[1] * width, 3 * width, x, 0, taps, count, 2 * width, steps, acc,
-              9 + 1, 9, lanes, sums, -1)  # fmt: skip
-    np.testing.assert_array_equal(sums, sums_before)  # no row sums asked for: untouched
-    acc[...] = before
-    _tap_dots(d, 0, d.shape[1] * width, 3 * width, x, 0, taps, count, 2 * width, steps, acc,
-              9 + 1, 9, lanes, sums, 1)  # fmt: skip
-    # the rows' own sums: the products' with a row of ones for input, to the bit
-    ones, row_sums = np.ones((1, width), np.float32), sums_before.copy()
-    _tap_dots(d, 0, d.shape[1] * width, 3 * width, ones, 0, np.zeros(1, np.int64), 1, 0, steps,
-              row_sums, 1, 1, lanes, sums, -1)  # fmt: skip
-    np.testing.assert_array_equal(sums, row_sums)
-    np.testing.assert_array_equal(sums[[0, -1]], sums_before[[0, -1]])  # only rows 1 to 4
-    own = d[:, 3 * np.arange(steps), :lanes].astype(np.float64).sum(axis=(1, 2))
-    np.testing.assert_allclose(sums[1:-1], sums_before[1:-1] + own, rtol=1e-5, atol=1e-5)
-    expected = before.astype(np.float64)
+    _tap_dots(d, 0, d.shape[1] * width, 3 * width, x, 0, taps, count, 2 * width, steps, acc, 1, 0)
+    np.testing.assert_array_equal(acc[[0, *range(1 + products, len(acc))]],
+                                  before[[0, *range(1 + products, len(acc))]])  # fmt: skip
+    expected = np.zeros((vt.ROWS, count))
     for r in range(vt.ROWS):
         for q in range(count):
-            rows = x[taps[q] // width + 2 * np.arange(steps), :lanes].astype(np.float64)
-            expected[1 + r, 1 + q] += (d[r, 3 * np.arange(steps), :lanes] * rows).sum()
-    np.testing.assert_allclose(acc, expected, rtol=1e-5, atol=1e-5)
-    untouched = np.ones_like(acc, bool)
-    untouched[1:, 1 : 1 + count] = False
-    np.testing.assert_array_equal(acc[untouched], before[untouched])
+            rows = x[taps[q] // width + 2 * np.arange(steps), : vt.WIDTH].astype(np.float64)
+            expected[r, q] = (d[r, 3 * np.arange(steps), : vt.WIDTH] * rows).sum()
+    np.testing.assert_allclose(acc[1 : 1 + products], expected.ravel(), rtol=1e-5, atol=1e-5)
+    alone = acc[1 : 1 + products].copy()
+    acc[...] = before
+    _tap_dots(d, 0, d.shape[1] * width, 3 * width, x, 0, taps, count, 2 * width, steps, acc, 1, 1)
+    np.testing.assert_array_equal(acc[1 : 1 + products], alone)  # the same products beside
+    np.testing.assert_array_equal(acc[[0, -1]], before[[0, -1]])
+    # the rows' own sums: the products' with a row of ones for input, to the bit
+    ones, row_sums = np.ones((1, width), np.float32), np.zeros(vt.ROWS, np.float32)
+    _tap_dots(d, 0, d.shape[1] * width, 3 * width, ones, 0, np.zeros(1, np.int64), 1, 0, steps,
+              row_sums, 0, 0)  # fmt: skip
+    np.testing.assert_array_equal(acc[1 + products : 1 + summed], row_sums)
+    own = d[:, 3 * np.arange(steps), : vt.WIDTH].astype(np.float64).sum(axis=(1, 2))
+    np.testing.assert_allclose(row_sums, own, rtol=1e-5, atol=1e-5)
 
 
 @numba.njit
@@ -266,12 +262,12 @@ def _head_backward(w, x, y, rows, row_step, steps, out, acc, pad):
 def _head_backward_per_step(w, x, y, rows, row_step, steps, out, acc, pad):
     """What ``head_backward`` replaces: per step, a ``tap_dots`` and a gated ``tap_sums``."""
     taps, zeros = np.zeros(1, np.int64), np.zeros(vt.ROWS, np.float32)
+    four = np.zeros(vt.ROWS, np.float32)  # a call's sums, one per row
     for r in range(0, rows, vt.ROWS):
         for s in range(steps):
             o = pad + r * row_step + s * vt.WIDTH
-            acc[1 + r * steps + s : 1 + (r + vt.ROWS) * steps : steps] = 0
-            vt.tap_dots(y, o, row_step, 0, x, 0, taps, 1, 0, 1, acc, 1 + r * steps + s, steps,
-                        vt.WIDTH, acc, -1)  # fmt: skip
+            vt.tap_dots(y, o, row_step, 0, x, 0, taps, 1, 0, 1, four, 0, 0)
+            acc[1 + r * steps + s : 1 + (r + vt.ROWS) * steps : steps] = four
             vt.tap_sums(w, r * steps + s, steps, 1, x, 0, taps, 1, out, o, row_step, zeros, 0, 1,
                         vt.WIDTH, vt.WIDTH, vt.GATED, y)  # fmt: skip
 
@@ -407,7 +403,7 @@ def test_tiles_refuse_arrays_they_cannot_address():
     with pytest.raises(TypingError, match="taps must be an int64 array"):
         _tap_sums(w, x, order.astype(np.int32), 1, out, x.shape[1], bias, vt.WIDTH, vt.PLAIN, out)
     with pytest.raises(TypingError, match="tap_dots: taps must be an int64 array"):
-        _tap_dots(w, 0, 1, 1, x, 0, order.astype(np.int32), 1, 1, 1, out, 0, 1, vt.WIDTH, out, -1)
+        _tap_dots(w, 0, 1, 1, x, 0, order.astype(np.int32), 1, 1, 1, out, 0, 0)
 
 
 @pytest.mark.parametrize(

@@ -115,26 +115,24 @@ def _conv_forward(geo, layer, pad, lanes, g, w, b, taps, fin, fout):  # pragma: 
 
 
 @numba.njit(inline="always", **_JIT)
-def _conv_backward(geo, layer, pad, lanes, g, at, fin, fd, fdin, gw, gb, bw, btaps, bcount, jtaps,
+def _conv_backward(geo, layer, pad, lanes, g, at, fin, fd, fdin, gp, bw, btaps, bcount, jtaps,
                    zeros):  # fmt: skip  # pragma: no cover (compiled)
     """Convolution ``layer`` of group ``g`` backward from its output's gradient ``fd`` (ReLU's
-    backward applied): its weights' and biases' gradients into ``gw`` and ``gb`` (flat, this
-    group's at ``at`` x their size) and, but for the first layer, its input's gradient through
-    the ReLU before it into ``fdin``. ``fin``: the layer's input for every group, flat."""
+    backward applied): its weights' and biases' gradients into ``gp`` (flat, this group's at
+    ``at`` x their size, in the order ``_dots_order`` gives) and, but for the first layer, its
+    input's gradient through the ReLU before it into ``fdin``. ``fin``: the layer's input for
+    every group, flat."""
     k, s, left, cin, cout = _shape(geo, layer)
     tpi, tpo, steps = geo[layer, 5] + 2 * pad, geo[layer, 6] + 2 * pad, geo[layer, 6]
-    at_in, at_gw, at_gb = g * cin * tpi * lanes, at * cout * cin * k, at * cout
-    for q in range(cout * cin * k):
-        gw[at_gw + q] = 0.0
-    for q in range(cout):
-        gb[at_gb + q] = 0.0
+    at_in, at_gp = g * cin * tpi * lanes, at * cout * (cin * k + 1)
     for e in range(0, cout, ROWS):
         for i in range(cin):
             for j in range(0, k, DOT_TAPS):  # the bias's gradient with the first taps'
+                taps, own = min(DOT_TAPS, k - j), 1 if i == 0 and j == 0 else 0
                 tap_dots(fd, (e * tpo + pad) * lanes, tpo * lanes, lanes, fin,
-                         at_in + (i * tpi + pad - left + j) * lanes, jtaps, min(DOT_TAPS, k - j),
-                         s * lanes, steps, gw, at_gw + (e * cin + i) * k + j, cin * k, lanes, gb,
-                         at_gb + e if i == 0 and j == 0 else -1)  # fmt: skip
+                         at_in + (i * tpi + pad - left + j) * lanes, jtaps, taps, s * lanes,
+                         steps, gp, at_gp, own)  # fmt: skip
+                at_gp += ROWS * (taps + own)
     if layer > 0:  # the input of the first needs no gradient
         most = geo[layer, 7]
         for phase in range(s):  # the input steps u * s + phase, each a slot
@@ -166,12 +164,13 @@ def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, b
            start, stop):  # fmt: skip  # pragma: no cover (compiled)
     """Tiles ``start`` to ``stop`` of the batch ``rows`` (0/1 labels ``y`` per row of ``X``), each
     tile's rows checked to lie in ``X`` first: each tile's summed loss into ``losses[tile]`` and its
-    share of every gradient into ``shares`` (each gradient's, tiles x its padded size: the three
-    weights', the three biases', the classification layer's weight's) and ``ghb``; from tile 0, each
-    tile's shares added to ``sums`` (``_add_shares``) while in cache. ``geo[layer]``: kernel,
-    stride, left padding, input and output channels (padded), input and output steps, and the input
-    gradient's taps per input channel (output channels x kernel). ``hw`` (groups, c3', t3) the
-    classification layer's weight, flat; ``htaps`` its taps' offsets in a group's last activation.
+    share of every gradient into ``shares`` (tiles x size: each layer's weights' and biases'
+    gradients, padded, in ``_dots_order``; the classification layer's weight's) and ``ghb``; from
+    tile 0, each tile's shares added to ``sums`` (``_add_shares``) while in cache. ``geo[layer]``:
+    kernel, stride, left padding, input and output channels (padded), input and output steps, and
+    the input gradient's taps per input channel (output channels x kernel). ``hw`` (groups, c3', t3)
+    the classification layer's weight, flat; ``htaps`` its taps' offsets in a group's last
+    activation.
     ``acts`` (``flat_acts``: the same arrays flat), ``grads``, ``partial`` (groups, lanes; flat),
     ``gs``: this task's buffers (``acts``' and ``grads``' padding rows zero). The weights, the input
     gradients' weights, ``grads`` and the shares come flat, one array per layer, taken from their
@@ -208,10 +207,8 @@ def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, b
     b0, b1, b2 = borrowed(bs[0]), borrowed(bs[1]), borrowed(bs[2])
     t0, t1, t2 = borrowed(ftaps[0]), borrowed(ftaps[1]), borrowed(ftaps[2])
     d0, d1, d2 = borrowed(grads[0]), borrowed(grads[1]), borrowed(grads[2])
-    gw0, gw1 = borrowed(shares[0].reshape(-1)), borrowed(shares[1].reshape(-1))
-    gw2, gb0 = borrowed(shares[2].reshape(-1)), borrowed(shares[3].reshape(-1))
-    gb1, gb2 = borrowed(shares[4].reshape(-1)), borrowed(shares[5].reshape(-1))
-    ghw = borrowed(shares[6].reshape(-1))
+    gp0, gp1 = borrowed(shares[0].reshape(-1)), borrowed(shares[1].reshape(-1))
+    gp2, ghw = borrowed(shares[2].reshape(-1)), borrowed(shares[3].reshape(-1))
     bw1, bw2, bt1 = borrowed(bwts[1]), borrowed(bwts[2]), borrowed(btaps[1])
     bt2, bc1, bc2 = borrowed(btaps[2]), borrowed(bcount[1]), borrowed(bcount[2])
     for tile in range(start, stop):
@@ -244,13 +241,10 @@ def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, b
             head_backward(hw, g * head, gs, 0, a3, at_y + pad * lanes, c3, tp3 * lanes, t3, d2,
                           pad * lanes, ghw, at_h)  # fmt: skip
             at = tile * groups + g
-            _conv_backward(geo, 2, pad, lanes, g, at, a2, d2, d1, gw2, gb2, bw2, bt2, bc2, jtaps,
-                           zeros)  # fmt: skip
-            _conv_backward(geo, 1, pad, lanes, g, at, a1, d1, d0, gw1, gb1, bw1, bt1, bc1, jtaps,
-                           zeros)  # fmt: skip
+            _conv_backward(geo, 2, pad, lanes, g, at, a2, d2, d1, gp2, bw2, bt2, bc2, jtaps, zeros)
+            _conv_backward(geo, 1, pad, lanes, g, at, a1, d1, d0, gp1, bw1, bt1, bc1, jtaps, zeros)
             # the first layer's input gradient arguments are not used: any of the right types
-            _conv_backward(geo, 0, pad, lanes, g, at, a0, d0, d0, gw0, gb0, bw1, bt1, bc1, jtaps,
-                           zeros)  # fmt: skip
+            _conv_backward(geo, 0, pad, lanes, g, at, a0, d0, d0, gp0, bw1, bt1, bc1, jtaps, zeros)
         if start == 0:  # the first tiles: their shares summed while in cache
             _add_shares(shares, tile, tile + 1, sums, tile == 0)
 
@@ -292,21 +286,42 @@ def _buffers(slot: int, shapes: Sequence[tuple[int, ...]], pad: int) -> Buffers:
     return _BUFFERS[key]
 
 
-# (which gradient, its shape) -> every tile's share of it, rows for the largest batch so far
-_SHARES: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}
+# (which share, its size) -> every tile's share, rows for the largest batch so far
+_SHARES: dict[tuple[int, int], np.ndarray] = {}
 
 
-def _shares(gradient: int, tiles: int, shape: tuple[int, ...]) -> np.ndarray:
-    """(tiles, size of ``shape``) for every tile's share of a gradient (the kernels write it
-    whole), kept from step to step: a fresh one faults in ~2 MB of pages every step at the
-    paper's sizes."""
-    if len(_SHARES.get((gradient, shape), ())) < tiles:
-        _SHARES[gradient, shape] = np.empty((tiles, int(np.prod(shape))), np.float32)
-    return _SHARES[gradient, shape][:tiles]
+def _shares(share: int, tiles: int, size: int) -> np.ndarray:
+    """(tiles, ``size``) for every tile's share of some gradients (the kernels write it whole),
+    kept from step to step: a fresh one faults in ~2 MB of pages every step at the paper's
+    sizes."""
+    if len(_SHARES.get((share, size), ())) < tiles:
+        _SHARES[share, size] = np.empty((tiles, size), np.float32)
+    return _SHARES[share, size][:tiles]
 
 
 def _ceil(n: int, multiple: int) -> int:
     return -(-n // multiple) * multiple
+
+
+def _dots_order(outs: int, ins: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where a group's weight gradient (``outs`` padded output channels, ``ins`` input channels,
+    ``k`` taps) and bias gradient lie in its share: in the order ``_conv_backward``'s
+    ``tap_dots`` calls write them, each call's products row by row, then, in a row block's
+    first call, its bias's."""
+    weight, bias = np.zeros((outs, ins, k), np.int64), np.zeros(outs, np.int64)
+    at = 0
+    for e in range(0, outs, ROWS):
+        for i in range(ins):
+            for j in range(0, k, DOT_TAPS):
+                taps = min(DOT_TAPS, k - j)
+                weight[e : e + ROWS, i, j : j + taps] = at + np.arange(ROWS * taps).reshape(
+                    ROWS, taps
+                )
+                at += ROWS * taps
+                if i == 0 and j == 0:
+                    bias[e : e + ROWS] = at + np.arange(ROWS)
+                    at += ROWS
+    return weight, bias
 
 
 class _Plan:
@@ -376,20 +391,23 @@ class _Plan:
         # the head's taps: (channel, step) of the last activation, from its first real step
         self.htaps = np.array([(e * rows[3] + t) * lanes for e in range(outs[2])
                                for t in range(lengths[3])], np.int64)  # fmt: skip
-        # The tiles' gradient shares summed, padded as the weights, in one block ``totals``
-        # (``sums``: each gradient's part, the weights', the biases', the head's); ``take``: where
-        # each parameter's entries lie in it, the parameters in order; ``cuts``: each gradient's
-        # slice of a step's output and its shape (the head bias's last).
-        padded = [*self.ws, *self.bs, self.hw]
-        ats = list(itertools.pairwise(np.cumsum([0, *(a.size for a in padded)])))
+        # The tiles' gradient shares summed, in one block ``totals`` (``sums``: each share's
+        # part: each layer's weights' and biases' gradients, padded, a group's in
+        # ``_dots_order``; the head's weight's); ``take``: where each parameter's entries lie in
+        # it, the parameters in order; ``cuts``: each gradient's slice of a step's output and
+        # its shape (the head bias's last).
+        orders = [_dots_order(*w.shape[1:]) for w in self.ws]
+        self.share_sizes = [groups * (w.size + b.size) for w, b in orders] + [self.hw.size]
+        ats = list(itertools.pairwise(np.cumsum([0, *self.share_sizes])))
         self.totals = np.zeros(ats[-1][1], np.float32)
         self.sums = tuple(self.totals[a:b] for a, b in ats)
-        spots = [np.arange(a, b).reshape(p.shape) for (a, b), p in zip(ats, padded, strict=True)]
         kept = []
-        for layer, shape in enumerate(shapes):
+        for layer, (shape, (weight, bias)) in enumerate(zip(shapes, orders, strict=True)):
             cout, cin = shape[0] // groups, shape[1]
-            kept += [spots[layer][:, :cout, :cin], spots[3 + layer][:, :cout]]
-        kept.append(spots[6][:, : shapes[2][0] // groups])
+            base = ats[layer][0] + (weight.size + bias.size) * np.arange(groups)  # each group's
+            kept += [base[:, None, None, None] + weight[None, :cout, :cin],
+                     base[:, None] + bias[None, :cout]]  # fmt: skip
+        kept.append(np.arange(*ats[3]).reshape(self.hw.shape)[:, : shapes[2][0] // groups])
         self.take = np.concatenate([spot.ravel() for spot in kept])
         given = [*(s for shape in shapes for s in (shape, shape[:1])), (1, kept[-1].size), (1,)]
         ends = np.cumsum([int(np.prod(shape)) for shape in given])
@@ -492,8 +510,7 @@ def train_step(
     ensure_compiled(__name__)  # before the first kernel call (``_plan``'s)
     plan = _plan(X.shape[1], X.shape[2], weights, biases, head_weight, groups, strides)
     tiles = -(-len(rows) // TILE_LANES)
-    padded = (*plan.ws, *plan.bs, plan.hw)  # the gradients' padded shapes
-    shares = tuple(_shares(k, tiles, a.shape) for k, a in enumerate(padded))
+    shares = tuple(_shares(k, tiles, size) for k, size in enumerate(plan.share_sizes))
     ghb, losses = np.empty(tiles, np.float32), np.empty(tiles, np.float32)
     summed = []  # the tiles the first thread summed
 

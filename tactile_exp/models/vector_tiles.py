@@ -559,7 +559,7 @@ def head_backward(typingctx, w, w_at, x, x_at, y, y_at, rows, row_step, steps, o
                 o = builder.add(builder.mul(read_r, row_step), builder.mul(read_s, const(WIDTH)))
                 ys = builder.load(builder.bitcast(builder.gep(y_p, [o]), _VEC.as_pointer()),
                                   align=4)  # fmt: skip
-                product = builder.fadd(zero, builder.call(fma, [ys, gs, zero]))
+                product = builder.call(fma, [ys, gs, zero])
                 product = builder.select(valid, product, zero) if guarded else product
                 products[_bit_reversed(j)] = product  # so that lane j of the sums is q's
                 weight = _splat(builder, builder.load(builder.gep(w_p, [read_q])))
@@ -577,7 +577,7 @@ def head_backward(typingctx, w, w_at, x, x_at, y, y_at, rows, row_step, steps, o
                 r = builder.select(wrapped, builder.add(r, const(1)), r)
             builder.store(r, r_at)
             builder.store(s, s_at)
-            sums = builder.fadd(zero, _hsums(builder, products))
+            sums = _hsums(builder, products)
             if not guarded:
                 target = builder.bitcast(builder.gep(acc_p, [first]), _VEC.as_pointer())
                 builder.store(sums, target, align=4)
@@ -598,36 +598,55 @@ def head_backward(typingctx, w, w_at, x, x_at, y, y_at, rows, row_step, steps, o
     return sig, codegen
 
 
+def _store_first(builder, value, where, n):
+    """The first ``n`` lanes of the vector ``value`` stored at the float pointer ``where``, the
+    floats past them untouched (one masked store)."""
+    target = builder.bitcast(where, _VEC.as_pointer())
+    if n == WIDTH:
+        builder.store(value, target, align=4)
+        return
+    mask_type = ir.VectorType(ir.IntType(1), WIDTH)
+    signature = ir.FunctionType(ir.VoidType(), [_VEC, _VEC.as_pointer(), ir.IntType(32), mask_type])
+    store = cgutils.get_or_insert_function(
+        builder.module, signature, f"llvm.masked.store.v{WIDTH}f32.p0v{WIDTH}f32"
+    )
+    mask = ir.Constant(mask_type, [int(lane < n) for lane in range(WIDTH)])
+    builder.call(store, [value, target, ir.Constant(ir.IntType(32), 4), mask])
+
+
 @intrinsic
 def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, steps, acc,
-             acc_at, acc_row, lanes, own, own_at):  # fmt: skip  # noqa: ARG001
-    """For the ``ROWS`` rows r and the taps q < ``count`` (at most ``DOT_TAPS``):
-    ``acc[acc_at + r * acc_row + q] += sum_m sum_{s < steps} d[d_at + r * d_row + s * d_step
-    + m] * x[x_at + taps[q] + s * x_step + m]`` over the lanes m < ``lanes`` (a multiple of
-    ``WIDTH``): a convolution's weight gradient, its output-gradient rows against the input rows
-    of each tap; and where ``own_at >= 0``, the rows' own sums, ``own[own_at + r] += sum_m
-    sum_s d[...]`` (its bias's gradient), in the same pass: ``ROWS`` more running sums beside the
-    products' instead of a pass of its own, whose four dependent chains waited on each add. Each
-    vector of lanes sums over the steps in registers (one ``fma`` per term, steps in order; an
-    add for a row's own sum, which is an ``fma`` with 1), the vectors are added in order, then
-    their lanes in a fixed tree: the same result at any thread count. The trees of ``WIDTH``
-    sums run as one (``_hsums``): one thread's ConvNet step 2% faster (a process per version,
-    alternating, 8 pairs: median ratio 0.98, range 0.96-1.01; 2026-11-28), the same bits."""
-    _check("tap_dots", d=d, x=x, acc=acc, own=own)
+             acc_at, own):  # fmt: skip  # noqa: ARG001
+    """For the ``ROWS`` rows r and the taps q < ``count`` (at most ``DOT_TAPS``), over one
+    vector of lanes m < ``WIDTH``: ``acc[acc_at + r * count + q] = sum_m sum_{s < steps}
+    d[d_at + r * d_row + s * d_step + m] * x[x_at + taps[q] + s * x_step + m]``: a
+    convolution's weight gradient, its output-gradient rows against the input rows of each tap;
+    and where ``own`` is not 0, the rows' own sums, ``acc[acc_at + ROWS * count + r] = sum_m
+    sum_s d[...]`` (its bias's gradient), in the same pass: ``ROWS`` more running sums beside
+    the products' instead of a pass of its own, whose four dependent chains waited on each add.
+    Each vector of lanes sums over the steps in registers (one ``fma`` per term, steps in order;
+    an add for a row's own sum, which is an ``fma`` with 1), then its lanes in a fixed tree: the
+    same result at any thread count. The trees of ``WIDTH`` sums run as one (``_hsums``) and
+    their sums are stored as they come out of it, a vector (or its first lanes) at a time, which
+    is why a call's sums lie together in ``acc``. Against a scalar add per sum into ``acc`` where
+    the weights lie (and a vector sum over blocks of lanes, always one in the ConvNet), the same
+    bits: the ConvNet's weight gradients 4-7% faster (one thread, in L1, each layer's calls at
+    bench/bench_roofline.py's shapes), its training step 5% (two threads, both versions in one
+    process, alternating, 12 rounds: median ratio 0.948, range 0.93-0.99; 2-core Xeon,
+    2026-11-28)."""
+    _check("tap_dots", d=d, x=x, acc=acc)
     if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
         raise TypingError(f"tap_dots: taps must be an int64 array, got {taps}")
     i = types.intp
-    sig = types.void(d, i, i, i, x, i, taps, i, i, i, acc, i, i, i, own, i)
+    sig = types.void(d, i, i, i, x, i, taps, i, i, i, acc, i, i)
 
     def codegen(context, builder, signature, args):
-        d_p, x_p = (
+        d_p, x_p, acc_p = (
             builder.gep(_data(context, builder, signature.args[n], args[n]), [args[n + 1]])
-            for n in (0, 4)
+            for n in (0, 4, 10)
         )
-        acc_p = builder.gep(_data(context, builder, signature.args[10], args[10]), [args[11]])
         taps_p = _data(context, builder, signature.args[6], args[6])
-        own_p = _data(context, builder, signature.args[14], args[14])
-        d_r, d_s, q_n, x_s, s_n, a_r, m_n, own_at = (args[n] for n in (2, 3, 7, 8, 9, 12, 13, 15))
+        d_r, d_s, q_n, x_s, s_n, own = (args[n] for n in (2, 3, 7, 8, 9, 12))
         fma, zero = _fma(builder), ir.Constant(_VEC, [0.0] * WIDTH)
 
         def const(n):
@@ -636,60 +655,38 @@ def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, st
         def at(base, offset):
             return builder.bitcast(builder.gep(base, [offset]), _VEC.as_pointer())
 
-        slots = ROWS * (DOT_TAPS + 1)  # the rows' own sums after the products'
-        sums = [cgutils.alloca_once(builder, _VEC) for _ in range(slots)]
-        totals = [cgutils.alloca_once(builder, _VEC) for _ in range(slots)]
+        sums = [cgutils.alloca_once(builder, _VEC) for _ in range(ROWS * (DOT_TAPS + 1))]
 
         def body(taps_n, summed):
             offsets = [builder.load(builder.gep(taps_p, [const(q)])) for q in range(taps_n)]
             used = [r * DOT_TAPS + q for r in range(ROWS) for q in range(taps_n)]
             mine = [ROWS * DOT_TAPS + r for r in range(ROWS)] if summed else []
             for slot in used + mine:
-                builder.store(zero, totals[slot])
-            with cgutils.for_range_slice(builder, const(0), m_n, const(WIDTH)) as (m, _):
-                for slot in used + mine:
-                    builder.store(zero, sums[slot])
-                with cgutils.for_range(builder, s_n) as loop:
-                    s = loop.index
-                    ds = [
-                        builder.load(
-                            at(d_p, builder.add(builder.add(builder.mul(const(r), d_r),
-                                                            builder.mul(s, d_s)), m)),
-                            align=4,
-                        )
-                        for r in range(ROWS)
-                    ]  # fmt: skip
-                    row = builder.add(builder.mul(s, x_s), m)
-                    for q in range(taps_n):
-                        xv = builder.load(at(x_p, builder.add(offsets[q], row)), align=4)
-                        for r in range(ROWS):
-                            slot = sums[r * DOT_TAPS + q]
-                            builder.store(builder.call(fma, [ds[r], xv, builder.load(slot)]), slot)
-                    for r, slot in enumerate(mine):
-                        builder.store(builder.fadd(builder.load(sums[slot]), ds[r]), sums[slot])
-                for slot in used + mine:
-                    part = builder.load(sums[slot])
-                    builder.store(builder.fadd(builder.load(totals[slot]), part), totals[slot])
-            targets = [
-                (builder.gep(acc_p, [builder.add(builder.mul(const(r), a_r), const(q))]),
-                 totals[r * DOT_TAPS + q])
-                for r in range(ROWS) for q in range(taps_n)
-            ]  # fmt: skip
-            targets += [
-                (builder.gep(own_p, [builder.add(own_at, const(r))]), totals[slot])
-                for r, slot in enumerate(mine)
-            ]
-            i32 = ir.IntType(32)
+                builder.store(zero, sums[slot])
+            with cgutils.for_range(builder, s_n) as loop:
+                s = loop.index
+                ds = [
+                    builder.load(at(d_p, builder.add(builder.mul(const(r), d_r),
+                                                     builder.mul(s, d_s))), align=4)
+                    for r in range(ROWS)
+                ]  # fmt: skip
+                row = builder.mul(s, x_s)
+                for q in range(taps_n):
+                    xv = builder.load(at(x_p, builder.add(offsets[q], row)), align=4)
+                    for r in range(ROWS):
+                        slot = sums[r * DOT_TAPS + q]
+                        builder.store(builder.call(fma, [ds[r], xv, builder.load(slot)]), slot)
+                for r, slot in enumerate(mine):
+                    builder.store(builder.fadd(builder.load(sums[slot]), ds[r]), sums[slot])
+            targets = used + mine  # in acc's order: the products row by row, then the rows' own
             for first in range(0, len(targets), WIDTH):  # WIDTH sums per shuffle tree
-                part = [builder.load(total) for _, total in targets[first : first + WIDTH]]
+                part = [builder.load(sums[slot]) for slot in targets[first : first + WIDTH]]
                 vectors = [_bit_reversed(slot) for slot in range(WIDTH)]
                 vectors = [part[v] if v < len(part) else zero for v in vectors]
                 lane_sums = _hsums(builder, vectors)  # lane k: the sum of part[k]'s lanes
-                for k, (where, _) in enumerate(targets[first : first + WIDTH]):
-                    value = builder.extract_element(lane_sums, ir.Constant(i32, k))
-                    builder.store(builder.fadd(builder.load(where), value), where)
+                _store_first(builder, lane_sums, builder.gep(acc_p, [const(first)]), len(part))
 
-        summed = builder.icmp_signed(">=", own_at, const(0))
+        summed = builder.icmp_signed("!=", own, const(0))
         for taps_n in range(1, DOT_TAPS + 1):
             chosen = builder.icmp_signed("==", q_n, const(taps_n))
             with builder.if_then(builder.and_(chosen, summed)):
