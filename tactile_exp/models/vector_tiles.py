@@ -630,10 +630,10 @@ def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, st
     their sums are stored as they come out of it, a vector (or its first lanes) at a time, which
     is why a call's sums lie together in ``acc``. Against a scalar add per sum into ``acc`` where
     the weights lie (and a vector sum over blocks of lanes, always one in the ConvNet), the same
-    bits: the ConvNet's weight gradients 4-7% faster (one thread, in L1, each layer's calls at
-    bench/bench_roofline.py's shapes), its training step 5% (two threads, both versions in one
-    process, alternating, 12 rounds: median ratio 0.948, range 0.93-0.99; 2-core Xeon,
-    2026-11-28)."""
+    sums to the bit (but a sum of exactly zero, which keeps its sign): the ConvNet's weight
+    gradients 4-7% faster (one thread, in L1, each layer's calls at bench/bench_roofline.py's
+    shapes), its training step 5% (two threads, both versions in one process, alternating, 12
+    rounds: median ratio 0.948, range 0.93-0.99; 2-core Xeon, 2026-11-28)."""
     _check("tap_dots", d=d, x=x, acc=acc)
     if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
         raise TypingError(f"tap_dots: taps must be an int64 array, got {taps}")
