@@ -24,11 +24,9 @@ phase of the stride. The forward and the input gradients sum their taps in the o
 gradients' order does on the vector width: 16-lane tiles with AVX-512, 8 with AVX2), and differ
 from the whole-batch kernels' by float rounding.
 
-Measured (2-core Xeon, 2026-11-27, one thread, batch 1000 of 5,300 instances, a process per
-version, alternating): a training step took 17.1-18.6 ms with tiles of 16 lanes, 20.0-20.5 with 32
-and 22.1-22.3 with 64 (slots along time; the tile's activations ~1.4, 2.7 and 5.4 MB), and
-23.6-23.8 with 64 lanes and the slots along them, a call per output step. Against the whole-batch
-kernels through autograd: bench/bench_roofline.py --before.
+With one vector of lanes a tile keeps its activations in L2: wider tiles (32 or 64 lanes, ~2.7
+and 5.4 MB) made a one-thread step 1.1-1.3x slower. The whole-batch kernels through autograd
+against this: bench/bench_roofline.py --before.
 """
 
 from __future__ import annotations
@@ -176,21 +174,12 @@ def _tiles(X, rows, y, groups, pad, geo, ws, bs, hw, hb, ftaps, btaps, bcount, b
     gradients' weights, ``grads`` and the shares come flat, one array per layer, taken from their
     tuples once, here, and each layer's pass is a helper called with its arrays: an array taken from
     a tuple at a layer known only at run time, or a view made in the loops, costs numba two atomic
-    reference counts each time. Against loops over the layers that took them so, a step 3-6% faster
-    on one thread, as fast on two (a process per version, alternating, 6 to 10 pairs, 2026-11-27).
-    The helpers take borrowed arrays (``vector_tiles.borrowed``): their reference counts cost ~5% of
-    a step (a profile); borrowed, a step is 3% faster on one thread (5 pairs, median ratio 0.97),
-    1.6% on two (10 pairs, 0.984, range 0.94-1.01; 2026-11-28). The classification layer runs on
-    register tiles too: its forward a ``tap_sums`` over its (channel, step) taps (one row of
-    weights, computed as ``ROWS`` equal rows: 4x the multiplies, still ~3x faster than numba's loop
-    over the lanes); its backward, per group, a ``head_backward`` (its weights' gradient, the lanes
-    of ``WIDTH`` sums added by one shuffle tree, and the last layer's output gradient through the
-    ReLU). Against numba's loops, one thread, batch 1000: 1.2 -> 0.6 ms a step for the layer, the
-    step 3-4% faster (a process per version, alternating, one thread 8 pairs, median ratio 0.96,
-    range 0.86-1.01; two threads 18 pairs, 0.97, 0.82-1.05; 2026-11-27). Against a ``tap_dots`` and
-    a gated ``tap_sums`` per step (the same bits): the step 1-2% faster (a process per version,
-    alternating: two threads 10 pairs, median ratio 0.987, range 0.94-1.05; one thread 6 pairs,
-    0.98, 0.93-1.06; 2026-11-28)."""
+    reference counts each time. The helpers take borrowed arrays (``vector_tiles.borrowed``): their
+    reference counts cost ~5% of a step. The classification layer runs on register tiles too: its
+    forward a ``tap_sums`` over its (channel, step) taps (one row of weights, computed as ``ROWS``
+    equal rows: 4x the multiplies, still ~3x faster than numba's loop over the lanes); its
+    backward, per group, a ``head_backward`` (its weights' gradient, the lanes of ``WIDTH`` sums
+    added by one shuffle tree, and the last layer's output gradient through the ReLU)."""
     lanes, n_batch = acts[0].shape[3], len(rows)
     scale = np.float32(1.0) / np.float32(n_batch)  # the mean's gradient
     # Every array the tiles' loops pass on, borrowed (``vector_tiles.borrowed``): no atomic
@@ -327,18 +316,11 @@ def _dots_order(outs: int, ins: int, k: int) -> tuple[np.ndarray, np.ndarray]:
 class _Plan:
     """The arguments of ``_tiles`` for one set of shapes: the geometry and offset tables of every
     layer's taps, built once (``_plan``), and the padded weights, refilled each step (``load``,
-    compiled). With the tiles' gradient shares kept and summed compiled, the time a two-thread
-    step spends outside the kernels went from 0.76-1.10 ms to 0.69-0.77 ms of ~9 ms (a process per
-    version, alternating, 4 pairs); the step: two threads, median ratio 0.967 (16 pairs, range
-    0.90-1.04) and 0.986 (10 pairs), one thread 0.999 (10 pairs); bench/bench_roofline.py
-    --before: x0.86 to x1.04 in five runs (2026-11-27). What runs between two steps' kernels
-    runs from cold caches (the tiles fill L2), ~20-50 us a numpy or torch call: the shares are
-    summed in the kernels (``_tiles`` the first thread's, as it goes; ``_finish`` the rest, the
-    gradients laid out as the parameters), the labels' signs and the rows' check are the
-    kernels', and ``_tiles``' arguments are the plan's and the buffers': outside
-    ``_in_parallel`` 0.26-0.36 -> 0.13-0.16 ms a two-thread step, outside ``train_step`` 0.22-0.32
-    -> 0.18-0.23 ms (2 runs each); the step, a process per version alternating, 10 pairs: median
-    ratio 0.966, range 0.92-1.03 (2026-11-28)."""
+    compiled). What runs between two steps' kernels runs from cold caches (the tiles fill L2),
+    ~20-50 us a numpy or torch call, so as little as can runs there: the shares are summed in the
+    kernels (``_tiles`` the first thread's, as it goes; ``_finish`` the rest, the gradients laid
+    out as the parameters), the labels' signs and the rows' check are the kernels', and
+    ``_tiles``' arguments are the plan's and the buffers'."""
 
     def __init__(
         self,
@@ -544,10 +526,8 @@ def tiled_step(
     CPU ``X`` (n, C, T) and 0/1 labels ``y`` (n,), to float rounding, returned detached, its
     gradients added to the parameters' ``.grad`` (``train.add_gradients``; ``X`` gets none): one
     compiled pass per step (the rows read in place, each checked to lie in ``X``), with no
-    autograd graph around it: through an autograd function, its apply and backward (cold after
-    the kernels) took 0.5 ms more of a ~6.5 ms step (two threads, 50 steps each way alternating
-    in one process, three processes), and bench/bench_roofline.py --before, its steps back to
-    back, gave the step without it 1.03x faster (2-core Xeon, 2026-11-28)."""
+    autograd graph around it: an autograd function's apply and backward, cold after the kernels,
+    cost ~0.5 ms of a ~6.5 ms two-thread step."""
     value, grads = train_step(
         X.detach().contiguous().numpy(),
         rows.to(torch.int64).contiguous().numpy(),

@@ -23,16 +23,12 @@ kernels compile in about two thirds of the time numba's parallel loops took, and
 compile is on a fresh clone's critical path (the README job, bench_readme_job). Layout arrays
 are reused across steps (``scratch``). Rates per kernel: bench/bench_haptic_cnn.py.
 
-Measured and not kept (one thread, batch 1000, old and new kernels in one process, interleaved):
-the batch in chunks of 128-336 lanes with conv1 and conv2 recomputed in the backward, so that a
-group's layers stay in L2, made a step 1.3-2x slower; the entry transpose gathered from a
-once-transposed training set was slower than ``to_layout``; ``to_layout`` channel by channel over
-all the batch's instances (9.3 against 8.3 ms a batch, each call on another batch than the last:
-on the same batch again it had looked 2x faster, from rows left in cache); software prefetches of
-the next rows, in ``to_layout`` (1.1-1.3x slower) and in the weight gradients (1.03-1.28x faster
-alone, ~4% of a step); a step as 2 to 8 smaller batches (1.14-1.75x slower); conv2's and
-conv3's weight and input gradients in one walk through time, so that each layer's input is read
-once (no faster: 42.6 against 42.0 ms a step; results bit-identical).
+Measured on one thread and not kept: the batch in chunks with conv1 and conv2 recomputed in the
+backward (1.3-2x slower), a step as 2 to 8 smaller batches (1.1-1.75x slower), software
+prefetches of the next rows (``to_layout`` 1.1-1.3x slower, the weight gradients ~4% of a step
+faster alone), conv2's and conv3's weight and input gradients in one walk through time (no
+faster). Time a layout change on another batch each call, as training runs it: on the same batch
+again its rows are left in cache and it looks up to 2x faster.
 
 numba was chosen over a C++ extension: it is a wheel on the package index (no compiler needed at
 install), and its on-disk cache (``numba_setup``) makes the compile a once-per-machine cost.
@@ -424,9 +420,8 @@ def _in_parallel(task: Callable[[int, int, int], None], count: int) -> None:
     contiguous parts (slot: the part's index), run side by side: this thread takes the first,
     a pool's threads the others (the kernels release the GIL). Where the parts cannot be equal
     the first is the larger: a pool thread starts ~0.05 ms after this one, and this one,
-    finishing last, need not be woken (the ConvNet's 63 tiles at batch 1000, two threads, ~0.21
-    ms each: with the pool's part the larger, this thread waited ~0.3 ms for the pool's 32;
-    2-core Xeon, 2026-11-28)."""
+    finishing last, need not be woken (with the pool's part the larger, this thread waited
+    ~0.3 ms for it in the ConvNet's two-thread step)."""
     parts = max(1, min(count, numba.get_num_threads()))
     bounds = [count - count * (parts - k) // parts for k in range(parts + 1)]
     others = [_threads().submit(task, k, bounds[k], bounds[k + 1]) for k in range(1, parts)]

@@ -165,8 +165,8 @@ def _gram(X: torch.Tensor, rows: torch.Tensor) -> np.ndarray:
     halves = (slice(0, n // 2), slice(n // 2, n))
     # A pool's thread runs its BLAS on the process's default thread count (OMP_NUM_THREADS, else
     # every core), not on the caller's: left so, row M's Gram matrix differs in its last bits
-    # between a job on two threads and one on one, and three of the row's 24 AUCs with it
-    # (2-core Xeon, 2026-11-28). Each thread sets its own count to one as it starts.
+    # between a job on two threads and one on one, and three of the row's 24 AUCs with it.
+    # Each thread sets its own count to one as it starts.
     with ThreadPoolExecutor(2, initializer=torch.set_num_threads, initargs=(1,)) as pool:
         for done in [pool.submit(torch.matmul, rows[h], rows.T, out=G[h]) for h in halves]:
             done.result()

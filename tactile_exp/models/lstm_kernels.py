@@ -3,67 +3,35 @@
 ``nn.LSTM`` on CPU runs a few small library calls per time step on a (batch, 10) state, so at the
 paper's sizes (hidden 10, 150 steps) it is bound by per-call overhead, not arithmetic. Here a batch
 is cut into chunks of ``CHUNK`` instances, and each chunk runs forward and backward through time
-inside one numba loop, with the chunk as the innermost, contiguous axis and time outermost (layout
-(time, feature, chunk)), so every gate update is one vector FMA over the chunk and what a step reads
-and writes is one contiguous block of each array. The forward runs step by step, each step's input
-projection, recurrence and cell update on data in L1. The backward sums the weight gradient step by
-step as it goes (a step's inputs times its gate gradients, ~20 KB, in L1), not over the whole chunk
-at the end (~3 MB of operands). Chunks run in parallel on numba's threads. A training step runs a
-chunk at a time through everything (``lstm_step``: the recurrence, both FC layers, each instance's
-loss and back through all of it), so the backward reads the chunk's forward from cache: nothing
-outlives the chunk and nothing runs twice (1.71x faster than the autograd path below,
-bench/bench_roofline.py --before, two threads). It keeps only the current step's gate gradients (the
-step's weight and state gradients use them at once; a chunk's all, 1.8 MB, only the input's gradient
-needs), keeps its arrays from call to call (fresh ones, ~4 MB a thread, cost a page fault per
-4 KB every step) and runs its elementwise loops, the cell update and the gates' gradients, as whole
-vectors (``vector_tiles.lanes``: numba's loops over that many arrays stayed scalar or behind alias
-checks): together 1.11x (bench/bench_roofline.py --before, both sides in child processes, two
-threads, 2026-11-27). Each step's weight-gradient sums are added to the running sum as the tile
-stores them (``ADDED``), not in a second pass, and each step's kernels take the chunk's flat arrays
-(a view made per step costs numba two atomic reference counts): together a step 2-4% faster, the
-same gradients bit for bit (one thread, a process per version, alternating, 8 pairs: median ratio
-0.963, range 0.88-1.04; bench/bench_roofline.py --before, two threads: x0.99 to x1.14 in three runs;
-2026-11-27). The step's gradients are summed over the chunks and laid out as the parameters' inside
-the compiled step (``_gradient_sums``), one tensor per parameter, its arguments prepared in numpy,
-not torch: the time a two-thread step spends outside ``_train`` went from 0.62-0.79 ms to
-0.61-0.71 ms of ~9 ms (a process per version, alternating, 4 pairs), the step as fast as before
-(16 pairs: median ratio 0.998; bench/bench_roofline.py --before: x0.99 to x1.12 in five runs;
-2026-11-27). What runs between two steps' kernels runs from cold caches (a kernel's chunks fill
-L2), ~20-50 us a torch or numpy call: ``_train`` also checks the rows, joins the gate weights and
-sums the loss, and the arrays are kept from call to call in one block on huge pages rather than
-taken from the scratch pool and refilled (its ones and zero rows) each step: outside ``_train``
-0.39-0.49 -> 0.25-0.28 ms a two-thread step (3 runs each); the step's time, a process per
-version alternating, 16 pairs, median ratio 0.84 (0.68-1.02): from the pool it took 8.7-8.9 or
-11-12 ms from run to run, kept 8.1-9.5 (2026-11-28).
-Through autograd (``lstm_last_hidden``: scoring, and training with a loss the step does not
-compute) the forward keeps nothing and the backward recomputes a chunk's forward in cache.
-Keeping every chunk's activations for that backward instead (~63 MB a batch of 1,000) made a
-training step 1.25x faster alone, but in the Table I grid, two jobs side by side on two cores, the
-LSTM job gained ~3% and the ConvNet job beside it lost ~5% (rows G and H against the grid before,
-scaled by the machine's speed on rows A to F, which neither version touches): writing and re-reading
-them takes the memory bandwidth the other job needs. Each chunk's gradients are summed on their own
-and the chunks' in a fixed order, so results do not depend on the thread count.
-The inner loops are explicit vectors (``vector_tiles``): the gate sums (forward), the states'
-gradient and the weight gradient (backward) are register tiles (``tap_sums``: four gates' sums over
-all 42 inputs, or four inputs' over a step's 64 lanes for all gates, stay in registers), the
-nonlinearities run a whole vector at a time (``tanh_lanes``), and the chunk's gather transposes
-square tiles in registers. Against numba's own loops the tiles made a training step 1.5x faster;
-the time-major layout, the weight gradient by steps and ``tanh_lanes`` another 1.12x (one thread,
-batch 1000, interleaved in one process: bench/bench_roofline.py). Also measured and not kept (the
-same way): a chunk's input projection as one BLAS product (numba's ``np.dot``) before its
-recurrence, a forward 1.2x slower; the input projection kept from the forward for the backward's
-recomputation (24 MB a batch), a step 1.2-1.3x slower; a forward pass that keeps only the current
-step's activations, 6% faster on its own (~1.5% of a step); chunks of 128 instances (as fast) or 32
-(1.13x slower); tanh's division shared by two floats (p q' r and p' q r, r = 1 / (q q')), or
-replaced by a reciprocal estimate and a Newton step, no faster: a vector's tanh is bound by its
-other operations (~8 cycles for 16 floats in L1), not by the division; the next chunk's gather
-spread over the backward's steps, a tile of it per step into a second inputs buffer, its rows
-prefetched 2 or 8 steps ahead, a step 1.03x slower (one thread; the gather is ~18% of a step in
-a profile).
+inside one numba loop, the chunk the innermost, contiguous axis and time the outermost (layout
+(time, feature, chunk)): every gate update is one vector FMA over the chunk, and what a step reads
+and writes is one contiguous block of each array, in L1. Chunks run in parallel on numba's
+threads; each chunk's gradients are summed on their own and the chunks' in a fixed order
+(``vector_tiles.ordered_sum``), so results do not depend on the thread count.
 
-tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the
-real line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and
-``tanh``, which would not vectorise and cost 7x more.
+- The training step (``lstm_step``) runs a chunk at a time through everything: the recurrence,
+  both FC layers, each instance's loss and back through all of it, so the backward reads the
+  chunk's forward from cache and nothing runs twice. It keeps only the current step's gate
+  gradients, adds each step's weight-gradient sums to the running sum as the tile stores them
+  (``ADDED``: the step's inputs times its gate gradients, ~20 KB, in L1, rather than ~3 MB of
+  operands at the chunk's end), and lays the summed gradients out as the parameters' inside the
+  compiled step (``_gradient_sums``). Its arrays are kept from call to call in one block on huge
+  pages (``scratch.carved``): fresh ones cost a page fault per 4 KB every step.
+- Through autograd (``lstm_last_hidden``: scoring, and training with a loss the step does not
+  compute) the forward keeps nothing and the backward recomputes a chunk's forward in cache.
+  Keeping every chunk's activations instead (~63 MB a batch of 1,000) speeds a lone job but, with
+  two jobs side by side on two cores, takes the memory bandwidth the other job needs.
+- The inner loops are explicit vectors (``vector_tiles``): the gate sums, the state's gradient and
+  the weight gradient are register tiles (``tap_sums``), the nonlinearities and the cell update run
+  a whole vector at a time (``tanh_lanes``, ``lanes``: numba's own loops over that many arrays stay
+  scalar or behind alias checks), and the chunk's gather transposes square tiles in registers.
+  A chunk's input projection as one BLAS product before its recurrence is slower: BLAS at these
+  shapes (40 x 32 by 32 x 9600) runs below the tiles' rate (bench/bench_roofline.py prints both).
+
+tanh and the sigmoid use a rational approximation (Eigen's float tanh, max error ~4e-7 over the real
+line; sigmoid(x) = tanh(x / 2) / 2 + 1 / 2) because numba calls libm's scalar ``exp`` and ``tanh``,
+which would not vectorise. The kernels' rates against the machine's and against the earlier kernels:
+docs/benchmarks.md (bench_roofline, bench_lstm).
 
 numba's compiled-code cache: see ``numba_setup``.
 """

@@ -12,7 +12,7 @@ for that process, then loads the compiled code from the cache. Without a compile
 call starts that process itself and waits (``ensure_compiled``): kernels are never compiled in the
 process that runs them, because numba's code compiled in the calling process can round
 differently from the same code loaded from its cache (the LSTM training step's FC and output
-weight gradients differed in the last bits, 2026-11-27, numba 0.68), and a model's results would
+weight gradients differed in the last bits with numba 0.68), and a model's results would
 then depend on whether its kernels had been compiled before.
 """
 

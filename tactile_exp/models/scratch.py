@@ -16,12 +16,9 @@ and ask for transparent huge pages (``MADV_HUGEPAGE``; honoured when the kernel'
 each with 4 kB pages, and a virtual machine's TLB misses cost two page walks. (A shared mapping,
 ``mmap``'s default, lives in shmem, where huge pages are off by default.) The training set goes
 there too (``on_huge_pages``), the ConvNet's per-thread tiles (``convnet_tiles``) and the LSTM's
-per-thread chunks (``lstm_kernels``, which keep theirs from call to call). On huge pages, measured
-a process per version alternating (2-core Xeon, 2026-11-28): the ConvNet's training step at batch
-1000 x0.77 on two threads (6 pairs, x0.73-0.81) and x0.80 on one (4 pairs); the LSTM's x0.91 on two
-(6 pairs, noisy: x0.81-1.07) and x0.85 on one (3 pairs); with buffers from 256 kB rather than 2 MB
-mapped, the LSTM's one-thread step (its buffers, from this pool then, all under 2 MB) a further
-x0.94 (6 rounds in one process, x0.89-0.96).
+per-thread chunks (``lstm_kernels``, which keep theirs from call to call). On huge pages the
+ConvNet's training step at batch 1000 takes ~0.8x the time, the LSTM's ~0.85-0.9x; ``MAPPED_FROM``
+is 256 kB, not 2 MB, because the LSTM's buffers are all under 2 MB (its step a further ~0.94x).
 """
 
 from __future__ import annotations

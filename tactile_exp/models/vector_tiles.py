@@ -1,16 +1,15 @@
 """Register tiles written with LLVM vector types: the compiled kernels' inner loops.
 
-numba vectorises a loop over lanes, but between the loop's passes it keeps running sums in
-memory: a gate's sum over 42 inputs is loaded and stored once per few inputs, and those loads
-and stores, not the arithmetic, set the rate. Here the sums of ``ROWS`` rows over a block of
-lanes stay in vector registers across all their inputs (taps): each input vector is loaded once
-for four FMAs and each weight once per vector. The LSTM's gate sums ran at 51 GFLOP/s as numba's
-loop and run at 154 as a tile (one thread, in L1; bench/bench_roofline.py, 2-core Xeon,
-2026-11-27). The code is LLVM IR emitted by numba intrinsics, so it compiles with the calling
-kernel and is cached with it: no compiler at install. numba's cache checks the calling kernel's
-file, not this one: after editing this file, empty the cache (``NUMBA_CACHE_DIR``). Like C, the
-tiles check no bounds: the kernels keep their offsets inside their arrays (their tests check
-every shape against torch).
+numba vectorises a loop over lanes, but between the loop's passes it keeps running sums in memory: a
+gate's sum over 42 inputs is loaded and stored once per few inputs, and those loads and stores, not
+the arithmetic, set the rate. Here the sums of ``ROWS`` rows over a block of lanes stay in vector
+registers across all their inputs (taps): each input vector is loaded once for four FMAs and each
+weight once per vector: the LSTM's gate sums run ~3x faster as a tile than as numba's loop
+(bench/bench_roofline.py prints the tile's rate). The code is LLVM IR emitted by numba intrinsics,
+so it compiles with the calling kernel and is cached with it: no compiler at install. numba's cache
+checks the calling kernel's file, not this one: after editing this file, empty the cache
+(``NUMBA_CACHE_DIR``). Like C, the tiles check no bounds: the kernels keep their offsets inside
+their arrays (their tests check every shape against torch).
 
 - ``tap_sums``: rows of weighted sums over taps (a convolution's output rows, an LSTM's gates),
   with the ReLU or its backward applied, or added to a running sum, in the one store; a tile's
@@ -30,8 +29,7 @@ every shape against torch).
 - ``lanes``: an elementwise loop written as plain arithmetic on whole vectors (``Lanes``), for
   loops that read and write several arrays, which LLVM cannot prove apart: numba compiles them
   scalar or behind runtime alias checks (as lanes, the LSTM's cell update and its gates'
-  gradients made its training step ~6% faster: one batch of 1000, embedded data, a process per
-  version, alternating, 2-core Xeon, 2026-11-27).
+  gradients made its training step ~6% faster).
 
 The vector width follows the CPU numba compiles for: 16 float32 lanes with AVX-512, 8 with
 AVX2, else 4. ``tap_sums`` sums each lane in the same order at any width (the bias, then one
@@ -628,12 +626,8 @@ def tap_dots(typingctx, d, d_at, d_row, d_step, x, x_at, taps, count, x_step, st
     an add for a row's own sum, which is an ``fma`` with 1), then its lanes in a fixed tree: the
     same result at any thread count. The trees of ``WIDTH`` sums run as one (``_hsums``) and
     their sums are stored as they come out of it, a vector (or its first lanes) at a time, which
-    is why a call's sums lie together in ``acc``. Against a scalar add per sum into ``acc`` where
-    the weights lie (and a vector sum over blocks of lanes, always one in the ConvNet), the same
-    sums to the bit (but a sum of exactly zero, which keeps its sign): the ConvNet's weight
-    gradients 4-7% faster (one thread, in L1, each layer's calls at bench/bench_roofline.py's
-    shapes), its training step 5% (two threads, both versions in one process, alternating, 12
-    rounds: median ratio 0.948, range 0.93-0.99; 2-core Xeon, 2026-11-28)."""
+    is why a call's sums lie together in ``acc``: one vector store where a scalar add per sum
+    into the weights' own layout cost the ConvNet's training step ~5%."""
     _check("tap_dots", d=d, x=x, acc=acc)
     if not (isinstance(taps, types.Array) and taps.dtype == types.int64):
         raise TypingError(f"tap_dots: taps must be an int64 array, got {taps}")
