@@ -7,10 +7,19 @@ start to last end: what jobs side by side shorten) and the sum of the jobs' time
 several jobs (seeds, splits) shows their summed time. The grid is one sweep (the ``sweep_id``
 tag: ``multirun/<date>/<time>``), by default the one whose job started last.
 
+With ``--against URI`` it also compares the grid's results with another grid's (the code before
+a change, in the store at ``URI``; the same store with ``--against-sweep ID``): per Table I row
+both ran, each grid's mean AUC as the report pools it and the report's paired difference (after
+minus before, 95% paired-bootstrap interval, ``stats.compare``) on the same test objects, and how
+many adjectives' AUCs differ; a row the two grids tested on other objects says why it is not
+compared. A change that keeps every sum's order changes no AUC; one that sums in another order
+moves the last bits, which training amplifies: its differences should not be told from zero.
+
 Run after a grid, e.g. ``python -m tactile_exp -m sweep=table1``:
 ``.venv/bin/python bench/bench_grid.py [--experiment tactile_exp] [--sweep-id ID] [--json OUT]
-[--note TEXT]`` (``--json``: the figures with the machine and the date, ``bench/record.py``;
-``--note``: how the grid ran, which the runs do not record, e.g. its launcher).
+[--note TEXT] [--against URI [--against-sweep ID]]`` (``--json``: the figures with the machine
+and the date, ``bench/record.py``; ``--note``: how the grid ran, which the runs do not record,
+e.g. its launcher).
 """
 
 from __future__ import annotations
@@ -22,6 +31,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tactile_exp import stats
+from tactile_exp.report import heldout
+from tactile_exp.report import runs as report_runs
 from tactile_exp.tracking import ExperimentNotFound, Tracker
 
 
@@ -82,6 +94,76 @@ def rows(runs: list[Any]) -> tuple[list[Row], float, float]:
     return out, (grid_end - grid_start) / 1000, sum(r.seconds for r in out)
 
 
+@dataclass
+class RowChange:
+    """One Table I row in two grids: each one's mean AUC and the paired difference, after minus
+    before, or ``why`` there is none."""
+
+    row: str
+    before: float
+    after: float
+    difference: stats.Interval | None
+    changed: int = 0  # adjectives whose AUC differs
+    adjectives: int = 0
+    why: str = ""
+
+
+def _row_groups(tracker: Tracker, sweep_id: str) -> dict[str, report_runs.Group]:
+    """Table I row -> the sweep's group that stands for it (``report.runs.row_group``)."""
+    groups = report_runs.collect(tracker, sweep_id)
+    return {g.row: report_runs.row_group(groups, g.row) for g in groups if g.row}
+
+
+def auc_changes(
+    after: Tracker, after_sweep: str, before: Tracker, before_sweep: str
+) -> list[RowChange]:
+    """Each Table I row both sweeps ran at the same settings, in row order: its mean AUC in each
+    (the report's, seeds and folds pooled) and the report's paired comparison of the two."""
+    new, old = _row_groups(after, after_sweep), _row_groups(before, before_sweep)
+    out = []
+    nan = float("nan")
+    for row in sorted(set(new) & set(old)):
+        if new[row].differences != old[row].differences:  # e.g. a quick schedule in one grid
+            settings = [", ".join(g.differences) or "the paper's" for g in (old[row], new[row])]
+            why = f"not compared: other settings (before {settings[0]}; after {settings[1]})"
+            out.append(RowChange(row, nan, nan, None, why=why))
+            continue
+        a, b = heldout.load(after, new[row]), heldout.load(before, old[row])
+        if not (a.ok and b.ok):
+            missing = [f"{n}: {e.missing}" for n, e in (("after", a), ("before", b)) if e.missing]
+            out.append(RowChange(row, nan, nan, None, why="; ".join(missing)))
+            continue
+        before_auc, after_auc = b.interval().estimate, a.interval().estimate
+        reason = stats.unpaired_reason(a.evaluations, b.evaluations)
+        if reason is not None:
+            out.append(RowChange(row, before_auc, after_auc, None, why=f"not paired: {reason}"))
+            continue
+        c = stats.compare("after", a.evaluations, "before", b.evaluations)
+        changed = len(c.a_better) + len(c.b_better)
+        out.append(RowChange(row, before_auc, after_auc, c.difference, changed, c.n_adjectives))
+    return out
+
+
+def _print_changes(changes: list[RowChange], figures: dict[str, float]) -> None:
+    header = f"{'row':4s} {'before':>7s} {'after':>7s}  after - before [95% paired]"
+    print(f"{header}  adjectives changed")
+    for c in changes:
+        if c.difference is None:
+            print(f"{c.row:4s} {c.before:7.4f} {c.after:7.4f}  {c.why}")
+            continue
+        d = c.difference
+        print(
+            f"{c.row:4s} {c.before:7.4f} {c.after:7.4f}  {d.estimate:+.4f} [{d.low:+.4f}, "
+            f"{d.high:+.4f}]  {c.changed}/{c.adjectives}"
+        )
+        figures[f"row {c.row}, mean AUC before"] = round(c.before, 4)
+        figures[f"row {c.row}, mean AUC after"] = round(c.after, 4)
+        figures[f"row {c.row}, AUC after - before"] = round(d.estimate, 4)
+        figures[f"row {c.row}, AUC after - before, 95% low"] = round(d.low, 4)
+        figures[f"row {c.row}, AUC after - before, 95% high"] = round(d.high, 4)
+        figures[f"row {c.row}, adjectives changed"] = c.changed
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracking-uri", default=None, help="default: as the jobs' tracking.uri")
@@ -91,12 +173,23 @@ def main() -> None:
     parser.add_argument(
         "--note", default="", help="how the grid ran (launcher, caches), kept with the figures"
     )
+    parser.add_argument("--against", default=None, help="compare AUCs with the grid in this store")
+    parser.add_argument(
+        "--against-sweep", default=None, help="that grid's sweep id (default: its newest job's)"
+    )
     args = parser.parse_args()
     try:
         tracker = Tracker.open(args.tracking_uri, args.experiment)
+        before = Tracker.open(args.against, args.experiment) if args.against else None
     except ExperimentNotFound as err:
         raise SystemExit(f"error: {err}") from None
     sweep_id, runs = parent_runs(tracker, args.sweep_id)
+    if before is not None:
+        before_sweep = parent_runs(before, args.against_sweep)[0]
+        if before.uri == tracker.uri and before_sweep == sweep_id:
+            raise SystemExit(
+                f"error: --against names the grid measured ({sweep_id}); give --against-sweep"
+            )
     table, wall, total = rows(runs)
     print(f"{len(runs)} jobs of sweep {sweep_id or '(none)'} in {tracker.uri}, {args.experiment}")
     print(
@@ -116,12 +209,17 @@ def main() -> None:
     )
     figures["grid wall, min"] = round(wall / 60, 2)
     figures["sum of job times, min"] = round(total / 60, 2)
+    if before is not None:
+        print(f"mean AUC against sweep {before_sweep} in {before.uri}, paired on the test objects:")
+        _print_changes(auc_changes(tracker, sweep_id, before, before_sweep), figures)
     if args.json:
         from record import write
 
         notes = f"sweep {sweep_id or '(none)'}, {len(runs)} jobs" + (
             f"; {args.note}" if args.note else ""
         )
+        if before is not None:
+            notes += f"; AUCs against sweep {before_sweep} in {before.uri}"
         write(args.json, "bench_grid", figures, notes)
 
 
