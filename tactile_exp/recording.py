@@ -130,6 +130,7 @@ def record_data(tracker: Tracker, parent_id: str, dataset: Any, notes: Mapping[s
         {
             "data.identity": dataset.identity(),
             "data.labels": " ".join(dataset.label_names),
+            "data.layout": dataset.sensor.layout or "none",  # the report's paper preset reads it
             **notes,
         },
     )

@@ -293,14 +293,15 @@ class Tracker:
             what=f"experiment tag {key}",
         )
 
-    def runs_view(self, columns: Sequence[str], *, order_by: str) -> str:
+    def runs_view(self, columns: Sequence[str], *, order_by: str, where: str = "") -> str:
         """A link that opens the UI on this experiment's runs table (not its GenAI Overview)
-        showing the jobs (parent runs) with ``columns``, sorted by ``order_by``, best first. The
-        state is a shared view: an experiment tag named by its content, so the jobs of one sweep
-        write the same tag once each and print the same link."""
+        showing the jobs (parent runs; those meeting ``where`` too, an MLflow filter) with
+        ``columns``, sorted by ``order_by``, best first. The state is a shared view: an
+        experiment tag named by its content, so the jobs of one sweep write the same tag once
+        each and print the same link."""
         state = {
             "selectedColumns": list(columns),
-            "searchFilter": _JOB,
+            "searchFilter": f"{_JOB} and {where}" if where else _JOB,
             "orderByKey": order_by,
             "orderByAsc": False,
         }
@@ -546,6 +547,11 @@ class Tracker:
     def log_figure(self, run_id: str, figure: Any, path: str) -> None:
         with shielded():
             self.client.log_figure(run_id, figure, path)
+
+    def log_table(self, run_id: str, rows: list[dict[str, str]], path: str) -> None:
+        """Rows (one dict per row, the same keys) as an MLflow table artifact (a JSON file)."""
+        columns = list(rows[0]) if rows else []
+        self.client.log_table(run_id, {c: [r[c] for r in rows] for c in columns}, path)
 
     def log_file(self, run_id: str, file: Path, path: str) -> None:
         self.client.log_artifact(run_id, str(file), path)

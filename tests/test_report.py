@@ -6,6 +6,7 @@ import shutil
 
 import numpy as np
 import pytest
+import report_fixture
 from mlflow.tracking import MlflowClient
 from PIL import Image
 from sklearn.metrics import f1_score, roc_auc_score
@@ -14,7 +15,7 @@ from tactile_exp import experiment, stats, store
 from tactile_exp.app import sweep
 from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import ADJECTIVES
-from tactile_exp.report import activations, cli, figures, heldout, runs, table1
+from tactile_exp.report import activations, cli, configurations, figures, heldout, runs, table1
 from tactile_exp.report import table3 as t3
 from tactile_exp.tracking import Tracker
 
@@ -38,8 +39,9 @@ RUNS = [
 
 
 def _hash(key: str) -> str:
-    """A group's row hash without the experiment file that keeps a Table I row apart."""
-    return key.split(":")[0]
+    """A group's row hash without the experiment file that keeps a Table I row apart and the
+    data identity."""
+    return key.split("@")[0].split(":")[0]
 
 
 def _log(
@@ -132,6 +134,8 @@ def test_written_files_read_back(tracker, tmp_path):
         "table1.csv",
         "per_adjective.csv",
         "per_adjective_intervals.csv",
+        "leaderboard.md",
+        "leaderboard.csv",
         "fig5_per_adjective.png",
         "claims.md",
         "claims.csv",
@@ -141,7 +145,8 @@ def test_written_files_read_back(tracker, tmp_path):
     ]
     with open(tmp_path / "out" / "table1.csv") as f:
         evidence = {g.key: heldout.load(tracker, g) for g in groups}
-        assert list(csv.DictReader(f)) == table1.table1(groups, evidence)
+        names = configurations.names(groups)
+        assert list(csv.DictReader(f)) == table1.table1(groups, evidence, names=names)
     with open(tmp_path / "out" / "per_adjective.csv") as f:
         lines = {r["row_hash"]: r for r in csv.DictReader(f)}
     assert float(lines["a"]["metallic"]) == pytest.approx(
@@ -154,8 +159,8 @@ def test_written_files_read_back(tracker, tmp_path):
         assert image.size == (1200, 450)
         assert np.asarray(image.convert("L")).std() > 10  # drawn, not blank
     # Fig. 5 takes row I at the paper's settings, not its stronger combine=10 variant.
-    assert runs.best(groups, runs.HAPTIC).key == "i:table1_i_haptic_cnn_1trial"
-    assert runs.best(groups, ("visual",)).key == "k:table1_k_image_googlenet_1view"
+    assert runs.best(groups, runs.HAPTIC).key == "i:table1_i_haptic_cnn_1trial@synthetic-abc"
+    assert runs.best(groups, ("visual",)).key == "k:table1_k_image_googlenet_1view@synthetic-abc"
     index = (tmp_path / "out" / "index.md").read_text()
     assert "![Fig. 5](fig5_per_adjective.png)" in index and "`table1_i_haptic_cnn_1trial`" in index
     # Runs without scores.csv (logged before it existed) still report, without intervals.
@@ -612,3 +617,83 @@ def test_the_margin_option_decides_an_as_good_as_claim(mlflow_uri, tmp_path, cap
     with pytest.raises(SystemExit):
         cli.main([*args, "--margin", "0"])
     assert "--margin: an AUC difference in (0, 1), got 0.0" in capsys.readouterr().err
+
+
+# Three folder data sets, three models, 2 folds each: the ConvNet planted better on slide,
+# identical in effect to the linear model on flat (the same scores), worse on slip.
+FOLDER_QUALITY = {
+    "slide": {"linear": (0.6, ""), "haptic_cnn": (2.0, ""), "haptic_lstm": (0.6, "")},
+    "flat": {"linear": (0.8, "same"), "haptic_cnn": (0.8, "same"), "haptic_lstm": (0.5, "")},
+    "slip": {"linear": (1.2, ""), "haptic_cnn": (0.5, ""), "haptic_lstm": (0.8, "")},
+}
+
+
+@pytest.fixture(scope="module")
+def folder_tracker(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "folder_report_test")
+    for dataset, models in FOLDER_QUALITY.items():
+        for model, (quality, noise) in models.items():
+            for fold in (0, 1):
+                report_fixture.log_job(
+                    tracker, dataset=dataset, model=model, quality=quality, fold=fold, noise=noise
+                )
+    return tracker
+
+
+def test_a_report_on_folder_data_sets_compares_configurations_not_the_paper(
+    folder_tracker, mlflow_uri, tmp_path, capsys
+):
+    out = tmp_path / "out"
+    args = ["--tracking-uri", mlflow_uri, "--experiment", "folder_report_test", "--out", str(out)]
+    cli.main([*args, "--compare", "model=haptic_cnn > model=linear"])
+    index = (out / "index.md").read_text()
+    assert index.startswith("# 3 configurations on 3 data sets\n")
+    for paper in ("Gao et al.", "Table I", "claims", "Fig. 5", "Fig. 6", "Table III", "not run"):
+        assert paper not in index
+    assert not {"claims.md", "fig5_per_adjective.png", "table3.md"} & {
+        p.name for p in out.iterdir()
+    }
+    board = list(csv.DictReader((out / "leaderboard.csv").read_text().splitlines()))
+    slide = [r for r in board if r["dataset"] == "slide"]
+    assert [r["configuration"] for r in slide][0] == "model=haptic_cnn"
+    assert all("fold" not in r["configuration"] for r in board)
+    assert {r["configuration"] for r in board} == {
+        "model=haptic_cnn",
+        "model=haptic_lstm",
+        "model=linear",
+    }
+    assert all(r["test_objects"] == "6/10" for r in board)  # every object once, pooled
+    compared = {
+        r["dataset"]: r
+        for r in csv.DictReader((out / "comparisons.csv").read_text().splitlines())
+        if not r["label"]
+    }
+    assert compared["slide"]["result"] == "supported"
+    assert compared["flat"]["result"] == "not distinguishable"
+    assert compared["slip"]["result"] in ("contradicted", "not distinguishable")
+    bench = list(csv.DictReader((out / "benchmark.csv").read_text().splitlines()))
+    assert [r["missing_on"] for r in bench] == ["", "", ""] and all(r["mean_rank"] for r in bench)
+    assert "Friedman over 3 data sets and 3 configurations" in index
+    with Image.open(out / "benchmark_cd.png") as image:
+        assert np.asarray(image.convert("L")).std() > 10
+    printed = capsys.readouterr().out
+    assert "Leaderboard (every column:" in printed and "Table I" not in printed
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("folder_report_test")
+    (report,) = client.search_runs([experiment.experiment_id], "tags.run_level = 'report'")
+    tables = {a.path for a in client.list_artifacts(report.info.run_id, "tables")}
+    assert tables == {f"tables/{t}.json" for t in ("leaderboard", "comparisons", "benchmark")}
+    assert report.data.params["compare"] == "model=haptic_cnn > model=linear"
+
+
+def test_a_bad_comparison_is_one_line(folder_tracker, mlflow_uri, tmp_path, capsys):
+    args = ["--tracking-uri", mlflow_uri, "--experiment", "folder_report_test"]
+    args += ["--out", str(tmp_path / "out")]
+    with pytest.raises(SystemExit) as err:
+        cli.main([*args, "--compare", "model=nosuch > model=linear"])
+    line = str(err.value.code)
+    assert line.startswith("error: --compare 'model=nosuch > model=linear': 'model=nosuch' names")
+    assert "\n" not in line
+    with pytest.raises(SystemExit) as err:
+        cli.main([*args, "--compare", "model=haptic_cnn, model=linear"])
+    assert err.value.code == 2 and "expected 'A > B' or 'A >= B'" in capsys.readouterr().err

@@ -40,11 +40,20 @@ from pathlib import Path
 
 from tactile_exp import stats
 from tactile_exp.artifacts import ArtifactError
+from tactile_exp.data.dataset import PHAC2_LAYOUT
 from tactile_exp.metrics import METRICS, THRESHOLD
-from tactile_exp.report import comparisons, heldout
+from tactile_exp.report import (
+    benchmark,
+    comparisons,
+    configurations,
+    declared,
+    heldout,
+    leaderboard,
+)
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
-from tactile_exp.report.figures import cd_diagram, fig5, fig6, numeric_axis
+from tactile_exp.report.configurations import Spec, SpecError
+from tactile_exp.report.figures import cd_diagram, differences, fig5, fig6, numeric_axis
 from tactile_exp.report.labels import label_notes
 from tactile_exp.report.runs import (
     HAPTIC,
@@ -58,9 +67,11 @@ from tactile_exp.report.runs import (
 from tactile_exp.report.runs_table import runs_table
 from tactile_exp.report.scores import ReportError
 from tactile_exp.report.table1 import table1, table1_markdown, table1_summary
-from tactile_exp.tracking import ExperimentNotFound, Tracker, git_commit
+from tactile_exp.tracking import ExperimentNotFound, Tracker, canonical_column, git_commit
 
 ENTRY_POINT = "python -m tactile_exp.report"
+PRESETS = ("auto", "gao2016", "none")  # auto: the paper's sections when its rows ran on PHAC-2
+PHAC2_SOURCES = ("synthetic", "phac2")  # data sources of PHAC-2's layout (runs without the tag)
 FIG6_ADJECTIVES = ("metallic", "compressible")  # the paper's Fig. 6
 FIG6_ROWS = ("I", "H", "J")  # the jobs whose ConvNet Fig. 6 shows, first run first
 
@@ -86,14 +97,23 @@ def write(
     skipped: tuple[str, ...] = (),
     metric: str = "roc_auc",
     margin: float = stats.MARGIN,
+    compare: tuple[declared.Declared, ...] = (),
+    baseline: Spec | None = None,
+    preset: str = "auto",
 ) -> list[Path]:
     """Every report file into ``out``; returns their paths, ``index.md`` last. ``skipped``: the
     sweep's cells that did not run (invalid config), listed at the end of ``index.md``.
     ``metric``: what the numbers are (``groups`` must be collected for it). ``margin``: the
-    loss (in AUC) an "as good as" claim may rule out (``stats.MARGIN`` unless given)."""
+    loss (in AUC) an "as good as" comparison may rule out (``stats.MARGIN`` unless given).
+    ``compare``: the declared comparisons; ``baseline``: what each leaderboard compares with
+    (default: its best by mean). ``preset``: the paper's sections (`PRESETS`)."""
     out.mkdir(parents=True, exist_ok=True)
     evidence = {g.key: heldout.load(tracker, g, metric) for g in groups}
-    rows = table1(groups, evidence, metric)
+    names = configurations.names(groups)
+    datasets = configurations.by_dataset(groups)
+    # Fig. 6 or Table III asked for by an option: the paper's sections.
+    paper = paper_groups(groups, "gao2016" if preset == "auto" and choices != Choices() else preset)
+    rows = table1(groups, evidence, metric, names)
     (out / "table1.md").write_text(table1_markdown(rows, metric))
     (out / "table1_summary.md").write_text(table1_summary(rows, metric))
     _write_csv(out / "table1.csv", rows)
@@ -113,26 +133,23 @@ def write(
         out / "per_adjective.csv",
         out / "per_adjective_intervals.csv",
     ]
-    visual, haptic = best(groups, ("visual",)), best(groups, HAPTIC)
-    if visual or haptic:
-        shown = [
-            (kind, g, evidence[g.key].per_adjective() if evidence[g.key].ok else {})
-            for kind, g in (("best haptic", haptic), ("best visual", visual))
-            if g is not None
-        ]
-        title = _fig5_title(haptic, visual, metric)
-        fig5(shown, title, out / "fig5_per_adjective.png", metric)
-        paths.append(out / "fig5_per_adjective.png")
-    claim_text, claim_paths = _claims(groups, evidence, haptic, visual, out, margin)
-    friedman_text, friedman_paths = _friedman(groups, evidence, out)
+    boards = [
+        leaderboard.board(name, members, evidence, names, baseline)
+        for name, members in datasets.items()
+    ]
+    board_text, board_paths = _leaderboards(boards, evidence, out, metric, tracker)
+    declared_text, declared_paths = _declared(
+        list(compare), datasets, evidence, names, out, margin, metric
+    )
+    bench_text, bench_paths = _benchmark(boards, out, metric)
+    paths += board_paths + declared_paths + bench_paths
+    index = _title(groups, datasets, paper, source, names) + _metric_text(metric)
+    if paper:
+        index += _paper(paper, evidence, out, tracker, choices, metric, margin, paths)
+    index += board_text + declared_text + bench_text
     ablation_text, ablation_paths = _ablation(groups, evidence, out, metric)
-    paths += claim_paths + friedman_paths + ablation_paths
-    fig6_paths, fig6_text = _fig6(groups, out, tracker, choices)
-    table3_lines = _table3(groups, tracker, choices)
-    paths += fig6_paths + t3.write_table3(table3_lines, out)
-    index = _index(groups, rows, source, visual, haptic, evidence, metric)
-    index += claim_text + friedman_text + ablation_text
-    index += fig6_text + _table3_text(table3_lines)
+    paths += ablation_paths
+    index += ablation_text
     index += label_notes(groups, tracker)
     if skipped:
         index += "\n## Not run: invalid config\n\nCells of this sweep listed invalid before its "
@@ -140,6 +157,37 @@ def write(
         index += "".join(f"- {line}\n" for line in skipped)
     (out / "index.md").write_text(index)
     return [*paths, out / "index.md"]
+
+
+def paper_groups(groups: list[Group], preset: str) -> list[Group]:
+    """The groups the paper's sections (Table I's rows, Fig. 5, the claims, Fig. 6, Table III)
+    are about: with ``auto``, the groups on PHAC-2-layout data when one of them is a Table I
+    row, else none; ``gao2016`` all groups on PHAC-2-layout data (all groups if none is);
+    ``none`` none."""
+    if preset == "none":
+        return []
+    phac2 = [g for g in groups if on_phac2(g)]
+    if preset == "gao2016":
+        return phac2 or groups
+    return phac2 if any(g.row for g in phac2) else []
+
+
+def on_phac2(g: Group) -> bool:
+    """Whether the group ran on PHAC-2's layout (the real file or its synthetic twin): the
+    ``data.layout`` tag jobs log; for runs logged without it, the data source's name."""
+    layout = g.layout
+    if layout is not None:
+        return layout == PHAC2_LAYOUT
+    return g.params.get("data.name", "phac2") in PHAC2_SOURCES
+
+
+# The report's tables MLflow shows as tables too (its Evaluation/Artifacts views), not only files.
+TABLES = ("leaderboard", "benchmark", "comparisons")
+
+
+def _read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
 
 
 def _write_csv(path: Path, rows: list[dict[str, str]]) -> None:
@@ -274,9 +322,9 @@ def _ablation(
     lines = [
         "## The ablation view",
         "",
-        "The configurations outside Table I's rows, named by the swept settings that differ. For",
-        "each axis, every pair of its levels compared paired, averaged over the other axes'",
-        "combinations (Holm over all these comparisons).",
+        "The configurations of one sweep on one data set (the paper's rows aside), named by the",
+        "swept settings that differ. For each axis, every pair of its levels compared paired,",
+        "averaged over the other axes' combinations (Holm over all these comparisons).",
         "",
         "| configuration | mean AUC [95% CI] | seeds |",
         "|---|---|---|",
@@ -434,10 +482,173 @@ def _table3_text(lines: list[dict[str, str]]) -> str:
     )
 
 
-def _index(
+def _title(
+    groups: list[Group],
+    datasets: dict[str, list[Group]],
+    paper: list[Group],
+    source: str,
+    names: dict[str, str],
+) -> str:
+    """The report's title names what it compares; the paper's when its rows were run."""
+    n_configs = len(set(names.values()))
+    if paper:
+        title = "Gao et al. (ICRA 2016), regenerated from tracked runs"
+    elif len(datasets) == 1:
+        title = f"{_count(n_configs, 'configuration')} on {next(iter(datasets))}"
+    else:
+        title = f"{_count(n_configs, 'configuration')} on {len(datasets)} data sets"
+    return "\n".join(
+        [
+            f"# {title}",
+            "",
+            f"{source}; {_count(n_configs, 'configuration')} on "
+            f"{_count(len(datasets), 'data set')} ({', '.join(datasets)}), "
+            f"{_count(_n_runs(groups), 'run')} (each seed and fold once). Written "
+            f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC by `{ENTRY_POINT}`"
+            + (f" at commit `{commit}`." if (commit := _commit()) else "."),
+            "",
+            "",
+        ]
+    )
+
+
+def _leaderboards(
+    boards: list[leaderboard.Board],
+    evidence: dict[str, heldout.Evidence],
+    out: Path,
+    metric: str,
+    tracker: Tracker,
+) -> tuple[str, list[Path]]:
+    """``leaderboard.md`` / ``.csv``, one board per data set, each with a runs-table link."""
+    label = METRICS.build(metric).label
+    text = [
+        "## Leaderboard" + ("s" if len(boards) > 1 else ""),
+        "",
+        f"Per data set, every configuration's mean {label} over the labels it ran, with a 95%",
+        "bootstrap interval over test objects (an object's units together, positives and",
+        "negatives apart; with `split=folds` over the pooled out-of-fold scores), its rank (1 =",
+        "best mean), the positive/negative test objects each label rests on (range over labels),",
+        "and its difference from the baseline, paired on the same test objects (95% paired",
+        "bootstrap interval; Wilcoxon over labels and the bootstrap's test, Holm over the data",
+        "set's comparisons). A configuration is named by the settings that differ between the",
+        "report's configurations; every setting, split, seed and run id is in",
+        "[table1.md](table1.md) ([table1.csv](table1.csv)). Machine-readable:",
+        "[leaderboard.csv](leaderboard.csv).",
+        "",
+    ]
+    rows = []
+    for b in boards:
+        identity = b.entries[0].group.first_run.data
+        columns = [canonical_column("metrics", f"mean_{METRICS.build(metric).key}")]
+        columns += [canonical_column("params", "choice.model")]
+        where = f"tags.`data.identity` = '{identity}'" if identity else ""
+        link = tracker.runs_view(columns, order_by=columns[0], where=where)
+        text += [
+            f"### {b.dataset}",
+            "",
+            f"Baseline: `{b.baseline}` ({b.chosen}). In `mlflow ui`: [its runs]({link}).",
+            "",
+            leaderboard.markdown(b, evidence, metric),
+        ]
+        rows += leaderboard.rows(b, evidence, metric)
+    body = "\n".join(text) + "\n"
+    (out / "leaderboard.md").write_text(body)
+    _write_csv(out / "leaderboard.csv", rows)
+    return body, [out / "leaderboard.md", out / "leaderboard.csv"]
+
+
+def _declared(
+    compare: list[declared.Declared],
+    datasets: dict[str, list[Group]],
+    evidence: dict[str, heldout.Evidence],
+    names: dict[str, str],
+    out: Path,
+    margin: float,
+    metric: str,
+) -> tuple[str, list[Path]]:
+    """``comparisons.md`` / ``.csv`` and each compared pair's per-label figure."""
+    if not compare:
+        return "", []
+    found = declared.outcomes(compare, datasets, evidence, names, margin)
+    overall = declared.across(compare, datasets, evidence, names)
+    text = [
+        "## Declared comparisons",
+        "",
+        "Each `--compare` on every data set where both configurations ran: the difference of",
+        "mean metric with its 95% paired-bootstrap interval, Wilcoxon's signed-rank test over the",
+        "labels and the bootstrap's test, Holm-corrected over every declared comparison on every",
+        "data set (on the larger of the two p-values). `A > B` is `supported` only when the",
+        "corrected test, the interval and the direction of the signed ranks agree that A wins,",
+        "`contradicted` when they agree B does, `mixed` when the interval and the ranks point",
+        "opposite ways, else `not distinguishable`. `A >= B` is `supported` only when the",
+        f"interval rules out a loss of {margin} or more (`--margin`). Machine-readable, with each",
+        "label's difference: [comparisons.csv](comparisons.csv).",
+        "",
+        declared.markdown(found, overall),
+    ]
+    paths = []
+    for i, o in enumerate(found, 1):
+        if o.labels:
+            path = out / f"comparison_{i}.png"
+            title = f"{o.a} - {o.b} on {o.dataset} ({o.level:.2%} paired intervals)"
+            differences(o.labels, title, path, metric)
+            paths.append(path)
+            text += [f"![{o.declared.text} on {o.dataset}]({path.name})", ""]
+    body = "\n".join(text) + "\n"
+    (out / "comparisons.md").write_text(body)
+    _write_csv(out / "comparisons.csv", declared.rows(found))
+    return body, [out / "comparisons.md", out / "comparisons.csv", *paths]
+
+
+def _benchmark(boards: list[leaderboard.Board], out: Path, metric: str) -> tuple[str, list[Path]]:
+    """With two or more data sets: ``benchmark.md`` / ``.csv`` and the CD diagram over them."""
+    if len(boards) < 2:
+        return "", []
+    bench = benchmark.benchmark(boards)
+    body = "## Across data sets\n\n" + benchmark.markdown(bench, metric)
+    (out / "benchmark.md").write_text(body)
+    _write_csv(out / "benchmark.csv", benchmark.rows(bench, metric))
+    paths = [out / "benchmark.md", out / "benchmark.csv"]
+    if bench.friedman is not None:
+        cd_diagram(bench.friedman, out / "benchmark_cd.png", blocks="data sets")
+        paths.append(out / "benchmark_cd.png")
+    return body, paths
+
+
+def _paper(
+    groups: list[Group],
+    evidence: dict[str, heldout.Evidence],
+    out: Path,
+    tracker: Tracker,
+    choices: Choices,
+    metric: str,
+    margin: float,
+    paths: list[Path],
+) -> str:
+    """The paper's sections on its rows (the ``gao2016`` preset): Table I, Fig. 5, the claims,
+    Friedman's test over adjectives, Fig. 6 and Table III; their files are added to ``paths``."""
+    rows = table1(groups, evidence, metric)
+    visual, haptic = best(groups, ("visual",)), best(groups, HAPTIC)
+    if visual or haptic:
+        shown = [
+            (kind, g, evidence[g.key].per_adjective() if evidence[g.key].ok else {})
+            for kind, g in (("best haptic", haptic), ("best visual", visual))
+            if g is not None
+        ]
+        fig5(shown, _fig5_title(haptic, visual, metric), out / "fig5_per_adjective.png", metric)
+        paths.append(out / "fig5_per_adjective.png")
+    claim_text, claim_paths = _claims(groups, evidence, haptic, visual, out, margin)
+    friedman_text, friedman_paths = _friedman(groups, evidence, out)
+    fig6_paths, fig6_text = _fig6(groups, out, tracker, choices)
+    table3_lines = _table3(groups, tracker, choices)
+    paths += claim_paths + friedman_paths + fig6_paths + t3.write_table3(table3_lines, out)
+    text = _table1_text(groups, rows, visual, haptic, evidence, metric)
+    return text + claim_text + friedman_text + fig6_text + _table3_text(table3_lines)
+
+
+def _table1_text(
     groups: list[Group],
     rows: list[dict[str, str]],
-    source: str,
     visual: Group | None,
     haptic: Group | None,
     evidence: dict[str, heldout.Evidence],
@@ -454,13 +665,6 @@ def _index(
         over += f" ({', '.join(label_order(groups))})"
     missing = [g for g in groups if not evidence[g.key].ok]
     lines = [
-        "# Gao et al. (ICRA 2016), regenerated from tracked runs",
-        "",
-        f"{source}; {_count(len(groups), 'configuration')}, {_count(_n_runs(groups), 'run')} "
-        f"(each seed and fold once). Written {datetime.now(UTC):%Y-%m-%d %H:%M} UTC by "
-        f"`{ENTRY_POINT}`" + (f" at commit `{commit}`." if (commit := _commit()) else "."),
-        "",
-        *_metric_note(metric),
         f"## Table I: mean {shown.label} {over}",
         "",
         "One line per configuration up to the seed (and fold); `n seeds` counts its seeds",
@@ -505,20 +709,22 @@ def _index(
     return "\n".join(lines) + "\n"
 
 
-def _metric_note(metric: str) -> list[str]:
+def _metric_text(metric: str) -> str:
     """What the numbers are when they are not ROC AUC (the prose below speaks of AUC)."""
     if metric == "roc_auc":
-        return []
+        return ""
     shown = METRICS.build(metric)
-    return [
+    lines = [
         f"**Metric: {shown.label}** (`--metric {metric}`, logged as `{shown.key}`). Every AUC",
-        "below (Table I, Fig. 5, the per-adjective files, the claims, Friedman's test, the",
-        f"ablation view) is the {shown.label} of the test units; its intervals come from the same",
-        f"object bootstrap, {shown.label} recomputed on each replicate's resampled objects. The",
-        "paper's column is empty: its figures are ROC AUC. Jobs that did not log",
-        f"`mean_{shown.key}` are not listed.",
+        "below (the leaderboards, the comparisons, Table I, Fig. 5, the per-adjective files, the",
+        f"claims, Friedman's test, the ablation view) is the {shown.label} of the test units; its",
+        f"intervals come from the same object bootstrap, {shown.label} recomputed on each",
+        "replicate's resampled objects. Table I's paper column is empty: the paper's figures are",
+        f"ROC AUC. Jobs that did not log `mean_{shown.key}` are not listed.",
+        "",
         "",
     ]
+    return "\n".join(lines)
 
 
 def _commit() -> str | None:
@@ -586,6 +792,28 @@ def main(argv: list[str] | None = None) -> None:
         f"equivalence bound (ours, not the paper's; default: {stats.MARGIN})",
     )
     parser.add_argument(
+        "--compare",
+        action="append",
+        default=[],
+        metavar="'A > B'",
+        help="a declared comparison of two configurations by their settings, e.g. "
+        '"model=haptic_cnn > model=linear" (A beats B) or "combine=1 >= combine=10" (A is '
+        "not worse by --margin or more); repeat for several (Holm over all of them)",
+    )
+    parser.add_argument(
+        "--baseline",
+        metavar="SPEC",
+        help="the configuration each leaderboard compares every other with, by its settings "
+        "(e.g. model=linear; default: each data set's best by mean)",
+    )
+    parser.add_argument(
+        "--preset",
+        choices=PRESETS,
+        default="auto",
+        help="the paper's sections (Table I's rows, Fig. 5, its claims, Fig. 6, Table III): auto "
+        "(when its rows ran on PHAC-2-layout data), gao2016 (always), none (never)",
+    )
+    parser.add_argument(
         "--runs-table",
         metavar="RUN_ID",
         help="print this job's runs as mlflow ui lists them (Markdown) and exit",
@@ -597,6 +825,11 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"--margin: an AUC difference in (0, 1), got {args.margin}")
     if args.metric not in METRICS:
         parser.error(f"--metric: unknown {args.metric!r}; known: {', '.join(METRICS.names())}")
+    try:
+        compare = tuple(declared.Declared.parse(text) for text in args.compare)
+        baseline = Spec.parse(args.baseline) if args.baseline else None
+    except SpecError as err:
+        parser.error(str(err))
     try:
         tracker = Tracker.open(args.tracking_uri, args.experiment, entry_point=ENTRY_POINT)
     except ExperimentNotFound as err:
@@ -633,8 +866,11 @@ def main(argv: list[str] | None = None) -> None:
             skipped=skipped,
             metric=args.metric,
             margin=args.margin,
+            compare=compare,
+            baseline=baseline,
+            preset=args.preset,
         )
-    except (ReportError, ArtifactError) as err:
+    except (ReportError, ArtifactError, SpecError) as err:
         sys.exit(f"error: {err}")
     params = {
         "experiment": args.experiment,
@@ -642,13 +878,21 @@ def main(argv: list[str] | None = None) -> None:
         "out": str(args.out),
         "metric": args.metric,
         "margin": str(args.margin),
+        "compare": " ; ".join(args.compare)[:5000],
+        "baseline": args.baseline or "",
+        "preset": args.preset,
     }
     with tracker.run("report", params, {"run_level": "report"}) as run_id:
         tracker.log_metrics(run_id, {"n_groups": len(groups), "n_runs": _n_runs(groups)})
         for path in paths:
             tracker.log_file(run_id, path, "report")
+            if path.suffix == ".csv" and path.stem in TABLES:
+                tracker.log_table(run_id, _read_csv(path), f"tables/{path.stem}.json")
     for path in paths:
         print(path)
     print(f"logged as MLflow run {run_id} (report) in {tracker.uri}")
-    print(f"Table I (every column: {args.out / 'table1.md'}):")
-    print((args.out / "table1_summary.md").read_text())
+    if (args.out / "table1_summary.md").exists() and paper_groups(groups, args.preset):
+        print(f"Table I (every column: {args.out / 'table1.md'}):")
+        print((args.out / "table1_summary.md").read_text())
+    print(f"Leaderboard (every column: {args.out / 'leaderboard.csv'}):")
+    print((args.out / "leaderboard.md").read_text())

@@ -208,17 +208,18 @@ def _level_key(v: str) -> tuple[int, float | str]:
         return 1, v
 
 
-IGNORED_AXES = ("seed", "split.fold", "hydra", "tracking")
+IGNORED_AXES = ("seed", "split.fold", "hydra", "tracking", "data")
 
 
 def ablation(groups: list[Group], evidence: dict[str, Evidence]) -> Ablation | None:
-    """The configurations outside Table I's rows of one sweep (the one with the most of them),
-    named by the overrides that differ, with each axis's paired effect between each pair of its
-    levels, averaged over the other axes' combinations (Holm over all of them)."""
-    sweeps: dict[str, list[Group]] = {}
+    """The configurations outside Table I's rows of one sweep on one data set (the pair with
+    the most of them), named by the overrides that differ, with each axis's paired effect
+    between each pair of its levels, averaged over the other axes' combinations (Holm over all
+    of them)."""
+    sweeps: dict[tuple[str, str], list[Group]] = {}
     for g in groups:
         if not g.row and evidence[g.key].ok:
-            sweeps.setdefault(g.first_run.sweep_id, []).append(g)
+            sweeps.setdefault((g.first_run.sweep_id, g.first_run.data), []).append(g)
     pool = max(sweeps.values(), key=len, default=[])
     if len(pool) < 2:
         return None

@@ -92,9 +92,10 @@ def fig5_adjectives(groups: list[Group]) -> list[str]:
     return label_order(groups)
 
 
-def cd_diagram(result: Friedman, path: Path) -> None:
+def cd_diagram(result: Friedman, path: Path, blocks: str = "adjectives") -> None:
     """Demsar's critical-difference diagram: mean ranks on one axis (1 = best, on the left),
-    bars joining configurations whose ranks differ by less than Nemenyi's CD."""
+    bars joining configurations whose ranks differ by less than Nemenyi's CD; ``blocks`` names
+    what each configuration was ranked on (adjectives, data sets)."""
     plt = _pyplot()
     order = np.argsort(result.mean_ranks)
     k = len(order)
@@ -147,11 +148,11 @@ def cd_diagram(result: Friedman, path: Path) -> None:
         fontsize=8,
     )
     ax.set_title(
-        f"Mean rank over {result.n_adjectives} adjectives (Friedman p = {result.p:.3g}); red bars: "
+        f"Mean rank over {result.n_adjectives} {blocks} (Friedman p = {result.p:.3g}); red bars: "
         "not distinguishable (Nemenyi, 0.05)",
         fontsize=9,
     )
-    ax.text((k + 1) / 2, 0.45, "mean rank over adjectives (1 = best)", ha="center", fontsize=8)
+    ax.text((k + 1) / 2, 0.45, f"mean rank over {blocks} (1 = best)", ha="center", fontsize=8)
     if legend:
         ax.text(
             0.5,
@@ -164,6 +165,31 @@ def cd_diagram(result: Friedman, path: Path) -> None:
         )
         ax.set_ylim(-k * 0.35 - 0.7 - 0.16 * len(legend), 1.2)
     ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+
+
+def differences(intervals: dict[str, Interval], title: str, path: Path, metric: str) -> None:
+    """One pair's per-label differences (a - b) with their paired intervals: the paper's Fig. 5
+    for any two configurations; a label without an interval is drawn as its point alone."""
+    plt = _pyplot()
+    labels = list(intervals)
+    fig, ax = plt.subplots(figsize=(max(4.0, 0.35 * len(labels) + 1.5), 3.6))
+    x = np.arange(len(labels))
+    estimates = np.array([intervals[j].estimate for j in labels])
+    colours = [
+        "tab:red" if iv.low > 0 else "tab:blue" if iv.high < 0 else "0.4"
+        for iv in intervals.values()
+    ]
+    ax.scatter(x, estimates, c=colours, s=14, zorder=3)
+    low = np.array([iv.low for iv in intervals.values()])
+    high = np.array([iv.high for iv in intervals.values()])
+    _interval_bars(ax, x, low, high)
+    ax.axhline(0, color="k", lw=0.8, ls=":")
+    ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=8)
+    ax.set_ylabel(f"difference of {_label(metric)}")
+    ax.set_title(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)

@@ -55,6 +55,7 @@ class Run:
     fold: int = -1  # split=folds: the tested fold; -1 for the other split rules
     folds: int = 0  # split=folds: K; 0 otherwise
     labels: tuple[str, ...] = ()  # every label of its data set, in order (tag data.labels)
+    layout: str | None = None  # its data set's record layout (tag data.layout; "none": plain)
 
 
 @dataclass
@@ -104,6 +105,11 @@ class Group:
     def n_labels(self) -> int:
         """How many labels the group's data set has (its runs may have trained fewer)."""
         return len(self.first_run.labels) or UNTAGGED_LABELS
+
+    @property
+    def layout(self) -> str | None:
+        """Its data set's record layout as the jobs tagged it (None: logged before the tag)."""
+        return self.first_run.layout
 
     @property
     def first_run(self) -> Run:
@@ -177,6 +183,8 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
         experiment = params.get("choice.experiment", "None")
         if experiment != "None":  # a Table I row stays one even if a sweep ran its config
             key = f"{key}:{experiment}"
+        if tags.get("data.identity"):  # the same config on changed data is another line
+            key = f"{key}@{tags['data.identity']}"
         if key not in groups:
             paper = params.get("paper.auc", "None")
             groups[key] = Group(
@@ -184,7 +192,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
                 row_hash=row_hash,
                 method=experiment
                 if experiment != "None"
-                else re.sub(r"-s\d+$", "", run.info.run_name),
+                else re.sub(r"-s\d+$", "", re.sub(r"-fold=\d+(?=-)", "", run.info.run_name)),
                 row=params.get("paper.row", ""),
                 paper_auc=None if paper == "None" else float(paper),
                 schedule=params.get("choice.schedule", ""),
@@ -216,6 +224,7 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
             fold=int(params.get("split.fold", -1)),
             folds=int(params.get("split.folds", 0)),
             labels=labels,
+            layout=tags.get("data.layout"),
         )
         kept = groups[key].runs.get((entry.seed, entry.fold))
         if kept is None or entry.start_time > kept.start_time:

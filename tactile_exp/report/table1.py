@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 from tactile_exp.metrics import METRICS
+from tactile_exp.report.configurations import dataset
 from tactile_exp.report.heldout import FEW_OBJECTS, Evidence
 from tactile_exp.report.runs import Group
 
 
 def table1(
-    groups: list[Group], evidence: dict[str, Evidence] | None = None, metric: str = "roc_auc"
+    groups: list[Group],
+    evidence: dict[str, Evidence] | None = None,
+    metric: str = "roc_auc",
+    names: dict[str, str] | None = None,
 ) -> list[dict[str, str]]:
-    """Table I's lines, machine-readable: AUC as fractions, full precision, full run ids.
+    """Table I's lines, machine-readable: AUC as fractions, full precision, full run ids; with
+    ``names`` (`configurations.names`), each line's configuration and data set too.
 
     ``mean_auc`` is the mean over adjectives (then seeds); with ``split=folds`` it is each
     adjective's AUC over all objects' pooled out-of-fold scores when the scores are there, and
@@ -35,6 +40,11 @@ def table1(
                 "row": g.row,
                 "at_paper_settings": str(g.at_paper_settings),
                 "method": g.method,
+                **(
+                    {"configuration": names[g.key], "dataset": dataset(g, groups)}
+                    if names is not None
+                    else {}
+                ),
                 "differences": "; ".join(g.differences),
                 "schedule": f"{g.schedule} ({g.schedule_epochs})",
                 "adjectives": str(g.n_adjectives),

@@ -1,0 +1,61 @@
+"""Configurations named by what differs, data sets by their names, specs that pick one."""
+
+import pytest
+from report_fixture import group
+
+from tactile_exp.report import configurations
+from tactile_exp.report.configurations import Spec, SpecError
+
+
+def _groups():
+    return [
+        group("slip", "linear", 1.0)[0],
+        group("slip", "haptic_cnn", 1.0, ("model.groups=24",))[0],
+        group("slip", "haptic_cnn", 1.0, ("model.groups=24", "combine=10"))[0],
+        group("slide", "linear", 1.0)[0],
+    ]
+
+
+def test_names_say_what_differs_and_are_shared_across_data_sets():
+    groups = _groups()
+    for g in groups[2:3]:
+        g.params["combine"] = "10"
+    for g in groups[:2] + groups[3:]:
+        g.params["combine"] = "1"
+    names = configurations.names(groups)
+    assert [names[g.key] for g in groups] == [
+        "model=linear combine=1",
+        "model=haptic_cnn combine=1 model.groups=24",
+        "model=haptic_cnn combine=10 model.groups=24",
+        "model=linear combine=1",  # the same configuration on another data set
+    ]
+    assert not any("fold" in n or "seed" in n or "data" in n for n in names.values())
+
+
+def test_a_lone_configuration_is_named_by_its_model_and_ties_by_their_hash():
+    (g, _) = group("slip", "linear", 1.0)
+    assert configurations.names([g]) == {g.key: "model=linear"}
+    twin = group("slip", "linear", 1.0)[0]
+    twin.key, twin.row_hash = "other@slip-0123456789ab", "abcdef123"
+    names = configurations.names([g, twin])
+    assert names[g.key] != names[twin.key] and names[twin.key] == "model=linear #abcdef"
+
+
+def test_data_sets_are_named_by_their_files_and_told_apart_by_digest():
+    a, b = group("slip", "linear", 1.0)[0], group("slip", "linear", 1.0)[0]
+    b.runs[0, -1] = type(b.first_run)(**{**vars(b.first_run), "data": "slip-fedcba987654"})
+    assert configurations.dataset(a) == "slip"
+    assert {configurations.dataset(g, [a, b]) for g in (a, b)} == {"slip (012345)", "slip (fedcba)"}
+    assert list(configurations.by_dataset(_groups())) == ["slide", "slip"]
+
+
+def test_a_spec_picks_the_one_configuration_it_names():
+    groups = _groups()[:3]
+    names = configurations.names(groups)
+    assert Spec.parse("model=linear").pick(groups, names) is groups[0]
+    assert Spec.parse("model=haptic_cnn combine=10").pick(groups, names) is groups[2]
+    assert Spec.parse("model=lstm").pick(groups, names) is None
+    with pytest.raises(SpecError, match=r"matches 2 configurations on slip .*tells them apart"):
+        Spec.parse("model=haptic_cnn").pick(groups, names)
+    with pytest.raises(SpecError, match="expected key=value"):
+        Spec.parse("haptic_cnn")
