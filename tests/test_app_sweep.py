@@ -126,9 +126,10 @@ def test_smoke_sweep_and_report(cache_dir, mlflow_uri, tmp_path):
     reports = client.search_runs([experiment.experiment_id], "tags.run_level = 'report'")
     listed = {a.path for a in client.list_artifacts(reports[0].info.run_id, "report")}
     assert listed == {f"report/{p.name}" for p in out.iterdir()}
-    # Table I (md, csv, the four-column summary md), per-adjective (2 csv), Fig. 5, claims (md,
-    # csv), the CD diagram, Fig. 6 of metallic, Table III (md, csv), index.md
-    assert len(listed) == 13
+    # Table I (md, csv, the four-column summary md), per-adjective (2 csv), the leaderboard (md,
+    # csv), Fig. 5, claims (md, csv), the CD diagram, Fig. 6 of metallic, Table III (md, csv),
+    # index.md
+    assert len(listed) == 15
     assert "report/table1_summary.md" in listed
 
 

@@ -697,3 +697,90 @@ def test_a_bad_comparison_is_one_line(folder_tracker, mlflow_uri, tmp_path, caps
     with pytest.raises(SystemExit) as err:
         cli.main([*args, "--compare", "model=haptic_cnn, model=linear"])
     assert err.value.code == 2 and "expected 'A > B' or 'A >= B'" in capsys.readouterr().err
+
+
+def _folder_data(root, signal: float):
+    """16 objects x 2 trials of 8 channels; label k (positive for 6 objects) raises channel k by
+    ``signal`` standard deviations: learnable with signal > 0, noise alone with 0."""
+    from tactile_exp.data.dataset import Sensor
+    from tactile_exp.data.folder import write_folder
+
+    rng = np.random.default_rng([7, int(signal * 10)])
+    sensor = Sensor("test sensor", tuple(f"c{k}" for k in range(8)), 50.0)
+    labels, trials = {}, {}
+    for o in range(report_fixture.N_OBJECTS):
+        name = f"obj{o:02d}"
+        labels[name] = {
+            a: report_fixture.label_of(o, k) for k, a in enumerate(report_fixture.LABELS)
+        }
+        level = signal * np.array(list(labels[name].values()), dtype=float)
+        trials[name] = [level[:, None] + rng.normal(size=(8, 60)) for _ in range(2)]
+    return write_folder(root, sensor, labels, trials)
+
+
+@pytest.mark.slow
+@pytest.mark.job
+def test_jobs_on_two_folder_data_sets_then_the_comparison_report(tiny_config, mlflow_uri, tmp_path):
+    """Real jobs (three models, two folds) on two folder data sets, one with a planted signal,
+    then the report: the planted data set's leaderboard and declared comparison find it, the
+    other's do not, and the across-data-sets table ranks every configuration."""
+    from tactile_exp.config import settings_from_config
+
+    models = (["model=linear"], ["model=haptic_cnn", "model.groups=8"], ["model=random"])
+    for name, signal in (("planted", 3.0), ("noise", 0.0)):
+        data = _folder_data(tmp_path / name, signal)
+        for model in models:
+            for fold in (0, 1):
+                overrides = ["data=folder", f"data.path={data}", "modality=signals"]
+                overrides += ["split=folds", "split.folds=2", f"split.fold={fold}", *model]
+                overrides += ["schedule.epochs=20"]  # the tiny schedule's 2 do not learn it
+                experiment.run(settings_from_config(tiny_config(overrides, adjectives="null")))
+    out = tmp_path / "report"
+    args = ["--tracking-uri", mlflow_uri, "--out", str(out)]
+    cli.main([*args, "--compare", "model=linear > model=random"])
+    board = list(csv.DictReader((out / "leaderboard.csv").read_text().splitlines()))
+    planted = [r["configuration"] for r in board if r["dataset"] == "planted"]
+    assert planted[-1] == "model=random" and len(planted) == 3
+    compared = {
+        r["dataset"]: r["result"]
+        for r in csv.DictReader((out / "comparisons.csv").read_text().splitlines())
+        if not r["label"]
+    }
+    assert compared == {"planted": "supported", "noise": "not distinguishable"}
+    index = (out / "index.md").read_text()
+    assert index.startswith("# 3 configurations on 2 data sets\n") and "Table I" not in index
+    assert "Friedman over 2 data sets and 3 configurations" in index
+    assert (out / "benchmark_cd.png").exists()
+
+
+def test_the_preset_option_turns_the_paper_sections_on_and_off(
+    folds_tracker, folder_tracker, mlflow_uri, tmp_path
+):
+    args = ["--tracking-uri", mlflow_uri, "--out"]
+    cli.main([*args, str(tmp_path / "auto"), "--experiment", "folds_test"])
+    auto = (tmp_path / "auto" / "index.md").read_text()
+    assert auto.startswith("# Gao et al. (ICRA 2016)") and "## Table I" in auto
+    cli.main([*args, str(tmp_path / "none"), "--experiment", "folds_test", "--preset", "none"])
+    none = (tmp_path / "none" / "index.md").read_text()
+    assert "## Table I" not in none and "claims" not in none and "## Leaderboard" in none
+    assert none.startswith("# 8 configurations on synthetic-abc\n")
+    cli.main(
+        [*args, str(tmp_path / "on"), "--experiment", "folder_report_test"]
+        + ["--preset", "gao2016"]
+    )
+    assert "## Table I" in (tmp_path / "on" / "index.md").read_text()
+
+
+def test_a_named_baseline_is_each_leaderboard_s_reference(folder_tracker, mlflow_uri, tmp_path):
+    out = tmp_path / "out"
+    cli.main(
+        ["--tracking-uri", mlflow_uri, "--experiment", "folder_report_test", "--out", str(out)]
+        + ["--baseline", "model=haptic_lstm"]
+    )
+    board = list(csv.DictReader((out / "leaderboard.csv").read_text().splitlines()))
+    assert {r["baseline"] for r in board} == {"model=haptic_lstm"}
+    slide = {r["configuration"]: r for r in board if r["dataset"] == "slide"}
+    assert slide["model=haptic_cnn"]["verdict"].startswith(
+        "model=haptic_cnn beats model=haptic_lstm"
+    )
+    assert slide["model=haptic_lstm"]["difference"] == ""

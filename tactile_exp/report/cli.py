@@ -590,7 +590,7 @@ def _declared(
     for i, o in enumerate(found, 1):
         if o.labels:
             path = out / f"comparison_{i}.png"
-            title = f"{o.a} - {o.b} on {o.dataset} ({o.level:.2%} paired intervals)"
+            title = f"{o.a}\nminus {o.b}\non {o.dataset} ({o.level:.2%} paired intervals)"
             differences(o.labels, title, path, metric)
             paths.append(path)
             text += [f"![{o.declared.text} on {o.dataset}]({path.name})", ""]

@@ -175,7 +175,7 @@ def differences(intervals: dict[str, Interval], title: str, path: Path, metric: 
     for any two configurations; a label without an interval is drawn as its point alone."""
     plt = _pyplot()
     labels = list(intervals)
-    fig, ax = plt.subplots(figsize=(max(4.0, 0.35 * len(labels) + 1.5), 3.6))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.35 * len(labels) + 1.5), 4.2))
     x = np.arange(len(labels))
     estimates = np.array([intervals[j].estimate for j in labels])
     colours = [

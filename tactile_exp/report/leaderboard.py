@@ -167,7 +167,7 @@ def markdown(board: Board, evidence: dict[str, Evidence], metric: str) -> str:
     label = METRICS.build(metric).label
     lines = [
         f"| rank | configuration | mean {label} % [95% CI] | test objects +/- | labels | "
-        f"- baseline [95% CI] | verdict |",
+        "difference from the baseline [95% CI] | verdict |",
         "|---|---|---|---|---|---|---|",
     ]
     for e in board.entries:
