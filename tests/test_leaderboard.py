@@ -1,5 +1,6 @@
 """A data set's leaderboard: ranks, intervals, and paired differences from the baseline."""
 
+import numpy as np
 import pytest
 from report_fixture import group
 
@@ -60,3 +61,13 @@ def test_holm_covers_the_data_set_comparisons():
     compared = [e.comparison for e in board.entries if e.comparison]
     raw = [max(c.p, c.p_bootstrap) for c in compared]
     assert [c.p_holm for c in compared] == pytest.approx(stats.holm(raw))
+
+
+def test_few_labels_say_no_verdict_can_name_a_winner():
+    from scipy import stats as sps
+
+    # Wilcoxon's exact two-sided p with every difference of one sign: the floor the note quotes
+    for n in (3, 5):
+        assert sps.wilcoxon(np.arange(1, n + 1)).pvalue == pytest.approx(2 / 2**n)
+        assert f"2/2^{n} = {2 / 2**n:.3g}" in leaderboard.few_labels_note(n)
+    assert leaderboard.few_labels_note(6) == ""  # 2/64 < 0.05

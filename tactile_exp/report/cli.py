@@ -550,6 +550,9 @@ def _leaderboards(
             "",
             leaderboard.markdown(b, evidence, metric),
         ]
+        n_labels = min(len(label_order([e.group])) for e in b.entries)
+        if note := leaderboard.few_labels_note(n_labels):
+            text += [note, ""]
         rows += leaderboard.rows(b, evidence, metric)
     body = "\n".join(text) + "\n"
     (out / "leaderboard.md").write_text(body)
@@ -586,6 +589,9 @@ def _declared(
         "",
         declared.markdown(found, overall),
     ]
+    compared = [o.comparison.n_adjectives for o in found if o.comparison is not None]
+    if compared and (note := leaderboard.few_labels_note(min(compared))):
+        text += [note, ""]
     paths = []
     for i, o in enumerate(found, 1):
         if o.labels:

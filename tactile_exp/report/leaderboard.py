@@ -185,3 +185,16 @@ def markdown(board: Board, evidence: dict[str, Evidence], metric: str) -> str:
             f"{n_labels} | {difference} | {verdict} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def few_labels_note(n_labels: int) -> str:
+    """Why no verdict can name a winner on this few labels ("" from 6 labels on): Wilcoxon's
+    exact two-sided p over n labels is at least 2 / 2**n, which is 0.0625 at n = 5."""
+    floor = 2 / 2**n_labels
+    if floor < stats.ALPHA:
+        return ""
+    return (
+        f"With {n_labels} label(s), Wilcoxon's test over labels cannot reach p < {stats.ALPHA} "
+        f"(its smallest two-sided p is 2/2^{n_labels} = {floor:.3g}): no verdict here can name "
+        "a winner, whatever the difference; the intervals still say how large it may be."
+    )
