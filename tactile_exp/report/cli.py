@@ -49,6 +49,7 @@ from tactile_exp.report import (
     declared,
     heldout,
     leaderboard,
+    results,
 )
 from tactile_exp.report import table3 as t3
 from tactile_exp.report.activations import N_TRIALS, conv3_maps
@@ -100,15 +101,18 @@ def write(
     compare: tuple[declared.Declared, ...] = (),
     baseline: Spec | None = None,
     preset: str = "auto",
+    known: dict[str, heldout.Evidence] | None = None,
 ) -> list[Path]:
     """Every report file into ``out``; returns their paths, ``index.md`` last. ``skipped``: the
     sweep's cells that did not run (invalid config), listed at the end of ``index.md``.
     ``metric``: what the numbers are (``groups`` must be collected for it). ``margin``: the
     loss (in AUC) an "as good as" comparison may rule out (``stats.MARGIN`` unless given).
     ``compare``: the declared comparisons; ``baseline``: what each leaderboard compares with
-    (default: its best by mean). ``preset``: the paper's sections (`PRESETS`)."""
+    (default: its best by mean). ``preset``: the paper's sections (`PRESETS`). ``known``: the
+    evidence of groups that are not tracked runs (``--import-results``)."""
     out.mkdir(parents=True, exist_ok=True)
-    evidence = {g.key: heldout.load(tracker, g, metric) for g in groups}
+    known = known or {}
+    evidence = {g.key: known.get(g.key) or heldout.load(tracker, g, metric) for g in groups}
     names = configurations.names(groups)
     datasets = configurations.by_dataset(groups)
     # Fig. 6 or Table III asked for by an option: the paper's sections.
@@ -150,7 +154,7 @@ def write(
     ablation_text, ablation_paths = _ablation(groups, evidence, out, metric)
     paths += ablation_paths
     index += ablation_text
-    index += label_notes(groups, tracker)
+    index += label_notes([g for g in groups if g.key not in known], tracker)
     if skipped:
         index += "\n## Not run: invalid config\n\nCells of this sweep listed invalid before its "
         index += "first job and skipped (`sweep.on_invalid=skip`):\n\n"
@@ -820,6 +824,22 @@ def main(argv: list[str] | None = None) -> None:
         "(when its rows ran on PHAC-2-layout data), gao2016 (always), none (never)",
     )
     parser.add_argument(
+        "--export-results",
+        type=Path,
+        metavar="DIR",
+        help="also write every configuration's held-out scores as DIR/<configuration>/<data "
+        "set>/fold<k>.csv (label, object, unit, truth, score), to compare elsewhere",
+    )
+    parser.add_argument(
+        "--import-results",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="results of methods run elsewhere, in --export-results' layout, as configurations "
+        "of the report (repeat for several folders)",
+    )
+    parser.add_argument(
         "--runs-table",
         metavar="RUN_ID",
         help="print this job's runs as mlflow ui lists them (Markdown) and exit",
@@ -844,6 +864,13 @@ def main(argv: list[str] | None = None) -> None:
         print(runs_table(tracker=tracker, job_id=args.runs_table, metric=args.metric), end="")
         return
     groups = collect(tracker, args.sweep_id, args.metric)
+    try:
+        imported = [found for root in args.import_results for found in results.load(root)]
+    except ReportError as err:
+        sys.exit(f"error: {err}")
+    if imported and args.metric != "roc_auc":
+        parser.error("--import-results: imported scores are compared on roc_auc only")
+    groups += [g for g, _ in imported]
     if not groups:
         where = f" with sweep_id {args.sweep_id!r}" if args.sweep_id else ""
         logged = f" that logged mean_{METRICS.build(args.metric).key}"
@@ -875,7 +902,13 @@ def main(argv: list[str] | None = None) -> None:
             compare=compare,
             baseline=baseline,
             preset=args.preset,
+            known={g.key: e for g, e in imported},
         )
+        if args.export_results:
+            tracked = [g for g in groups if g.key not in {i.key for i, _ in imported}]
+            names = configurations.names(groups)
+            exported = results.export(tracker, tracked, names, args.export_results)
+            print(f"exported {len(exported)} result files into {args.export_results}")
     except (ReportError, ArtifactError, SpecError) as err:
         sys.exit(f"error: {err}")
     params = {
