@@ -512,8 +512,10 @@ def test_the_default_split_of_a_folder_data_set_is_folds_with_the_k_its_labels_a
     assert explicit.split_note == ""
     assert default.config_hash == explicit.config_hash
     assert default.row_hash == explicit.row_hash
-    assert default.run_name == explicit.run_name == (
-        "linear-concat-c1-folder-path=ds-signals-folds-folds=2-s0"
+    assert (
+        default.run_name
+        == explicit.run_name
+        == ("linear-concat-c1-folder-path=ds-signals-folds-folds=2-s0")
     )
     assert default.choices["split"] == "folds"
     # the command line still wins

@@ -112,7 +112,7 @@ def _objects(src: Path, pattern: str, glob: str, exclude: Path | None) -> dict[s
     return dict(sorted(out.items(), key=lambda item: _natural(Path(item[0]))))
 
 
-def _read_trial(file: Path, time_column: str | None) -> tuple[list[str], np.ndarray, np.ndarray]:
+def read_trial(file: Path, time_column: str | None) -> tuple[list[str], np.ndarray, np.ndarray]:
     """(channel names, (channels, samples) values, times or an empty array) of one CSV."""
     try:
         rows = read_table(file)
@@ -266,7 +266,7 @@ def import_csv(
     first: Path | None = None
     for name, files in objects.items():
         for file in files:
-            found, values, times = _read_trial(file, time_column)
+            found, values, times = read_trial(file, time_column)
             if channels is None:
                 channels, first = found, file
             elif found != channels:

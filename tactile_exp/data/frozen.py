@@ -73,7 +73,7 @@ class FrozenFolds:
             for folds in resamples:
                 names = [str(o) for objs in folds for o in objs]
                 if len(set(names)) != len(names):
-                    raise DataError(f"{file}: label {label!r}: an object in two folds of a resample")
+                    raise DataError(f"{file}: label {label!r}: an object in two folds of one seed")
         digest = hashlib.sha256(raw).hexdigest()[:12]
         return cls(k, r, {str(a): v for a, v in labels.items()}, digest)
 
