@@ -23,9 +23,7 @@ BIOTAC_HEADER = (
 
 def icub_values(obj: int, trial: int, k: int) -> list[list[float]]:
     """The 7 lines of time slice ``k`` of a trial: numbers that say where they are from."""
-    return [
-        [obj * 1000 + trial * 10 + k + j / 100 for j in range(n)] for n in ICUB_SLICE
-    ]
+    return [[obj * 1000 + trial * 10 + k + j / 100 for j in range(n)] for n in ICUB_SLICE]
 
 
 def write_icub(root: Path, slices: int = 2) -> Path:

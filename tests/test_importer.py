@@ -173,7 +173,8 @@ def test_list_names_each_upstream_its_commit_and_licence(capsys) -> None:
         recipe = RECIPES.build(name)
         assert f"{name}: {recipe.title}\n" in out
         assert f"  licence   {recipe.licence}\n" in out
-    assert "github.com/clear-nus/icub_grasp_dataset at 87dceecaa2f8056025f2ad42b55cb5f46fb77229" in out
+    commit = "87dceecaa2f8056025f2ad42b55cb5f46fb77229"
+    assert f"upstream  github.com/clear-nus/icub_grasp_dataset at {commit}\n" in out
     assert "labels    foam, hard, rough (ours: foam, hard, rough)" in out
     assert "labels    thick, rough, smooth, textile (ours: textile)" in out
 
