@@ -9,9 +9,9 @@ import h5py
 import numpy as np
 import yaml
 
-from tactile_exp.data.public.importer import select, tree_sha256
-from tactile_exp.data.public.readers import ICUB_SLICE
-from tactile_exp.data.public.recipe import RECIPE_DIR, RECIPES
+from tactile_exp.data.public import select, tree_sha256
+from tactile_exp.data.readers import ICUB_SLICE
+from tactile_exp.data.recipe import RECIPE_DIR, RECIPES
 
 BIOTAC_HEADER = (
     "timestamp,tdc,tac,pdc,"

@@ -9,7 +9,7 @@ import pytest
 
 from tactile_exp.data.frozen import FrozenFolds, check_stratified, deal
 from tactile_exp.data.layout import DataError
-from tactile_exp.data.public.recipe import FOLDS_DIR, RECIPES
+from tactile_exp.data.recipe import FOLDS_DIR, RECIPES
 from tactile_exp.data.splits import folds_for
 
 DEALT = [n for n in RECIPES.names() if RECIPES.build(n).described is None]

@@ -17,8 +17,8 @@ from public_fixture import icub_values, pinned_recipe, write_biotac, write_bolt,
 from tactile_exp.data.__main__ import main as data_main
 from tactile_exp.data.folder import FolderDataSet
 from tactile_exp.data.phac2 import PHAC2
-from tactile_exp.data.public.importer import PROVENANCE
-from tactile_exp.data.public.recipe import FOLDS_DIR, RECIPE_DIR, RECIPES
+from tactile_exp.data.public import PROVENANCE
+from tactile_exp.data.recipe import FOLDS_DIR, RECIPE_DIR, RECIPES
 from tactile_exp.data.splits import make_split
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from tactile_exp.data.layout import DataError
-from tactile_exp.data.public.readers import READERS, bolt_hdf5, icub_text
-from tactile_exp.data.public.recipe import RECIPES
+from tactile_exp.data.readers import READERS, bolt_hdf5, icub_text
+from tactile_exp.data.recipe import RECIPES
 
 
 def test_icub_text_needs_its_first_line_and_whole_slices(tmp_path: Path) -> None:

@@ -9,8 +9,8 @@ import pytest
 import yaml
 
 from tactile_exp.data.layout import DataError
-from tactile_exp.data.public.readers import READERS
-from tactile_exp.data.public.recipe import RECIPE_DIR, RECIPES, find
+from tactile_exp.data.readers import READERS
+from tactile_exp.data.recipe import RECIPE_DIR, RECIPES, find
 
 
 @pytest.mark.parametrize("name", RECIPES.names())

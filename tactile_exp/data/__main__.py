@@ -67,8 +67,8 @@ def _inspect(path: Path, photo_dir: Path | None) -> None:
 
 
 def _public(args: argparse.Namespace) -> int:
-    from tactile_exp.data.public.importer import freeze, import_public, listing
-    from tactile_exp.data.public.recipe import find
+    from tactile_exp.data.public import freeze, import_public, listing
+    from tactile_exp.data.recipe import find
 
     try:
         if args.verb == "list":

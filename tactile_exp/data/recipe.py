@@ -1,11 +1,13 @@
 """What a public data set's recipe declares, read from its YAML file (``recipes/<name>.yaml``).
 
+``python -m tactile_exp.data public list|import`` (`tactile_exp.data.public`) reads them.
+
 A recipe names its upstream (repository and pinned commit, or DOI), what it holds, its licence as
 the upstream states it, which of the upstream's files are trials (a pattern whose group
 ``object`` names the object and ``trial`` numbers the trial), how many there are and their
 checksum, the reader that turns a file into (channels, time) arrays, the rate and channel names,
 the label table with where each label comes from, and the split it is evaluated with. Its frozen
-folds ship beside it (``folds/<name>.yaml``, `tactile_exp.data.frozen`). Every recipe file is
+folds ship beside it (``frozen_folds/<name>.yaml``, `tactile_exp.data.frozen`). Every recipe file is
 registered in `RECIPES` under its name; a recipe file of one's own is read by `find`.
 """
 
@@ -23,14 +25,14 @@ from tactile_exp.data.layout import DataError
 from tactile_exp.registry import Registry
 
 HERE = Path(__file__).parent
-RECIPE_DIR, FOLDS_DIR = HERE / "recipes", HERE / "folds"
+RECIPE_DIR, FOLDS_DIR = HERE / "recipes", HERE / "frozen_folds"
 KEYS = {
     "name": "the recipe's name",
     "title": "what the data set is called",
     "upstream": "{repository: OWNER/NAME, commit: SHA}, {doi: ...} or {release: words}",
     "holds": "what it holds, in a sentence",
     "licence": "the licence as the upstream states it (or that it states none)",
-    "reader": "how a file becomes trials: a reader of tactile_exp.data.public.readers",
+    "reader": "how a file becomes trials: a reader of tactile_exp.data.readers",
     "files": "a regular expression on each file's path whose group 'object' names the object",
     "count": "how many files the recipe takes",
     "sha256": "the checksum of those files (`tree_sha256`), or null: counts only",
@@ -162,7 +164,7 @@ class Recipe:
         }
 
     def frozen_folds(self) -> FrozenFolds:
-        """The folds it ships (``folds/<name>.yaml``)."""
+        """The folds it ships (``frozen_folds/<name>.yaml``)."""
         file = FOLDS_DIR / f"{self.name}.yaml"
         if not file.is_file():
             raise DataError(f"{file}: missing; recipe {self.name} ships its frozen folds there")

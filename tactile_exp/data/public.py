@@ -1,4 +1,5 @@
-"""``public import NAME --from SRC DST``: a public data set's upstream files -> the folder layout.
+"""``python -m tactile_exp.data public list|import NAME --from SRC DST``: public data sets by
+recipe (`tactile_exp.data.recipe`, read by `tactile_exp.data.readers`) -> the folder layout.
 
 ``SRC`` is a local clone or copy of the upstream (a folder) or an archive of one (``.zip``,
 ``.tar``, ``.tar.gz``, ``.tgz``). The recipe's files are found under it by their pattern, counted
@@ -28,8 +29,8 @@ from tactile_exp.data.folder import FolderDataSet, write_folder
 from tactile_exp.data.frozen import FrozenFolds, check_stratified, deal
 from tactile_exp.data.layout import DataError
 from tactile_exp.data.phac2 import PHAC2
-from tactile_exp.data.public.readers import READERS
-from tactile_exp.data.public.recipe import FOLDS_DIR, RECIPES, Recipe, find
+from tactile_exp.data.readers import READERS
+from tactile_exp.data.recipe import FOLDS_DIR, RECIPES, Recipe, find
 
 ARCHIVES = (".zip", ".tar", ".tar.gz", ".tgz")
 PROVENANCE = "UPSTREAM.txt"  # written into DST: where the data came from, its licence
@@ -210,7 +211,7 @@ def _copy_phac2(recipe: Recipe, files: dict[str, list[Path]], dst: Path) -> Publ
 
 def freeze(recipe: Recipe) -> Path:
     """(Re)write the recipe's frozen folds from its label table (`tactile_exp.data.frozen.deal`):
-    what ships in ``folds/<name>.yaml``; a test checks the shipped file equals this."""
+    what ships in ``frozen_folds/<name>.yaml``; a test checks the shipped file equals this."""
     folds = FrozenFolds(
         recipe.folds, recipe.resamples, deal(recipe.label_table(), recipe.folds, recipe.resamples)
     )
