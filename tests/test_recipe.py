@@ -49,6 +49,7 @@ def _write(tmp_path: Path, **change: object) -> Path:
     [
         ({"labels": {}}, "no label table (labels: label -> {source: upstream | ours"),
         ({"extra": 1}, "unknown key(s) ['extra']"),
+        ({"count": "many"}, "a value of the wrong kind (invalid literal for int()"),
         ({"files": "a/(b"}, "files: not a regular expression"),
         ({"files": "x/.*\\.h5"}, "has no group 'object'"),
         (

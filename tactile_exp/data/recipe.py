@@ -134,6 +134,23 @@ class Recipe:
         if not isinstance(split, dict) or set(split) != {"folds", "resamples"}:
             raise DataError(f"{file}: split: {split!r}, expected {KEYS['split']}")
         trials = node.get("trials")
+        try:
+            return cls._build(file, node, files, objects, labels, split, trials, described)
+        except (TypeError, ValueError, AttributeError, IndexError) as err:
+            raise DataError(f"{file}: a value of the wrong kind ({err})") from None
+
+    @classmethod
+    def _build(
+        cls,
+        file: Path,
+        node: dict,
+        files: re.Pattern[str],
+        objects: dict[str, str],
+        labels: dict[str, Label],
+        split: dict,
+        trials: list | None,
+        described: dict[str, str] | None,
+    ) -> Recipe:
         return cls(
             name=str(node["name"]),
             title=str(node["title"]),
