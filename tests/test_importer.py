@@ -22,7 +22,7 @@ from tactile_exp.data.recipe import FOLDS_DIR, RECIPE_DIR, RECIPES
 from tactile_exp.data.splits import make_split
 
 
-def _import(capsys, name: str, src: Path, dst: Path) -> tuple[int, list[str], list[str]]:
+def _import(capsys, name: str, src: Path | str, dst: Path) -> tuple[int, list[str], list[str]]:
     code = data_main(["public", "import", name, "--from", str(src), str(dst)])
     captured = capsys.readouterr()
     return code, captured.out.splitlines(), captured.err.splitlines()
@@ -120,6 +120,49 @@ def test_an_archive_of_the_upstream_imports_as_its_folder_does(tmp_path, capsys)
     code, _, err = _import(capsys, str(recipe), archive, tmp_path / "ds")
     assert (code, err) == (0, [])
     assert len(FolderDataSet(tmp_path / "ds").trials) == 10
+
+
+def test_a_url_downloads_the_archive_and_imports_it(tmp_path, capsys) -> None:
+    """With a network ``--from URL`` works as the archive does (here a local HTTP server); an
+    unreachable one is one line."""
+    import functools
+    import http.server
+    import threading
+
+    src = write_bolt(tmp_path / "Penn-haptics-bolt-441c64d")
+    recipe = pinned_recipe("penn_bolt", src, tmp_path / "penn_bolt.yaml")
+    served = tmp_path / "served"
+    served.mkdir()
+    with tarfile.open(served / "bolt.tar.gz", "w:gz") as t:
+        t.add(src, arcname=src.name)
+
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args: object) -> None:  # stderr is the import's
+            pass
+
+    handler = functools.partial(Quiet, directory=str(served))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        url = f"http://127.0.0.1:{server.server_port}/bolt.tar.gz"
+        code, out, err = _import(capsys, str(recipe), url, tmp_path / "ds")
+        assert code == 0 and err[0] == f"downloading {url}" and err[1].startswith("downloaded ")
+        assert len(FolderDataSet(tmp_path / "ds").trials) == 10
+        code, _, err = _import(capsys, str(recipe), url.replace("bolt", "nope"), tmp_path / "d2")
+        assert code == 1 and err[-1].startswith(f"error: {url.replace('bolt', 'nope')}: cannot ")
+    finally:
+        server.shutdown()
+
+
+def test_without_from_the_pinned_archive_is_the_source(tmp_path) -> None:
+    from tactile_exp.data.public import archive_url
+
+    assert archive_url(RECIPES.build("icub_grasp")) == (
+        "https://github.com/clear-nus/icub_grasp_dataset/archive/"
+        "87dceecaa2f8056025f2ad42b55cb5f46fb77229.tar.gz"
+    )
+    with pytest.raises(Exception, match="is no repository to download from; give --from"):
+        archive_url(RECIPES.build("phac2"))
 
 
 def _no_labels(tmp_path: Path) -> str:

@@ -132,8 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     pub = verbs.add_parser("import", help="check SRC against a recipe, write DST")
     pub.add_argument("name", help="a recipe's name (public list) or a recipe file NAME.yaml")
     pub.add_argument(
-        "--from", dest="src", type=Path, required=True,
-        help="a local clone or copy of the upstream (a folder) or an archive of it",
+        "--from", dest="src",
+        help="a local clone or copy of the upstream (a folder), an archive of it, or its URL "
+        "(default: download the upstream's archive at the recipe's pinned commit)",
     )  # fmt: skip
     pub.add_argument("dst", type=Path, help="the data set to write (a new folder)")
     freeze = verbs.add_parser("freeze", help="(re)write a recipe's frozen folds (maintainers)")

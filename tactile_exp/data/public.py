@@ -2,20 +2,24 @@
 recipe (`tactile_exp.data.recipe`, read by `tactile_exp.data.readers`) -> the folder layout.
 
 ``SRC`` is a local clone or copy of the upstream (a folder) or an archive of one (``.zip``,
-``.tar``, ``.tar.gz``, ``.tgz``). The recipe's files are found under it by their pattern, counted
-and checksummed (`tree_sha256`) against the recipe, and refused in one line when they differ;
-then read (the recipe's reader) and written as the folder layout with the recipe's label table,
-its declared split and its frozen folds (``folds.yaml``), so that ``data=folder data.path=DST``
-and ``split=declared`` run on it unchanged. PHAC-2 is not converted: its file is checked with the
-existing reader and copied, for ``data=phac2``.
+``.tar``, ``.tar.gz``, ``.tgz``), or with a network its URL; without ``--from`` the upstream's
+archive at the pinned commit is downloaded (`archive_url`). The recipe's files are found under
+it by their pattern, counted and checksummed (`tree_sha256`) against the recipe, and refused in
+one line when they differ; then read (the recipe's reader) and written as the folder layout with
+the recipe's label table, its declared split and its frozen folds (``folds.yaml``), so that
+``data=folder data.path=DST`` and ``split=declared`` run on it unchanged. PHAC-2 is not
+converted: its file is checked with the existing reader and copied, for ``data=phac2``.
 """
 
 from __future__ import annotations
 
 import hashlib
 import shutil
+import sys
 import tarfile
 import tempfile
+import urllib.error
+import urllib.request
 import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -35,6 +39,7 @@ from tactile_exp.data.recipe import FOLDS_DIR, RECIPES, Recipe, find
 ARCHIVES = (".zip", ".tar", ".tar.gz", ".tgz")
 PROVENANCE = "UPSTREAM.txt"  # written into DST: where the data came from, its licence
 PHAC2_OBJECTS, PHAC2_TRIALS = 60, 600  # the release's objects and trials (10 per object)
+DOWNLOAD_TIMEOUT = 60  # seconds without an answer before a download is given up
 
 
 def tree_sha256(root: Path, files: list[Path]) -> str:
@@ -44,6 +49,56 @@ def tree_sha256(root: Path, files: list[Path]) -> str:
         h.update(f"{file.relative_to(root).as_posix()}\0".encode())
         h.update(hashlib.sha256(file.read_bytes()).digest())
     return h.hexdigest()
+
+
+def archive_url(recipe: Recipe) -> str:
+    """The upstream's archive at the pinned commit (GitHub's), what ``public import`` without
+    ``--from`` downloads."""
+    up = recipe.upstream
+    if "repository" not in up or "commit" not in up:
+        raise DataError(
+            f"recipe {recipe.name}: its upstream ({recipe.where()}) is no repository to download "
+            "from; give --from with a local copy"
+        )
+    return f"https://github.com/{up['repository']}/archive/{up['commit']}.tar.gz"
+
+
+def download(url: str, folder: Path) -> Path:
+    """``url`` saved into ``folder`` (its last path segment as the name); one DataError line
+    when it cannot be fetched."""
+    name = url.rstrip("/").rsplit("/", 1)[-1] or "download"
+    target = folder / name
+    print(f"downloading {url}", file=sys.stderr, flush=True)
+    try:
+        with (
+            urllib.request.urlopen(url, timeout=DOWNLOAD_TIMEOUT) as answer,
+            open(target, "wb") as f,
+        ):
+            shutil.copyfileobj(answer, f)
+    except (urllib.error.URLError, OSError, ValueError) as err:
+        reason = getattr(err, "reason", err)
+        raise DataError(
+            f"{url}: cannot download ({reason}); without a network give --from a local clone, "
+            "folder or archive"
+        ) from None
+    print(f"downloaded {target.stat().st_size / 1e6:.1f} MB", file=sys.stderr, flush=True)
+    return target
+
+
+@contextmanager
+def fetched(src: str | Path | None, recipe: Recipe) -> Iterator[Path]:
+    """The folder of the upstream's files: ``src`` (a folder or archive), or downloaded from a
+    URL, or (None) from the recipe's pinned archive."""
+    url = archive_url(recipe) if src is None else str(src)
+    if not url.startswith(("http://", "https://")):
+        with opened(Path(url).expanduser()) as root:
+            yield root
+        return
+    with (
+        tempfile.TemporaryDirectory(prefix="tactile_exp_download_") as tmp,
+        opened(download(url, Path(tmp))) as root,
+    ):
+        yield root
 
 
 @contextmanager
@@ -146,13 +201,14 @@ class PublicImport:
         return lines
 
 
-def import_public(name: str, src: str | Path, dst: str | Path) -> PublicImport:
-    """Check the upstream's files under ``src`` against recipe ``name`` and write ``dst``."""
+def import_public(name: str, src: str | Path | None, dst: str | Path) -> PublicImport:
+    """Check the upstream's files under ``src`` (`fetched`) against recipe ``name`` and write
+    ``dst``."""
     recipe = find(name)
-    src, dst = Path(src).expanduser(), Path(dst).expanduser()
+    dst = Path(dst).expanduser()
     if dst.exists() and (not dst.is_dir() or any(dst.iterdir())):
         raise DataError(f"{dst}: exists and is not an empty folder; expected a new folder")
-    with opened(src) as root:
+    with fetched(src, recipe) as root:
         files = select(recipe, root)
         check_files(recipe, root, files)
         if recipe.described is not None:
