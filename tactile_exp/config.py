@@ -73,7 +73,7 @@ class Settings:
     modules: tuple[str, ...] = ()  # the components' ``_module_``s: see ``component_modules``
     metrics: tuple[str, ...] = ("roc_auc",)  # logged per adjective (tactile_exp.metrics)
     min_objects: int | None = None  # labels.min_objects: see `data.splits.label_splits`
-    split_note: str = ""  # how split=declared was resolved, printed once (`_resolve_split`)
+    split_note: str = ""  # split=declared's choice, frozen folds: printed once (`_resolve_split`)
 
     @property
     def is_trial(self) -> bool:

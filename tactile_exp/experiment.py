@@ -48,9 +48,10 @@ def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -
     """Tags on the job's run, each logged once as a warning line: the labels
     ``labels.min_objects`` dropped, with their object counts (``labels.dropped``), and those
     scored on trials of an object seen in training (``labels.seen_object``: a class of one
-    object, split by trial). The split ``split=declared`` chose (``split.declared``) is
-    tagged too, printed once when the job starts."""
-    notes = {"split.declared": settings.split_note} if settings.split_note else {}
+    object, split by trial). How the split was resolved (``split.resolved``: what
+    ``split=declared`` chose, a frozen folds file's digest) is tagged too, printed once when the
+    job starts."""
+    notes = {"split.resolved": settings.split_note} if settings.split_note else {}
     dropped = [a for a in select_labels(dataset, settings.adjectives) if a not in splits]
     if dropped:
         counts = " ".join(

@@ -212,7 +212,7 @@ def test_the_default_job_on_a_folder_data_set_runs_its_declared_folds(
     said = [r.getMessage() for r in caplog.records if r.getMessage().startswith("split: ")]
     assert said == ["split: folds K=5 (every label has at least 5 positive and 5 negative objects)"]
     parent = MlflowClient(mlflow_uri).get_run(result.run_id)
-    assert parent.data.tags["split.declared"] == said[0].removeprefix("split: ")
+    assert parent.data.tags["split.resolved"] == said[0].removeprefix("split: ")
     assert parent.info.run_name.endswith("-folds-folds=5-s0")
     # fold 0 of 5 over 6 positive and 6 negative objects: 2 positives dealt to it, then the
     # negatives start at fold 1 and give it 1
