@@ -63,6 +63,10 @@ def test_icub_grasp_is_imported_with_its_labels_split_and_frozen_folds(tmp_path,
             assert objects == sorted(folds.labels["can"][seed][fold])
             tested += objects
         assert sorted(tested) == sorted(labels)
+    # a notebook's make_split without the digest reads the folds the data set holds
+    held = make_split(ds, "can", "folds", 3, folds=2, fold=1)
+    assert held == make_split(ds, "can", "folds", 3, folds=2, fold=1, frozen=folds.digest)
+    assert make_split(ds, "can", "declared", 3) == make_split(ds, "can", "folds", 3, folds=2)
 
 
 def test_biotac_slide_reads_the_bio_csv_of_each_slide(tmp_path, capsys) -> None:

@@ -429,3 +429,8 @@ def test_a_folder_data_set_declares_folds_with_the_k_its_labels_allow(tmp_path: 
         declared_split(ds, None, 4)
     split = make_split(ds, "a", "declared", seed=1)
     assert split.test == make_split(ds, "a", "folds", seed=1, folds=3, fold=0).test
+
+
+def test_the_declared_rule_of_phac2_is_its_published_split(full: PHAC2) -> None:
+    for adj in ("hard", "soft"):
+        assert make_split(full, adj, "declared") == make_split(full, adj, "published")

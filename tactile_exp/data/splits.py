@@ -299,7 +299,8 @@ def folds_split(
     folds in turn; the negatives continue the deal where the positives stopped, so the folds
     differ in size by at most one object. A data set with frozen folds (``frozen_folds``, e.g.
     an imported public data set) is not dealt: fold ``fold`` of its resample ``seed`` is tested,
-    and ``frozen`` (the digest the job was configured with) must be its file's.
+    and ``frozen`` (the digest a job was configured with; None: whatever file it holds) must be
+    its file's.
     """
     check_split_params("folds", {"folds": folds, "fold": fold})
     held: FrozenFolds | None = getattr(dataset, "frozen_folds", None)
@@ -334,7 +335,7 @@ def _frozen_split(
     held: FrozenFolds | None,
 ) -> Split:
     where = f"{dataset.path} (frozen folds)"
-    if held is None or held.digest != frozen:
+    if held is None or (frozen is not None and held.digest != frozen):
         have = f"digest {held.digest}" if held is not None else "none"
         raise DataError(
             f"{where}: the job was configured for frozen folds {frozen}, the data set holds "
