@@ -60,6 +60,8 @@ def fit(
     ``progress(name)``: an epoch callback per model trained (default: none); ``recorder``: what
     records the results (default: nothing is recorded)."""
     cache = MemoryCache() if cache is None else cache
+    if settings.split_note:  # what split=declared chose, as a job says it
+        log.info("split: %s", settings.split_note)
     dataset, _, splits = core.load(settings)
     results = {}
     for i, (adjective, split) in enumerate(splits.items(), start=1):

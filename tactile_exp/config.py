@@ -73,6 +73,7 @@ class Settings:
     modules: tuple[str, ...] = ()  # the components' ``_module_``s: see ``component_modules``
     metrics: tuple[str, ...] = ("roc_auc",)  # logged per adjective (tactile_exp.metrics)
     min_objects: int | None = None  # labels.min_objects: see `data.splits.label_splits`
+    split_note: str = ""  # split=declared's choice, frozen folds: printed once (`_resolve_split`)
 
     @property
     def is_trial(self) -> bool:
@@ -291,12 +292,19 @@ def settings_from_config(
             f"labels.min_objects: must be null (refuse labels the split cannot evaluate) or a "
             f"whole number of objects >= 1 per class, got {min_objects!r}"
         )
+    split_note = _resolve_split(resolved, row_config, adjectives, min_objects)
+    if resolved["split"]["name"] != choices["split"]:
+        choices["split"] = str(resolved["split"]["name"])
     objective = _check_objective(resolved.get("objective", "mean_val_auc"))
     metrics = _check_metrics(resolved.get("metrics", ["roc_auc"]))
     study_tags = _check_study(resolved.get("study") or {}, float(fraction))
 
     tracking = _check_tracking(resolved.get("tracking"))
     job_axes = axes(overrides)
+    if split_note and "split" not in job_axes:  # named as with the chosen split given
+        job_axes["split"] = choices["split"]
+        if "folds" in resolved["split"]:
+            job_axes["split.folds"] = str(resolved["split"]["folds"])
     settings = Settings(
         data=_component(resolved["data"], "data"),
         modality=_component(resolved["modality"], "modality"),
@@ -326,9 +334,36 @@ def settings_from_config(
         modules=component_modules(resolved),
         metrics=metrics,
         min_objects=min_objects,
+        split_note=split_note,
     )
     check_components(settings)
     return settings
+
+
+def _resolve_split(
+    resolved: dict[str, Any],
+    row_config: dict[str, Any],
+    adjectives: tuple[str, ...] | None,
+    min_objects: int | None,
+) -> str:
+    """``split=declared`` (and a folds split's frozen folds) resolved by the data source
+    (`tactile_exp.data.sources.resolve_split`) in the config and its row, before either is
+    hashed: the job is hashed and named by the split it runs. Returns what to print once."""
+    from tactile_exp.data.sources import DATA_SOURCES, resolve_split
+
+    node = resolved.get("split")
+    if not isinstance(node, dict) or not isinstance(resolved.get("data"), dict):
+        return ""
+    data = _component(resolved["data"], "data")  # imports a plugin source's module
+    if data.name not in DATA_SOURCES:
+        return ""  # check_components names the unknown source
+    try:
+        new, note = resolve_split(data.name, data.params, node, adjectives, min_objects)
+    except TypeError as err:
+        raise param_error("data", data.params, err) from err
+    resolved["split"] = new
+    row_config["split"] = {**new, "fold": None} if "fold" in new else dict(new)
+    return note
 
 
 def check_marked(resolved: dict[str, Any]) -> None:

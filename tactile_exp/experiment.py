@@ -48,8 +48,10 @@ def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -
     """Tags on the job's run, each logged once as a warning line: the labels
     ``labels.min_objects`` dropped, with their object counts (``labels.dropped``), and those
     scored on trials of an object seen in training (``labels.seen_object``: a class of one
-    object, split by trial)."""
-    notes = {}
+    object, split by trial). How the split was resolved (``split.resolved``: what
+    ``split=declared`` chose, a frozen folds file's digest) is tagged too, printed once when the
+    job starts."""
+    notes = {"split.resolved": settings.split_note} if settings.split_note else {}
     dropped = [a for a in select_labels(dataset, settings.adjectives) if a not in splits]
     if dropped:
         counts = " ".join(
@@ -77,6 +79,8 @@ def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -
 
 def run(settings: Settings) -> JobResult:
     """Run (or skip, if already FINISHED) one job and log it to MLflow."""
+    if settings.split_note:
+        log.info("split: %s", settings.split_note)
     dataset, modality, splits = open_data(settings)  # generated on first use
     compiled = kernels(settings, modality)
     if compiled:  # a first compile (empty cache) overlaps opening the store and preprocessing

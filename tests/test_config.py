@@ -8,6 +8,7 @@ import sys
 from fnmatch import fnmatch
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from conftest import TINY_DATA
@@ -18,6 +19,9 @@ from omegaconf import OmegaConf
 
 from tactile_exp.combine import COMBINERS
 from tactile_exp.config import settings_from_config
+from tactile_exp.data.dataset import Sensor
+from tactile_exp.data.folder import write_folder
+from tactile_exp.data.layout import DataError
 from tactile_exp.data.sources import DATA_SOURCES
 from tactile_exp.data.splits import SPLITS
 from tactile_exp.errors import ConfigError
@@ -54,6 +58,13 @@ def test_option_names_equal_registry_names(group):
     assert _options(group) == REGISTRIES[group].names()
 
 
+def _folder(root: Path) -> Path:
+    """A data set in the folder layout: 4 objects, two labels of 2 positive objects each."""
+    labels = {f"o{i}": {"a": i % 2, "b": i // 2} for i in range(4)}
+    trials = {o: [np.zeros((2, 5))] * 2 for o in labels}
+    return write_folder(root / "ds", Sensor("s", ("c0", "c1"), 10.0), labels, trials)
+
+
 @pytest.mark.parametrize(
     "group,option",
     [(g, o) for g in sorted(REGISTRIES) for o in _options(g)]
@@ -65,8 +76,8 @@ def test_every_option_composes_and_builds(compose_config, group, option, tmp_pat
     if group == "data" and option == "phac2":
         (tmp_path / "phac.h5").touch()  # only its existence is checked before a job
         overrides.append(f"data.path={tmp_path / 'phac.h5'}")
-    if group == "data" and option == "folder":
-        overrides.append(f"data.path={tmp_path}")  # only its existence is checked before a job
+    if group == "data" and option == "folder":  # opened before a job: split=declared asks it
+        overrides.append(f"data.path={_folder(tmp_path)}")
     if group == "modality":
         overrides.append(f"model={_model_for(option)}")
     if group == "model" and MODELS[option].accepts:
@@ -484,3 +495,61 @@ def test_data_modality_model_checked_when_the_data_opens(
     base = ["data=folder", f"data.path={path}", "split=random"]
     fits = settings_from_config(compose_config([*base, "modality=signals", "model.groups=48"]))
     open_data(fits)  # the value the message names works
+
+
+def test_the_default_split_of_a_folder_data_set_is_folds_with_the_k_its_labels_allow(
+    compose_config, tmp_path
+):
+    """split=declared (the default) on a folder data set that declares nothing: folds with the
+    largest K every label allows, hashed and named as the same split given on the command line."""
+    data = _folder(tmp_path)  # labels a and b: 2 positive and 2 negative objects each
+    base = ["data=folder", f"data.path={data}", "modality=signals", "model=linear"]
+    default = settings_from_config(compose_config(base), overrides=tuple(base))
+    given = [*base, "split=folds", "split.folds=2"]
+    explicit = settings_from_config(compose_config(given), overrides=tuple(given))
+    assert (default.split, default.split_params) == ("folds", {"folds": 2, "fold": 0})
+    assert default.split_note == "folds K=2 (label a has 2 positive objects)"
+    assert explicit.split_note == ""
+    assert default.config_hash == explicit.config_hash
+    assert default.row_hash == explicit.row_hash
+    assert (
+        default.run_name
+        == explicit.run_name
+        == ("linear-concat-c1-folder-path=ds-signals-folds-folds=2-s0")
+    )
+    assert default.choices["split"] == "folds"
+    # the command line still wins
+    random = [*base, "split=random"]
+    assert settings_from_config(compose_config(random)).split == "random"
+
+
+def test_a_declared_split_in_dataset_yaml_is_what_the_default_runs(compose_config, tmp_path):
+    data = _folder(tmp_path)
+    node = yaml.safe_load((data / "dataset.yaml").read_text())
+    overrides = ["data=folder", f"data.path={data}", "modality=signals", "model=linear"]
+    for declared, want in (
+        ({"name": "random"}, ("random", {}, "random (declared by the data set)")),
+        ({"name": "folds", "folds": 2}, ("folds", {"folds": 2, "fold": 0}, "folds K=2 (declared")),
+    ):
+        (data / "dataset.yaml").write_text(yaml.safe_dump({**node, "split": declared}))
+        s = settings_from_config(compose_config(overrides))
+        assert (s.split, s.split_params) == want[:2] and s.split_note.startswith(want[2])
+
+
+def test_the_default_split_on_phac2_is_the_published_one_with_nothing_printed(compose_config):
+    settings = settings_from_config(compose_config(TINY_DATA))
+    assert (settings.split, settings.split_params, settings.split_note) == ("published", {}, "")
+    assert settings.resolved["split"] == {"name": "published"}
+
+
+def test_no_fold_count_fits_is_one_error_naming_the_label(compose_config, tmp_path):
+    data = _folder(tmp_path)
+    text = (data / "labels.csv").read_text().replace("o3,1,1", "o3,0,1")  # a: one positive object
+    (data / "labels.csv").write_text(text)
+    cfg = compose_config(["data=folder", f"data.path={data}", "modality=signals", "model=linear"])
+    with pytest.raises(DataError, match=r"split=declared: no folds split fits: label a has 1 "):
+        settings_from_config(cfg)
+    cfg = compose_config(
+        ["data=folder", f"data.path={data}", "modality=signals", "model=linear", "adjectives=[b]"]
+    )
+    assert settings_from_config(cfg).split_params == {"folds": 2, "fold": 0}

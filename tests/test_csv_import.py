@@ -56,8 +56,14 @@ def test_import_writes_the_folder_layout_and_prints_what_it_found(tmp_path: Path
     assert out[2].startswith("  trials    60 (12-12 per object), ")
     assert out[3] == "  channels  5: pdc, tac, e1, e2, e3"
     assert out[4] == "  rate      50 Hz"
-    assert out[6:] == ["  hard                2         3", "  rough               3         2"]
+    assert out[6:8] == ["  hard                2         3", "  rough               3         2"]
+    # the split dataset.yaml declares: folds with the largest K every label allows
+    assert out[8] == (
+        "  split     folds K=2 (label hard has 2 positive objects); declared in dataset.yaml, "
+        "split=... overrides it"
+    )
     ds = FolderDataSet(tmp_path / "ds")
+    assert ds.declared_split == {"name": "folds", "folds": 2}
     assert ds.sensor.channels == CHANNELS and ds.sensor.rate_hz == 50.0
     assert ds.label_names == ("hard", "rough")
     assert {ds.object_name(i): (v["hard"], v["rough"]) for i, v in ds.labels().items()} == LABELS

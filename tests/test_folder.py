@@ -413,3 +413,52 @@ def test_labels_written_by_pandas_read_back(folder: Path) -> None:
     frame.to_csv(folder / "labels.csv", sep=";")
     ds = FolderDataSet(folder)
     assert {ds.object_name(i): row for i, row in ds.labels().items()} == LABELS
+
+
+@pytest.mark.parametrize(
+    "declared,expected",
+    [
+        (None, None),
+        ("folds", {"name": "folds"}),
+        ({"name": "folds", "folds": 3}, {"name": "folds", "folds": 3}),
+        ({"name": "random"}, {"name": "random"}),
+    ],
+)
+def test_dataset_yaml_may_declare_its_split(folder: Path, declared, expected) -> None:
+    import yaml
+
+    node = yaml.safe_load((folder / "dataset.yaml").read_text())
+    if declared is not None:
+        node["split"] = declared
+    (folder / "dataset.yaml").write_text(yaml.safe_dump(node))
+    assert FolderDataSet(folder).declared_split == expected
+
+
+@pytest.mark.parametrize(
+    "declared",
+    ["published", {"name": "folds", "folds": 1}, {"name": "random", "folds": 3}, {"rule": 1}],
+)
+def test_a_bad_declared_split_is_one_line_naming_dataset_yaml(folder: Path, declared) -> None:
+    import yaml
+
+    node = yaml.safe_load((folder / "dataset.yaml").read_text())
+    (folder / "dataset.yaml").write_text(yaml.safe_dump({**node, "split": declared}))
+    with pytest.raises(DataError) as err:
+        FolderDataSet(folder)
+    message = str(err.value)
+    assert message.startswith(f"{folder / 'dataset.yaml'}: split: ")
+    assert "expected split: {name: folds, folds: K}" in message and "\n" not in message
+
+
+def test_write_folder_declares_the_split_and_ships_frozen_folds(tmp_path: Path) -> None:
+    from tactile_exp.data.frozen import FrozenFolds, deal
+
+    frozen = FrozenFolds(2, 1, deal(LABELS, 2, 1))
+    trials = {o: _arrays(o) for o in OBJECTS}
+    path = write_folder(tmp_path / "ds", SENSOR, LABELS, trials, {"name": "folds"}, frozen)
+    ds = FolderDataSet(path)
+    assert ds.declared_split == {"name": "folds"}
+    assert ds.frozen_folds is not None and ds.frozen_folds.labels == frozen.labels
+    before = ds.identity()
+    (path / "folds.yaml").write_text((path / "folds.yaml").read_text() + "# changed\n")
+    assert FolderDataSet(path).identity() != before  # the folds file is one of its data files

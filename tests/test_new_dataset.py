@@ -192,3 +192,31 @@ def test_every_modality_and_model_runs_or_is_refused_before_any_run(
 
 def _all_runs(client: MlflowClient) -> list:
     return client.search_runs([e.experiment_id for e in client.search_experiments()])
+
+
+@pytest.mark.job
+def test_the_default_job_on_a_folder_data_set_runs_its_declared_folds(
+    tiny_config, mlflow_uri: str, tmp_path: Path, caplog
+) -> None:
+    """No split= on the command line: the job runs object-grouped folds with the K its labels
+    allow, says so once and tags its run; it is the job split=folds split.folds=K names."""
+    import logging
+
+    data = write_imu_data(tmp_path / "imu")  # each label positive for 6 of 12 objects: K=5
+    overrides = ["data=folder", f"data.path={data}", "modality=signals", "model=linear"]
+    settings = settings_from_config(
+        tiny_config(overrides, adjectives="[grippy,warm]"), overrides=tuple(overrides)
+    )
+    with caplog.at_level(logging.INFO, logger="tactile_exp.experiment"):
+        result = run(settings)
+    said = [r.getMessage() for r in caplog.records if r.getMessage().startswith("split: ")]
+    assert said == ["split: folds K=5 (every label has at least 5 positive and 5 negative objects)"]
+    parent = MlflowClient(mlflow_uri).get_run(result.run_id)
+    assert parent.data.tags["split.resolved"] == said[0].removeprefix("split: ")
+    assert parent.info.run_name.endswith("-folds-folds=5-s0")
+    # fold 0 of 5 over 6 positive and 6 negative objects: 2 positives dealt to it, then the
+    # negatives start at fold 1 and give it 1
+    assert {a: r.sizes["n_test_objects"] for a, r in result.results.items()} == {
+        "grippy": 3,
+        "warm": 3,
+    }

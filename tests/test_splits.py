@@ -12,7 +12,14 @@ from phac2_fixture import OBJECTS, published_groups, write_file
 
 from tactile_exp.data.layout import ADJECTIVES, Split, published_test_split
 from tactile_exp.data.phac2 import PHAC2, DataError
-from tactile_exp.data.splits import SPLITS, check_split, divide_views, make_split
+from tactile_exp.data.splits import (
+    SPLITS,
+    check_split,
+    declared_split,
+    divide_views,
+    folds_for,
+    make_split,
+)
 
 ALL = tuple(OBJECTS)
 # PHAC2_FORMAT §2: trial counts of the published split (train, test).
@@ -156,7 +163,7 @@ def test_check_split_rejects_shared_object() -> None:
 
 
 def test_unknown_rule_and_adjective(full: PHAC2) -> None:
-    assert SPLITS.names() == ["folds", "published", "random"]
+    assert SPLITS.names() == ["declared", "folds", "published", "random"]
     with pytest.raises(KeyError, match="unknown split 'nope'"):
         make_split(full, "soft", "nope")
     with pytest.raises(DataError, match="unknown adjective 'gritty'"):
@@ -386,3 +393,44 @@ def test_when_no_label_would_be_left_other_folds_are_advised(tmp_path: Path) -> 
         label_splits(ds, ds.label_names, "folds", 0, folds=5, fold=0)
     with pytest.raises(DataError, match="labels.min_objects=4 leaves no label: a"):
         label_splits(ds, ds.label_names, "folds", 0, 4, folds=3, fold=0)
+
+
+@pytest.mark.parametrize(
+    "counts,expected",
+    [
+        ({"a": (9, 12), "b": (6, 20)}, (5, "every label has at least 5 positive and 5 negative")),
+        ({"a": (9, 12), "b": (3, 20)}, (3, "label b has 3 positive objects")),
+        ({"a": (9, 2), "b": (3, 20)}, (2, "label a has 2 negative objects")),
+    ],
+)
+def test_folds_for_takes_the_largest_k_every_label_allows(counts, expected) -> None:
+    k, why = folds_for(counts)
+    assert k == expected[0] and why.startswith(expected[1])
+
+
+def test_folds_for_refuses_a_label_with_one_object_of_a_class() -> None:
+    with pytest.raises(DataError, match=r"no folds split fits: label b has 1 positive object \("):
+        folds_for({"a": (4, 4), "b": (1, 7)})
+
+
+def test_a_folder_data_set_declares_folds_with_the_k_its_labels_allow(tmp_path: Path) -> None:
+    from tactile_exp.data.dataset import Sensor
+    from tactile_exp.data.folder import FolderDataSet, write_folder
+
+    labels = {f"o{i}": {"a": int(i < 3), "b": int(i % 2)} for i in range(7)}
+    trials = {o: [np.zeros((1, 4))] * 2 for o in labels}
+    path = write_folder(tmp_path / "ds", Sensor("s", ("c",), 1.0), labels, trials)
+    ds = FolderDataSet(path)
+    node, note = declared_split(ds, None, None)
+    assert node == {"name": "folds", "folds": 3, "fold": 0}
+    assert note == "folds K=3 (label a has 3 positive objects)"
+    assert declared_split(ds, ("b",), None)[0]["folds"] == 3  # b alone: +3/-4
+    with pytest.raises(DataError, match=r"labels.min_objects=4 leaves no label: a \(\+3/-4"):
+        declared_split(ds, None, 4)
+    split = make_split(ds, "a", "declared", seed=1)
+    assert split.test == make_split(ds, "a", "folds", seed=1, folds=3, fold=0).test
+
+
+def test_the_declared_rule_of_phac2_is_its_published_split(full: PHAC2) -> None:
+    for adj in ("hard", "soft"):
+        assert make_split(full, adj, "declared") == make_split(full, adj, "published")

@@ -1,5 +1,6 @@
-"""``python -m tactile_exp.data generate|inspect|validate|import-csv``: make, show and check
-PHAC-2 files; turn per-trial CSV recordings into the folder layout."""
+"""``python -m tactile_exp.data generate|inspect|validate|import-csv|public``: make, show and
+check PHAC-2 files; turn per-trial CSV recordings, or a public data set by its recipe, into the
+folder layout."""
 
 from __future__ import annotations
 
@@ -65,6 +66,23 @@ def _inspect(path: Path, photo_dir: Path | None) -> None:
     print(f"  photographs: {s['photographs']}; objects without: {missing or 'none'}")
 
 
+def _public(args: argparse.Namespace) -> int:
+    from tactile_exp.data.public import freeze, import_public, listing
+    from tactile_exp.data.recipe import find
+
+    try:
+        if args.verb == "list":
+            print("\n".join(listing()))
+        elif args.verb == "freeze":
+            print(freeze(find(args.name)))
+        else:
+            print("\n".join(import_public(args.name, args.src, args.dst).summary()))
+    except DataError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m tactile_exp.data", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -103,8 +121,28 @@ def main(argv: list[str] | None = None) -> int:
     imp.add_argument("--time-unit", default="s", choices=sorted(TIME_UNITS))
     imp.add_argument("--rate", type=float, help="samples per second, when there is no time column")
     imp.add_argument("--sensor", help="the sensor's name (default: SRC's folder name)")
+    public = sub.add_parser(
+        "public",
+        help="public data sets by recipe: list them, import one (the folder layout)",
+        description="Each recipe names its upstream (pinned commit), licence, files, rate, "
+        "channels, label table and frozen folds; import checks the files' count and checksum.",
+    )
+    verbs = public.add_subparsers(dest="verb", required=True)
+    verbs.add_parser("list", help="every recipe and what it declares")
+    pub = verbs.add_parser("import", help="check SRC against a recipe, write DST")
+    pub.add_argument("name", help="a recipe's name (public list) or a recipe file NAME.yaml")
+    pub.add_argument(
+        "--from", dest="src",
+        help="a local clone or copy of the upstream (a folder), an archive of it, or its URL "
+        "(default: download the upstream's archive at the recipe's pinned commit)",
+    )  # fmt: skip
+    pub.add_argument("dst", type=Path, help="the data set to write (a new folder)")
+    freeze = verbs.add_parser("freeze", help="(re)write a recipe's frozen folds (maintainers)")
+    freeze.add_argument("name")
     args = parser.parse_args(argv)
 
+    if args.command == "public":
+        return _public(args)
     if args.command == "import-csv":
         try:
             found = import_csv(

@@ -28,6 +28,7 @@ from tactile_exp.data.folder import (
     write_folder,
 )
 from tactile_exp.data.layout import DataError
+from tactile_exp.data.splits import folds_for
 
 TIME_COLUMNS = ("time", "timestamp", "t", "time_s", "seconds")  # recognised, case-insensitive
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -44,6 +45,7 @@ class Imported:
     trials: dict[str, list[Path]]  # object -> its CSV files, in trial order
     samples: list[int]  # samples per trial
     labels: dict[str, dict[str, int]]  # object -> label -> 0/1
+    split: str = ""  # the split dataset.yaml declares, and why (`declared_split_of`)
 
     def summary(self) -> list[str]:
         """What an import prints: objects, trials, channels, rate, labels and their balance."""
@@ -65,6 +67,8 @@ class Imported:
         for label in next(iter(self.labels.values())):
             pos = sum(row[label] for row in self.labels.values())
             lines.append(f"  {label:<12} {pos:>8}  {len(self.labels) - pos:>8}")
+        if self.split:
+            lines.append(f"  split     {self.split}")
         return lines
 
 
@@ -108,7 +112,7 @@ def _objects(src: Path, pattern: str, glob: str, exclude: Path | None) -> dict[s
     return dict(sorted(out.items(), key=lambda item: _natural(Path(item[0]))))
 
 
-def _read_trial(file: Path, time_column: str | None) -> tuple[list[str], np.ndarray, np.ndarray]:
+def read_trial(file: Path, time_column: str | None) -> tuple[list[str], np.ndarray, np.ndarray]:
     """(channel names, (channels, samples) values, times or an empty array) of one CSV."""
     try:
         rows = read_table(file)
@@ -203,6 +207,26 @@ def read_labels(file: Path) -> dict[str, dict[str, int]]:
     return out
 
 
+def declared_split_of(labels: dict[str, dict[str, int]]) -> tuple[dict[str, object], str]:
+    """The split an import writes into ``dataset.yaml`` (object -> label -> 0/1): object-grouped
+    folds with the largest K every label allows (`folds_for`), and the line that says so; none
+    fits (a label with one object of a class): folds without K, chosen again when a job keeps
+    fewer labels."""
+    names = next(iter(labels.values()))
+    counts = {
+        a: (pos, len(labels) - pos)
+        for a in names
+        for pos in [sum(row[a] for row in labels.values())]
+    }
+    try:
+        k, why = folds_for(counts)
+    except DataError as err:
+        return {"name": "folds"}, f"folds, K chosen by each job ({err})"
+    return {"name": "folds", "folds": k}, (
+        f"folds K={k} ({why}); declared in dataset.yaml, split=... overrides it"
+    )
+
+
 def import_csv(
     src: str | Path,
     dst: str | Path,
@@ -242,7 +266,7 @@ def import_csv(
     first: Path | None = None
     for name, files in objects.items():
         for file in files:
-            found, values, times = _read_trial(file, time_column)
+            found, values, times = read_trial(file, time_column)
             if channels is None:
                 channels, first = found, file
             elif found != channels:
@@ -256,10 +280,11 @@ def import_csv(
     assert channels is not None and first is not None
     hz = _check_rates(rates, rate, first)
     found_sensor = Sensor(sensor or src.name, tuple(channels), hz)
-    write_folder(dst, found_sensor, table, arrays)
+    split, note = declared_split_of(table)
+    write_folder(dst, found_sensor, table, arrays, split=split)
     FolderDataSet(dst)  # what data=folder will read, checked once
     samples = [a.shape[1] for trial_arrays in arrays.values() for a in trial_arrays]
-    return Imported(dst, found_sensor, objects, samples, table)
+    return Imported(dst, found_sensor, objects, samples, table, note)
 
 
 def _check_rates(rates: list[tuple[Path, float]], rate: float | None, first: Path) -> float:

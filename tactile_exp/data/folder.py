@@ -3,11 +3,16 @@
 ::
 
     DIR/dataset.yaml                  sensor: NAME, channels: [CH, ...], rate_hz: R
+                                      [split: {name: folds, folds: K} | {name: random}]
     DIR/labels.csv                    object[,object_id],LABEL,...   one row per object, 0/1 cells
                                       (as spreadsheets and pandas write it: a BOM, ; or tab
                                       separators, true/false or 1.0/0.0, pandas' index column)
     DIR/trials/<object>/<trial>.npy   one (channels, time) real array per trial (numpy.save)
     DIR/photos/<object>/*.jpg         optional photographs
+    DIR/folds.yaml                    optional frozen folds (`tactile_exp.data.frozen`)
+
+``split:`` is the split the data set declares, what the default ``split=declared`` runs (none:
+object-grouped folds with the largest K its labels allow, `tactile_exp.data.splits.folds_for`).
 
 Opening reads ``dataset.yaml`` and ``labels.csv`` and lists the folders; a trial's array is read
 only when asked for (`FolderDataSet.signals`) and validated then, so a large data set opens in
@@ -27,15 +32,19 @@ import hashlib
 import re
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
 
 from tactile_exp.data.dataset import Sensor
+from tactile_exp.data.frozen import FOLDS_FILE, FrozenFolds
 from tactile_exp.data.layout import NON_TRIAL_PREFIXES, DataError, TrialName
 
 SENSOR_FILE, LABELS_FILE, TRIALS_DIR, PHOTOS_DIR = "dataset.yaml", "labels.csv", "trials", "photos"
 SENSOR_KEYS = ("sensor", "channels", "rate_hz")
+SPLIT_KEY = "split"  # optional in dataset.yaml: the split the data set declares
+DECLARABLE = ("folds", "random")  # the rules a folder data set may declare (published: PHAC-2's)
 OBJECT_COLUMN, ID_COLUMN = "object", "object_id"
 TRIAL_SUFFIX = ".npy"
 PHOTO_SUFFIXES = (".jpg", ".jpeg")
@@ -85,18 +94,21 @@ class FolderDataSet:
                 f"{self.path}: no such folder (expected a data set in the folder layout: "
                 f"{SENSOR_FILE}, {LABELS_FILE}, {TRIALS_DIR}/)"
             )
-        self.sensor = self._read_sensor(self.path / SENSOR_FILE)
+        self.sensor, self.declared_split = self._read_sensor(self.path / SENSOR_FILE)
         self.label_names, self._labels, self._names = self._read_labels(self.path / LABELS_FILE)
         self._files = self._list_trials(self.path / TRIALS_DIR)
         self.trials: tuple[TrialName, ...] = tuple(sorted(self._files))
         self._by_name = {t.name: t for t in self.trials}
+        folds = self.path / FOLDS_FILE
+        self.frozen_folds = FrozenFolds.read(folds) if folds.exists() else None
 
     def __repr__(self) -> str:
         return f"FolderDataSet({str(self.path)!r}, {len(self.trials)} trials)"
 
     # ---------------------------------------------------------------- opening
     @staticmethod
-    def _read_sensor(file: Path) -> Sensor:
+    def _read_sensor(file: Path) -> tuple[Sensor, dict[str, Any] | None]:
+        """The sensor and the declared split (None: not declared) of ``dataset.yaml``."""
         expected = "expected sensor: NAME, channels: [CH, ...], rate_hz: SAMPLES_PER_SECOND"
         try:
             node = yaml.safe_load(file.read_text())
@@ -107,7 +119,7 @@ class FolderDataSet:
         if not isinstance(node, dict):
             raise DataError(f"{file}: holds {type(node).__name__}, {expected}")
         missing = [k for k in SENSOR_KEYS if k not in node]
-        extra = sorted(str(k) for k in set(node) - set(SENSOR_KEYS))
+        extra = sorted(str(k) for k in set(node) - {*SENSOR_KEYS, SPLIT_KEY})
         if missing or extra:
             what = f"missing {missing}" if missing else f"unknown key(s) {extra}"
             raise DataError(f"{file}: {what}; {expected}")
@@ -125,7 +137,29 @@ class FolderDataSet:
             raise DataError(f"{file}: channels: {twice} listed twice, expected unique names")
         if isinstance(rate, bool) or not isinstance(rate, int | float) or not rate > 0:
             raise DataError(f"{file}: rate_hz: {rate!r}, expected samples per second > 0")
-        return Sensor(name.strip(), tuple(c.strip() for c in channels), float(rate))
+        sensor = Sensor(name.strip(), tuple(c.strip() for c in channels), float(rate))
+        return sensor, FolderDataSet._read_split(file, node.get(SPLIT_KEY))
+
+    @staticmethod
+    def _read_split(file: Path, node: Any) -> dict[str, Any] | None:
+        expected = (
+            "expected split: {name: folds, folds: K} (K >= 2; without K the largest its labels "
+            "allow) or {name: random}"
+        )
+        if node is None:
+            return None
+        if isinstance(node, str):
+            node = {"name": node}
+        if not isinstance(node, dict) or node.get("name") not in DECLARABLE:
+            raise DataError(f"{file}: split: {node!r}, {expected}")
+        if node["name"] == "random" and set(node) != {"name"}:
+            raise DataError(f"{file}: split: {node!r}, {expected}")
+        folds = node.get("folds", 2)
+        if set(node) - {"name", "folds"} or isinstance(folds, bool) or not isinstance(folds, int):
+            raise DataError(f"{file}: split: {node!r}, {expected}")
+        if folds < 2:
+            raise DataError(f"{file}: split: {node!r}, {expected}")
+        return dict(node)
 
     @staticmethod
     def _read_labels(
@@ -320,6 +354,8 @@ class FolderDataSet:
     def _data_files(self) -> Iterator[Path]:
         yield self.path / SENSOR_FILE
         yield self.path / LABELS_FILE
+        if self.frozen_folds is not None:
+            yield self.path / FOLDS_FILE
         yield from (self._files[t] for t in self.trials)
         for paths in self.photographs().values():
             yield from paths
@@ -360,12 +396,23 @@ def write_folder(
     sensor: Sensor,
     labels: Mapping[str, Mapping[str, int]],
     trials: Mapping[str, Sequence[np.ndarray]],
+    split: Mapping[str, Any] | None = None,
+    frozen: FrozenFolds | None = None,
 ) -> Path:
     """Export recordings to the folder layout: ``labels`` object -> label -> 0/1 (the label
-    order is the first object's), ``trials`` object -> its (channels, time) arrays in order."""
+    order is the first object's), ``trials`` object -> its (channels, time) arrays in order,
+    ``split`` the split the data set declares, ``frozen`` its frozen folds."""
     path = Path(path)
     (path / TRIALS_DIR).mkdir(parents=True, exist_ok=True)
-    node = {"sensor": sensor.name, "channels": list(sensor.channels), "rate_hz": sensor.rate_hz}
+    node: dict[str, Any] = {
+        "sensor": sensor.name,
+        "channels": list(sensor.channels),
+        "rate_hz": sensor.rate_hz,
+    }
+    if split is not None:
+        node[SPLIT_KEY] = dict(split)
+    if frozen is not None:
+        frozen.write(path / FOLDS_FILE)
     (path / SENSOR_FILE).write_text(yaml.safe_dump(node, sort_keys=False))
     names = list(next(iter(labels.values())))
     with open(path / LABELS_FILE, "w", newline="", encoding="utf-8") as f:

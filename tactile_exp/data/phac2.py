@@ -85,6 +85,7 @@ class PHAC2:
 
     label_names: tuple[str, ...] = ADJECTIVES
     sensor: Sensor = BIOTAC
+    declared_split = {"name": "published"}  # what split=declared runs (E1)
 
     def __init__(self, path: str | Path, photo_dir: str | Path | None = None) -> None:
         self.path = Path(path)

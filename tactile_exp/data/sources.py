@@ -3,6 +3,11 @@
 A source that reads a file or folder takes it as its ``path`` argument and may declare which
 (`opens`): the config check makes sure it exists before any run, and predict finds the source
 for a path it is given (`open_path`) among every registered one, a plugin's as well.
+
+A source may also declare the split its data is evaluated with (`declares_split`, without
+opening it: PHAC-2's published split); otherwise the data set it opens declares it
+(`tactile_exp.data.splits.declared_split`). `resolve_split` turns the config's ``split=declared``
+into that rule, before the job's hash is taken.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from tactile_exp.data.dataset import DataSet
 from tactile_exp.data.folder import FolderDataSet
 from tactile_exp.data.layout import DataError
 from tactile_exp.data.phac2 import PHAC2
+from tactile_exp.data.splits import DECLARED, declared_split
 from tactile_exp.registry import Registry
 
 DATA_SOURCES: Registry[DataSet] = Registry("data source")
@@ -34,6 +40,16 @@ def opens(kind: str, what: str) -> Callable[[F], F]:
     return declare
 
 
+def declares_split(rule: str) -> Callable[[F], F]:
+    """Declare the split rule a source's data is evaluated with, known without opening it."""
+
+    def declare(source: F) -> F:
+        source.split = rule  # type: ignore[attr-defined]
+        return source
+
+    return declare
+
+
 def path_kind(name: str) -> tuple[str, str] | None:
     """(file | folder | any, what) for a source that reads a ``path``; None for one that
     does not (``synthetic`` makes its own)."""
@@ -44,6 +60,7 @@ def path_kind(name: str) -> tuple[str, str] | None:
 
 
 @DATA_SOURCES.register("synthetic")
+@declares_split("published")
 def synthetic(
     cache_dir: str | Path,
     seed: int = 0,
@@ -69,6 +86,7 @@ def synthetic(
 
 @DATA_SOURCES.register("phac2")
 @opens("file", "the PHAC-2 HDF5 file")
+@declares_split("published")
 def phac2(path: str | Path, photo_dir: str | Path | None = None) -> DataSet:
     """The real release file (``phac_train_test_pos_neg_90_10_1_20.h5``)."""
     path = Path(path).expanduser()
@@ -123,3 +141,33 @@ def check_source_params(name: str, params: dict[str, Any]) -> None:
         raise ValueError(
             f"path: {path}: no such {'path' if kind == 'any' else kind}; expected {what}"
         )
+
+
+def resolve_split(
+    name: str,
+    params: Mapping[str, Any],
+    node: Mapping[str, Any],
+    adjectives: tuple[str, ...] | None,
+    min_objects: int | None,
+) -> tuple[dict[str, Any], str]:
+    """The split node a job runs with, and what to print about it ("" when nothing was chosen).
+
+    ``split=declared`` becomes the source's declared rule (`declares_split`), else the rule
+    the data set declares, opened here (a folds split without K: the largest its labels allow);
+    a folds split on a data set with frozen folds records their file's digest (``frozen``), so
+    that a changed file is a new job."""
+    out = dict(node)
+    declared = getattr(DATA_SOURCES[name], "split", None)
+    if declared is not None:
+        return ({"name": declared}, "") if out.get("name") == DECLARED else (out, "")
+    if out.get("name") not in (DECLARED, "folds"):
+        return out, ""
+    dataset = DATA_SOURCES.build(name, **params)
+    note = ""
+    if out.get("name") == DECLARED:
+        out, note = declared_split(dataset, adjectives, min_objects)
+    held = getattr(dataset, "frozen_folds", None)
+    if out["name"] == "folds" and held is not None:
+        out["frozen"] = held.digest
+        note = f"{note or 'folds K=' + str(out.get('folds'))}, frozen folds {held.digest}"
+    return out, note

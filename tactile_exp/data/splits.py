@@ -13,7 +13,8 @@ import warnings
 import h5py
 import numpy as np
 
-from tactile_exp.data.dataset import DataSet
+from tactile_exp.data.dataset import DataSet, select_labels
+from tactile_exp.data.frozen import FrozenFolds
 from tactile_exp.data.layout import (
     NEGATIVE_SPLIT_GROUP,
     POSITIVE_SPLIT_GROUP,
@@ -26,6 +27,8 @@ from tactile_exp.data.phac2 import PHAC2
 from tactile_exp.registry import Registry
 
 TRAIN_RATIO = 0.9  # the authors' 90/10 (the "90_10" in the file name)
+MAX_FOLDS = 5  # ours: the largest K a data set's declared folds split takes
+DECLARED = "declared"  # split=declared: the split the data set declares (`declared_split`)
 
 SPLITS: Registry[Split] = Registry("split")  # rule(dataset, adjective, seed, **params) -> Split
 
@@ -118,7 +121,7 @@ def _need(rule: str, params: dict[str, int]) -> str:
 
 def check_split_params(rule: str, params: dict[str, object]) -> None:
     """A rule's parameters, before any data is read: ValueError naming the key otherwise."""
-    allowed = {"folds": ("folds", "fold")}.get(rule, ())
+    allowed = {"folds": ("folds", "fold", "frozen")}.get(rule, ())
     extra = sorted(set(params) - set(allowed))
     if extra:
         raise ValueError(
@@ -282,16 +285,27 @@ def random_split(dataset: DataSet, adjective: str, seed: int = 0) -> Split:
 
 @SPLITS.register("folds")
 def folds_split(
-    dataset: DataSet, adjective: str, seed: int = 0, folds: int = 5, fold: int = 0
+    dataset: DataSet,
+    adjective: str,
+    seed: int = 0,
+    folds: int = 5,
+    fold: int = 0,
+    frozen: str | None = None,
 ) -> Split:
     """Object-grouped, class-stratified K-fold (ours): fold ``fold`` of ``folds`` is
     the test side. Over ``fold = 0..folds-1`` of one seed every object is tested exactly once.
 
     Each class's objects are shuffled (seeded by ``seed`` and the adjective) and dealt to the
     folds in turn; the negatives continue the deal where the positives stopped, so the folds
-    differ in size by at most one object.
+    differ in size by at most one object. A data set with frozen folds (``frozen_folds``, e.g.
+    an imported public data set) is not dealt: fold ``fold`` of its resample ``seed`` is tested,
+    and ``frozen`` (the digest a job was configured with; None: whatever file it holds) must be
+    its file's.
     """
     check_split_params("folds", {"folds": folds, "fold": fold})
+    held: FrozenFolds | None = getattr(dataset, "frozen_folds", None)
+    if held is not None or frozen is not None:
+        return _frozen_split(dataset, adjective, seed, folds, fold, frozen, held)
     rng = np.random.default_rng([seed, dataset.label_names.index(adjective), 27])
     train: list[str] = []
     test: list[str] = []
@@ -309,6 +323,91 @@ def folds_split(
             (test if (start + k) % folds == fold else train).extend(objs[i])
         start = (start + len(objs)) % folds
     return _make(dataset, adjective, train, test, f"folds seed={seed} fold={fold}/{folds}")
+
+
+def _frozen_split(
+    dataset: DataSet,
+    adjective: str,
+    seed: int,
+    folds: int,
+    fold: int,
+    frozen: str | None,
+    held: FrozenFolds | None,
+) -> Split:
+    where = f"{dataset.path} (frozen folds)"
+    if held is None or (frozen is not None and held.digest != frozen):
+        have = f"digest {held.digest}" if held is not None else "none"
+        raise DataError(
+            f"{where}: the job was configured for frozen folds {frozen}, the data set holds "
+            f"{have}; its folds file changed since the job was configured: run it again"
+        )
+    tested = set(held.test_objects(adjective, seed, folds, fold, where))
+    names = {dataset.object_name(i): i for i in dataset.object_ids()}
+    unknown = sorted(tested - set(names))
+    if unknown:
+        raise DataError(f"{where}: {adjective} fold {fold} names unknown object(s) {unknown}")
+    test_ids = {names[o] for o in tested}
+    train = [t.name for t in dataset.trials if t.object_id not in test_ids]
+    test = [t.name for t in dataset.trials if t.object_id in test_ids]
+    return _make(dataset, adjective, train, test, f"frozen folds seed={seed} fold={fold}/{folds}")
+
+
+def folds_for(counts: dict[str, tuple[int, int]]) -> tuple[int, str]:
+    """(K, why) of a declared folds split: the largest K <= `MAX_FOLDS` for which every label
+    (``counts``: label -> its positive and negative objects) has K objects of each class, and
+    the label that limits it. DataError's text when no K >= 2 fits."""
+    limiting = min(counts, key=lambda a: min(counts[a]))
+    p, n = counts[limiting]
+    k = min(MAX_FOLDS, p, n)
+    word = "positive" if p <= n else "negative"
+    if k == MAX_FOLDS:
+        return k, f"every label has at least {MAX_FOLDS} positive and {MAX_FOLDS} negative objects"
+    why = f"label {limiting} has {min(p, n)} {word} object{'s' if min(p, n) != 1 else ''}"
+    if k < 2:
+        raise DataError(
+            f"no folds split fits: {why} (+{p}/-{n}), object-grouped folds need 2 of each class; "
+            "labels.min_objects=2 drops such labels, or split=random"
+        )
+    return k, why
+
+
+def declared_split(
+    dataset: DataSet, adjectives: tuple[str, ...] | None, min_objects: int | None
+) -> tuple[dict[str, object], str]:
+    """The split node a data set declares (its ``declared_split``, e.g. a folder's
+    ``dataset.yaml`` ``split:``; none: object-grouped folds) and what to print about it. A
+    folds split without K takes `folds_for` the labels the job keeps."""
+    node = dict(getattr(dataset, "declared_split", None) or {"name": "folds"})
+    if node["name"] != "folds":
+        return node, f"{node['name']} (declared by the data set)"
+    held: FrozenFolds | None = getattr(dataset, "frozen_folds", None)
+    if held is not None:
+        node.setdefault("folds", held.folds)
+    if "folds" in node:
+        node.setdefault("fold", 0)
+        return node, f"folds K={node['folds']} (declared by the data set)"
+    labels = select_labels(dataset, adjectives)
+    counts = {a: object_counts(dataset, a) for a in labels}
+    kept = {a: c for a, c in counts.items() if min_objects is None or min(c) >= min_objects}
+    if not kept:
+        raise DataError(
+            f"{dataset.path}: labels.min_objects={min_objects} leaves no label: "
+            f"{_counts(dataset, list(labels))}"
+        )
+    try:
+        k, why = folds_for(kept)
+    except DataError as err:
+        raise DataError(f"{dataset.path}: split=declared: {err}") from None
+    return {"name": "folds", "folds": k, "fold": 0}, f"folds K={k} ({why})"
+
+
+@SPLITS.register(DECLARED)
+def declared(dataset: DataSet, adjective: str, seed: int = 0) -> Split:
+    """The split the data set declares (`declared_split`) for its labels: what a job's
+    ``split=declared`` resolves to before it runs, here for a notebook's `make_split`."""
+    node, _ = declared_split(dataset, None, None)
+    params = {k: v for k, v in node.items() if k != "name"}
+    return SPLITS[str(node["name"])](dataset, adjective, seed, **params)
 
 
 def divide_views(
