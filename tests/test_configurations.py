@@ -59,3 +59,17 @@ def test_a_spec_picks_the_one_configuration_it_names():
         Spec.parse("model=haptic_cnn").pick(groups, names)
     with pytest.raises(SpecError, match="expected key=value"):
         Spec.parse("haptic_cnn")
+
+
+def test_the_split_names_a_configuration_only_where_it_tells_two_apart():
+    a = group("slip", "linear", 1.0, ("split.folds=5",))[0]
+    b = group("grasp", "linear", 1.0, ("split.folds=2",))[0]  # each data set's own K
+    c = group("grasp", "linear", 1.0, ("split.folds=3",))[0]
+    c.key, c.row_hash = "k3@grasp-0123456789ab", "k3hash"
+    assert configurations.names([a, b]) == {a.key: "model=linear", b.key: "model=linear"}
+    names = configurations.names([a, b, c])
+    assert names[a.key] == "model=linear"
+    assert (names[b.key], names[c.key]) == (
+        "model=linear split.folds=2",
+        "model=linear split.folds=3",
+    )

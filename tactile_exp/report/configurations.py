@@ -75,24 +75,42 @@ def _order(key: str) -> tuple[int, str]:
     return (GROUP_ORDER.index(key), "") if key in GROUP_ORDER else (len(GROUP_ORDER), key)
 
 
+def _protocol(key: str) -> bool:
+    """The split is the data set's evaluation protocol (each data set declares its own K), not
+    part of a configuration: named only where it tells two groups on one data set apart."""
+    return key == "split" or key.startswith("split.")
+
+
+def _differing(groups: list[Group], own: dict[str, dict[str, str]], keys: list[str]) -> list[str]:
+    return [k for k in keys if len({_value(g, k, own[g.key]) for g in groups}) > 1]
+
+
+def _parts(g: Group, own: dict[str, str], keys: list[str]) -> list[str]:
+    return [f"{k}={v}" for k in keys if (v := _value(g, k, own)) not in (None, "None")]
+
+
 def names(groups: list[Group]) -> dict[str, str]:
     """Group key -> its configuration's name: the settings whose values differ among the
-    groups, ``key=value`` in `GROUP_ORDER`. Groups on one data set never share a name (a tie
-    gets its row hash); groups on different data sets share one when their settings do."""
+    groups, ``key=value`` in `GROUP_ORDER`, the split left out. Groups on one data set never
+    share a name (a tie gets the split settings that differ, else its row hash); groups on
+    different data sets share one when their settings do."""
     own = {g.key: settings(g) for g in groups}
     keys = sorted({k for s in own.values() for k in s}, key=_order)
-    differing = [k for k in keys if len({_value(g, k, own[g.key]) for g in groups}) > 1]
-    out = {}
-    for g in groups:
-        parts = [
-            f"{k}={v}" for k in differing if (v := _value(g, k, own[g.key])) not in (None, "None")
-        ]
-        out[g.key] = " ".join(parts) or _fallback(g, own[g.key])
+    differing = _differing(groups, own, [k for k in keys if not _protocol(k)])
+    out = {
+        g.key: " ".join(_parts(g, own[g.key], differing)) or _fallback(g, own[g.key])
+        for g in groups
+    }
     by_place: dict[tuple[str, str], list[Group]] = {}
     for g in groups:
         by_place.setdefault((dataset(g, groups), out[g.key]), []).append(g)
     for alike in by_place.values():
-        if len(alike) > 1:
+        if len(alike) < 2:
+            continue
+        split = _differing(alike, own, [k for k in keys if _protocol(k)])
+        for g in alike:
+            out[g.key] = " ".join([out[g.key], *_parts(g, own[g.key], split)])
+        if len({out[g.key] for g in alike}) < len(alike):
             for g in alike:
                 out[g.key] += f" #{g.row_hash[:6]}"
     return out
