@@ -29,6 +29,7 @@ from tactile_exp.errors import ConfigError
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.models.base import EpochCallback, History, Model
 from tactile_exp.models.registry import MODELS
+from tactile_exp.models.schedule import STEPS
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.registry import Component
 from tactile_exp.runtime import termination
@@ -131,6 +132,32 @@ def adjective_key(
 def stores_model(settings: Settings) -> bool:
     """Whether the job's model is trained and storable, so kept in (and found in) a cache."""
     return new_pipeline(settings).stores_model
+
+
+def ignored_schedule_keys(settings: Settings) -> tuple[str, ...]:
+    """The job's command-line ``schedule.<key>`` overrides that nothing it trains reads.
+
+    A model that learns no representation (``linear``) is not trained under a combiner that
+    retrains a head (``concat``, ``mean``): only its head is, by ``schedule.head``, so the
+    model's own steps (``schedule.epochs``, ...) that the head node sets change nothing; under
+    ``separate`` no head is trained, so ``schedule.head.<key>`` changes nothing. Judged for a
+    model that takes the ``schedule`` node whole (``schedule: ${schedule}``); one that mixes
+    its own values in (``visual_googlenet``) is not judged: ``()``."""
+    node = settings.model.params.get("schedule")
+    if not isinstance(node, dict) or node != settings.resolved.get("schedule"):
+        return ()
+    pipeline = new_pipeline(settings)
+    head = node.get("head") or {}
+
+    def read(key: str) -> bool:
+        step = key.removeprefix("schedule.")
+        if step.startswith("head."):
+            return not pipeline.keeps_instances
+        return pipeline.trains_model or (not pipeline.keeps_instances and step not in head)
+
+    given = [item.partition("=")[0].lstrip("+~") for item in settings.overrides]
+    steps = {f"schedule.{k}" for k in STEPS} | {f"schedule.head.{k}" for k in STEPS}
+    return tuple(dict.fromkeys(k for k in given if k in steps and not read(k)))
 
 
 def new_pipeline(settings: Settings, label: str = "") -> AdjectivePipeline:

@@ -19,14 +19,17 @@ from tactile_exp.config import Settings
 from tactile_exp.core import (
     AdjectiveResult,
     adjective_key,
+    ignored_schedule_keys,
     kernels,
     load,
+    new_pipeline,
     open_data,
     stores_model,
 )
 from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.splits import object_counts
+from tactile_exp.models.schedule import STEPS, Schedule
 from tactile_exp.runtime import workers
 
 log = logging.getLogger(__name__)
@@ -77,6 +80,30 @@ def label_notes(settings: Settings, dataset: Any, splits: Mapping[str, Split]) -
     return notes
 
 
+def schedule_notes(settings: Settings) -> dict[str, str]:
+    """A tag on the job's run, logged once as a warning line: the ``schedule.<key>`` overrides
+    that nothing the job trains reads (``core.ignored_schedule_keys``), and what it trains by
+    instead (``schedule.ignored``)."""
+    ignored = ignored_schedule_keys(settings)
+    if not ignored:
+        return {}
+    model, combiner = settings.model.name, settings.combiner
+    if new_pipeline(settings).trains_model:
+        instead = (
+            f"combine_instances={combiner} scores every instance with model={model} itself, "
+            "trained by schedule.<key>, and trains no head"
+        )
+    else:
+        head = Schedule.of(settings.model.params["schedule"]).for_head()
+        steps = " ".join(f"{k}={getattr(head, k)}" for k in STEPS)
+        instead = (
+            f"model={model} learns no representation, so under combine_instances={combiner} "
+            f"only its T4 head is trained, by schedule.head.<key> ({steps})"
+        )
+    log.warning("%s: set, but read by nothing this job trains: %s", " ".join(ignored), instead)
+    return {"schedule.ignored": " ".join(ignored)}
+
+
 def run(settings: Settings) -> JobResult:
     """Run (or skip, if already FINISHED) one job and log it to MLflow."""
     if settings.split_note:
@@ -104,7 +131,8 @@ def run(settings: Settings) -> JobResult:
     tracker.end_stale_runs(settings.config_hash)
     with recording.job_run(tracker, settings) as parent_id:
         modality.check(dataset)
-        recording.record_data(tracker, parent_id, dataset, label_notes(settings, dataset, splits))
+        notes = label_notes(settings, dataset, splits) | schedule_notes(settings)
+        recording.record_data(tracker, parent_id, dataset, notes)
         results: dict[str, AdjectiveResult] = {}
         headline = metrics.METRICS.build(settings.metrics[0])
         trial = settings.is_trial

@@ -237,3 +237,41 @@ def test_the_haptic_check_reads_the_biotac_frames_alone(tiny_config, monkeypatch
     checked = modality.arrays(Trials(dataset, tuple(t.name for t in dataset.trials)))
     np.testing.assert_array_equal(checked.signals, full.signals)
     np.testing.assert_array_equal(checked.scatter, full.scatter)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "ignored"),
+    [
+        # linear learns no representation: under concat only its head trains, by schedule.head
+        (
+            [
+                "model=linear",
+                "schedule.epochs=50",
+                "schedule.batch_size=8",
+                "schedule.head.lr=0.01",
+            ],
+            ("schedule.epochs", "schedule.batch_size"),
+        ),
+        (
+            ["model=linear", "combine_instances=mean", "schedule.finetune_epochs=30"],
+            ("schedule.finetune_epochs",),
+        ),
+        # a head node without lr takes the model's: schedule.lr reaches the head
+        (["model=linear", "~schedule.head.lr", "schedule.lr=0.05"], ()),
+        # separate trains the model and no head
+        (
+            [
+                "model=linear",
+                "combine_instances=separate",
+                "schedule.epochs=3",
+                "schedule.head.epochs=50",
+            ],
+            ("schedule.head.epochs",),
+        ),
+        # a ConvNet learns its features: both its schedule and its head's are read
+        (["schedule.epochs=3", "schedule.head.epochs=50"], ()),
+    ],
+)
+def test_schedule_overrides_that_nothing_trained_reads_are_named(tiny_config, overrides, ignored):
+    settings = settings_from_config(tiny_config(overrides), overrides=tuple(overrides))
+    assert core.ignored_schedule_keys(settings) == ignored

@@ -83,6 +83,26 @@ def test_a_job_compiles_its_kernels_ahead_before_it_preprocesses(tiny_config, mo
     assert calls == ["check"]
 
 
+def test_schedule_overrides_the_job_does_not_train_by_are_warned_and_tagged(
+    tiny_config, mlflow_uri, caplog
+):
+    """model=linear under concat trains only its head: a job given schedule.epochs says so in
+    one warning line before training, naming the head's schedule, and tags its run."""
+    overrides = ("model=linear", "schedule.epochs=50", "schedule.head.lr=0.01")
+    settings = settings_from_config(tiny_config(list(overrides), "[hard]"), overrides=overrides)
+    with caplog.at_level("WARNING", logger="tactile_exp.experiment"):
+        result = run(settings)
+    lines = [r.getMessage() for r in caplog.records if r.name == "tactile_exp.experiment"]
+    assert lines == [
+        "schedule.epochs: set, but read by nothing this job trains: model=linear learns no "
+        "representation, so under combine_instances=concat only its T4 head is trained, by "
+        "schedule.head.<key> (epochs=2 finetune_epochs=1 batch_size=256 lr=0.01 momentum=0.9)"
+    ]
+    _, runs = _runs(mlflow_uri, settings.config_hash)
+    parent = next(r for r in runs if r.info.run_id == result.run_id)
+    assert parent.data.tags["schedule.ignored"] == "schedule.epochs"
+
+
 def _artifact(client: MlflowClient, run, path: str) -> str:
     local = client.download_artifacts(run.info.run_id, path)
     with open(local) as f:
