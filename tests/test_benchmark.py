@@ -14,8 +14,8 @@ QUALITY = {  # data set -> model -> score separation
 }
 
 
-def _bench():
-    made = [group(d, m, q) for d, models in QUALITY.items() for m, q in models.items()]
+def _bench(made):
+    """The benchmark of (group, evidence) pairs, a leaderboard per data set."""
     groups = [g for g, _ in made]
     evidence = {g.key: e for g, e in made}
     names = configurations.names(groups)
@@ -26,8 +26,12 @@ def _bench():
     return benchmark.benchmark(boards)
 
 
+def _quality_bench():
+    return _bench([group(d, m, q) for d, models in QUALITY.items() for m, q in models.items()])
+
+
 def test_ranks_and_friedman_are_over_the_configurations_on_every_data_set():
-    bench = _bench()
+    bench = _quality_bench()
     assert bench.datasets == ("grasp", "slide", "slip")
     assert bench.missing == {"model=random": ("slide", "slip")}
     assert bench.configurations[-1] == "model=random" and "model=random" not in bench.mean_ranks
@@ -42,7 +46,7 @@ def test_ranks_and_friedman_are_over_the_configurations_on_every_data_set():
 
 
 def test_the_tables_list_the_missing_and_never_rank_them():
-    bench = _bench()
+    bench = _quality_bench()
     rows = benchmark.rows(bench, "roc_auc")
     random = next(r for r in rows if r["configuration"] == "model=random")
     assert random["mean_rank"] == "" and random["slide"] == "" and random["grasp"]
@@ -54,14 +58,8 @@ def test_the_tables_list_the_missing_and_never_rank_them():
 
 
 def test_two_complete_configurations_get_ranks_and_no_friedman():
-    made = [group(d, m, q) for d in ("a", "b") for m, q in (("linear", 1.0), ("lstm", 0.5))]
-    groups = [g for g, _ in made]
-    evidence = {g.key: e for g, e in made}
-    names = configurations.names(groups)
-    boards = [
-        leaderboard.board(d, gs, evidence, names)
-        for d, gs in configurations.by_dataset(groups).items()
-    ]
-    bench = benchmark.benchmark(boards)
+    bench = _bench(
+        [group(d, m, q) for d in ("a", "b") for m, q in (("linear", 1.0), ("lstm", 0.5))]
+    )
     assert bench.friedman is None and "Friedman's test needs 3" in bench.why_not
     assert bench.mean_ranks == {"model=linear": 1.0, "model=lstm": 2.0}
