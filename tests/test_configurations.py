@@ -73,3 +73,16 @@ def test_the_split_names_a_configuration_only_where_it_tells_two_apart():
         "model=linear split.folds=2",
         "model=linear split.folds=3",
     )
+
+
+def test_a_group_a_model_does_not_read_names_no_one():
+    cnn = group("slip", "haptic_cnn", 1.0)[0]
+    rocket = group("slip", "minirocket", 1.0)[0]
+    rocket.params.pop("choice.schedule")  # a model without epochs: no schedule in its config
+    names = configurations.names([cnn, rocket])
+    assert (names[cnn.key], names[rocket.key]) == ("model=haptic_cnn", "model=minirocket")
+    other = group("slip", "haptic_cnn", 1.0, ("schedule=paper",))[0]
+    other.params["choice.schedule"] = "paper"
+    assert configurations.names([cnn, rocket, other])[other.key] == (
+        "model=haptic_cnn schedule=paper"
+    )

@@ -82,7 +82,17 @@ def _protocol(key: str) -> bool:
 
 
 def _differing(groups: list[Group], own: dict[str, dict[str, str]], keys: list[str]) -> list[str]:
-    return [k for k in keys if len({_value(g, k, own[g.key]) for g in groups}) > 1]
+    """The keys whose values differ. A config group some groups do not have (a model without
+    epochs reads no ``schedule``) differs only where two groups chose differently; a setting
+    (``model.groups``) or the experiment file also where one group has it and another not."""
+    out = []
+    for k in keys:
+        values = {_value(g, k, own[g.key]) for g in groups}
+        if "." not in k and k != "experiment":
+            values.discard(None)
+        if len(values) > 1:
+            out.append(k)
+    return out
 
 
 def _parts(g: Group, own: dict[str, str], keys: list[str]) -> list[str]:
