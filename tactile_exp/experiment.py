@@ -18,9 +18,9 @@ from tactile_exp import metrics, recording, store
 from tactile_exp.config import Settings
 from tactile_exp.core import (
     AdjectiveResult,
-    adjective_key,
     kernels,
     load,
+    model_key,
     open_data,
     stores_model,
 )
@@ -172,7 +172,7 @@ def _in_turn(
         return
     put_off = []
     for adjective in splits:
-        key = adjective_key(settings, dataset, settings.modality, settings.model, adjective)
+        key = model_key(settings, dataset, adjective)
         holder = store.training_elsewhere(tracker, key, lease=settings.tracking.claim_lease)
         if holder is None:
             yield adjective
