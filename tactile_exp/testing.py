@@ -97,7 +97,11 @@ def check_model(
     held = {**params}
     if isinstance(held.get("schedule"), dict):  # the schedule node, held as one Schedule value
         held["schedule"] = Schedule.of(held["schedule"])
-    _require(model.get_params() == held, "every constructor keyword is held under its own name")
+    got = model.get_params()
+    _require(
+        all(k in got and got[k] == v for k, v in held.items()),
+        "every constructor keyword is held under its own name",
+    )
     _require(model.input_shape_ is None, "an unfitted model has no input_shape_")
 
     kind = cls.accepts[0] if cls.accepts else "signals"
