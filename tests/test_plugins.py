@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CONF, TINY_DATA
+from conftest import CONF, TINY_DATA, doc_block
 from hydra import compose, initialize_config_dir
 
 from tactile_exp import plugins
@@ -72,17 +72,7 @@ class Headless(Centroid):
         return Unregistered(shrink=self.shrink)
 '''
 
-MINIROCKET = """\
-# aeon's MiniRocket features and a ridge classifier, no code: the whole model.
-name: estimator
-transformer:
-  _target_: aeon.transformations.collection.convolution_based.MiniRocket
-  n_kernels: 84      # few kernels: a test-sized model (MiniRocket's default is 10,000)
-classifier:
-  _target_: sklearn.linear_model.RidgeClassifierCV
-layout: series       # (n, channels, time), as aeon takes series
-seed: ${seed}
-"""
+MINIROCKET = doc_block("extending.md", "# aeon's MiniRocket features")  # the page's YAML
 
 
 @pytest.fixture
@@ -99,6 +89,8 @@ def plugin_dir(tmp_path, monkeypatch):
     (tmp_path / "conf" / "model" / "minirocket.yaml").write_text(MINIROCKET)
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.chdir(tmp_path)
+    for module in ("my_models.centroid", "my_models"):  # another test's folder of that name
+        monkeypatch.delitem(sys.modules, module, raising=False)
     with MODELS.temporary():
         yield tmp_path
     for module in ("my_models.centroid", "my_models"):

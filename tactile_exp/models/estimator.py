@@ -168,6 +168,10 @@ class EstimatorModel(Model):
         self, train: Instances, on_epoch: EpochCallback | None = None
     ) -> History:
         """Only the transformer: the head's classifier scores the combined instances."""
+        self._fit_transformer(train)
+        return {}
+
+    def _fit_transformer(self, train: Instances) -> None:
         self.input_shape_ = tuple(int(n) for n in train.X.shape[1:])
         self.classifier_ = None
         self.transformer_ = None
@@ -176,10 +180,9 @@ class EstimatorModel(Model):
             X = self._rows(train.X)
             features = np.asarray(self.transformer_.fit_transform(X, train.y), dtype=np.float32)
             self._fitted_rows = (train.X, features.reshape(len(X), -1))
-        return {}
 
     def fit(self, train: Instances, on_epoch: EpochCallback | None = None) -> History:
-        self.fit_representation(train)
+        self._fit_transformer(train)
         self.classifier_ = _instantiate(self.classifier, "classifier", self.seed)
         self.classifier_.fit(self._features(train.X), train.y)
         return {}
