@@ -109,6 +109,11 @@ def axes(overrides: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
+def _group(key: str) -> str:
+    """The top-level key or config group an override key sets (``schedule.lr`` -> schedule)."""
+    return re.split(r"[./]", key.lstrip("+~"))[0]
+
+
 def _short(key: str, value: str, groups: Collection[str]) -> str:
     """One axis in a run name: a group's option alone (``logistic``), ``c10`` for combine, the
     adjectives (or their count), else ``leaf=value`` with a file path as its stem."""
@@ -311,7 +316,8 @@ def settings_from_config(
         resolved.pop(group, None)
         row_config.pop(group, None)
         choices.pop(group, None)
-    job_axes = {k: v for k, v in axes(overrides).items() if re.split(r"[./]", k)[0] not in unread}
+    job_axes = {k: v for k, v in axes(overrides).items() if _group(k) not in unread}
+    overrides = tuple(o for o in overrides if _group(o.partition("=")[0]) not in unread)
     settings = Settings(
         data=data,
         modality=modality,

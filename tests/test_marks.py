@@ -141,6 +141,7 @@ def test_a_model_without_epochs_carries_no_schedule_or_loss(compose_config):
     assert other.run_name == plain.run_name
     assert "schedule" not in other.resolved and "loss" not in other.resolved
     assert "schedule" not in other.choices and "loss" not in other.choices
+    assert other.overrides == tuple(row)  # the run's overrides tag: what the report compares
     cnn = settings_from_config(compose_config(["schedule=quick"]), overrides=("schedule=quick",))
     assert "quick" in cnn.run_name and cnn.resolved["schedule"]["epochs"] == 2  # it reads them
 
