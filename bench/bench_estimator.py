@@ -11,7 +11,7 @@ Prints each adjective's seconds (``sizes.seconds``: preprocessing, fit and scori
 median per adjective of each side, their ratio, and each adjective's test AUC on both sides,
 which must be equal: the head is the only classifier that scores.
 
-    .venv/bin/python bench/bench_estimator.py --adjectives 3
+    .venv/bin/python bench/bench_estimator.py --adjectives 3 --rounds 2 [--json OUT]
 """
 
 from __future__ import annotations
@@ -72,6 +72,7 @@ def main() -> None:
     parser.add_argument("--adjectives", type=int, default=3, help="adjectives per job (<= 24)")
     parser.add_argument("--kernels", type=int, default=10_000, help="MiniRocket's n_kernels")
     parser.add_argument("--rounds", type=int, default=1)
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
     adjectives = list(ADJECTIVES[: args.adjectives])
     print(f"{cores()} cores; MiniRocket ({args.kernels} kernels) + RidgeClassifierCV, concat, c1")
@@ -104,6 +105,20 @@ def main() -> None:
     b = statistics.median(s for v in seconds[before].values() for s in v)
     a = statistics.median(s for v in seconds[after].values() for s in v)
     print(f"median per adjective: {before} {b:.1f} s, {after} {a:.1f} s; ratio {a / b:.2f}")
+    if args.json:
+        from record import write
+
+        figures: dict[str, object] = {
+            f"median s per adjective, {before}": round(b, 1),
+            f"median s per adjective, {after}": round(a, 1),
+            "ratio": round(a / b, 2),
+        }
+        for adjective in adjectives:
+            figures[f"{adjective} AUC, {before} / {after}"] = (
+                f"{aucs[before][adjective]:.4f} / {aucs[after][adjective]:.4f}"
+            )
+        notes = f"{len(adjectives)} adjectives, {args.rounds} rounds, {args.kernels} kernels"
+        write(args.json, "bench_estimator", figures, notes)
 
 
 if __name__ == "__main__":
