@@ -7,7 +7,6 @@ error names the config key and the allowed values.
 from __future__ import annotations
 
 import hashlib
-import importlib
 import json
 import re
 from collections.abc import Collection
@@ -17,7 +16,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from tactile_exp import docs_test, marks
+from tactile_exp import docs_test, marks, plugins
 from tactile_exp.errors import ConfigError
 from tactile_exp.registry import Component
 
@@ -111,6 +110,11 @@ def axes(overrides: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
+def _group(key: str) -> str:
+    """The top-level key or config group an override key sets (``schedule.lr`` -> schedule)."""
+    return re.split(r"[./]", key.lstrip("+~"))[0]
+
+
 def _short(key: str, value: str, groups: Collection[str]) -> str:
     """One axis in a run name: a group's option alone (``logistic``), ``c10`` for combine, the
     adjectives (or their count), else ``leaf=value`` with a file path as its stem."""
@@ -146,21 +150,29 @@ def _component(node: Any, group: str) -> Component:
     that registers it, so a component outside the package needs only its module and its YAML."""
     if not isinstance(node, dict) or "name" not in node:
         raise ConfigError(f"{group}: expected a mapping with a 'name' key, got {node!r}")
-    module = node.get("_module_")
-    if module is not None:
-        try:
-            importlib.import_module(str(module))
-        except ImportError as err:
-            raise ConfigError(f"{group}._module_: cannot import {module!r} ({err})") from err
+    try:
+        plugins.import_modules({group: {"_module_": node.get("_module_")}}, "config")
+    except plugins.PluginError as err:
+        raise ConfigError(str(err).removeprefix("config: ")) from None
     params = {k: v for k, v in node.items() if k not in ("name", "_module_")}
     return Component(str(node["name"]), params)
 
 
 def component_modules(resolved: dict[str, Any]) -> tuple[str, ...]:
-    """The ``_module_`` of each component (what registers it): a spawned worker process
-    (``tactile_exp.runtime.workers``) imports them again, as ``_component`` did here."""
-    nodes = (resolved.get(group) for group in ("data", "modality", "model"))
-    return tuple(str(n["_module_"]) for n in nodes if isinstance(n, dict) and n.get("_module_"))
+    """Every ``_module_`` of the config (``plugins.modules``): a spawned worker process
+    (``tactile_exp.runtime.workers``) imports them again, as the config check did here."""
+    return tuple(dict.fromkeys(plugins.modules(resolved).values()))
+
+
+def unread_groups(model: Component) -> tuple[str, ...]:
+    """The groups among ``marks.MODEL_GROUPS`` (schedule, loss) that ``model`` does not read
+    (``Model.reads``): a job leaves them out of its hash, run name and logged config."""
+    from tactile_exp.models.registry import MODELS
+
+    if model.name not in MODELS:
+        return ()  # check_components says the name is unknown
+    reads = MODELS[model.name].reads
+    return tuple(g for g in marks.MODEL_GROUPS if g not in reads)
 
 
 def _check_tracking(tracking: Any) -> Tracking:
@@ -300,15 +312,24 @@ def settings_from_config(
     study_tags = _check_study(resolved.get("study") or {}, float(fraction))
 
     tracking = _check_tracking(resolved.get("tracking"))
-    job_axes = axes(overrides)
+    data = _component(resolved["data"], "data")
+    modality = _component(resolved["modality"], "modality")
+    model = _component(resolved["model"], "model")
+    unread = unread_groups(model)
+    for group in unread:  # no value of it reaches the model: it is not part of the job
+        resolved.pop(group, None)
+        row_config.pop(group, None)
+        choices.pop(group, None)
+    job_axes = {k: v for k, v in axes(overrides).items() if _group(k) not in unread}
+    overrides = tuple(o for o in overrides if _group(o.partition("=")[0]) not in unread)
     if split_note and "split" not in job_axes:  # named as with the chosen split given
         job_axes["split"] = choices["split"]
         if "folds" in resolved["split"]:
             job_axes["split.folds"] = str(resolved["split"]["folds"])
     settings = Settings(
-        data=_component(resolved["data"], "data"),
-        modality=_component(resolved["modality"], "modality"),
-        model=_component(resolved["model"], "model"),
+        data=data,
+        modality=modality,
+        model=model,
         combiner=combiner,
         combine=combine,
         split=str(resolved["split"]["name"]),
@@ -491,6 +512,8 @@ def check_components(settings: Settings) -> None:
         raise ConfigError(f"model.{err}") from err
     except (TypeError, ValueError) as err:
         raise param_error("model", settings.model.params, err) from err
+    if not COMBINERS[settings.combiner].keeps_instances:
+        _check_head(settings.model.name, model)
     steps = settings.modality.params.get("steps")
     if isinstance(steps, int) and steps >= 1:
         try:
@@ -501,6 +524,28 @@ def check_components(settings: Settings) -> None:
     emits = MODALITIES[settings.modality.name].emits
     if model.accepts and emits and emits not in model.accepts:
         raise ConfigError(_kind_mismatch(settings, model.accepts, emits))
+
+
+def _check_head(name: str, model: Any) -> None:
+    """A storable head (combined instances) must be a registered model: the stored pipeline
+    names it by its registry name, and loading builds it from that name."""
+    from tactile_exp import artifacts
+
+    try:
+        head = model.head()
+    except NotImplementedError as err:
+        raise ConfigError(f"combine_instances: model={name} has no head: {err}") from None
+    if not head.storable:
+        return
+    try:
+        artifacts.model_name(head)
+    except KeyError:
+        cls = type(head)
+        raise ConfigError(
+            f"model: model={name}'s head() gives a {cls.__module__}.{cls.__qualname__}, which is "
+            "not a registered model, so a stored pipeline could not name it; register it "
+            "(@MODELS.register) or return a registered model from head()"
+        ) from None
 
 
 def _kind_mismatch(settings: Settings, accepts: tuple[str, ...], emits: str) -> str:

@@ -115,7 +115,13 @@ def kernels(settings: Settings, modality: Modality) -> tuple[str, ...]:
 
 
 def adjective_key(
-    settings: Settings, dataset: Any, modality: Component, model: Component, label: str
+    settings: Settings,
+    dataset: Any,
+    modality: Component,
+    model: Component,
+    label: str,
+    *,
+    representation_only: bool = False,
 ) -> str:
     """``keys.training_key`` of one adjective's model (or part) in this job."""
     return keys.training_key(
@@ -126,7 +132,17 @@ def adjective_key(
         validation=settings.validation_fraction,
         seed=settings.seed,
         adjective=label,
+        representation_only=representation_only,
     )
+
+
+def model_key(settings: Settings, dataset: Any, adjective: str) -> str:
+    """The training key of the job's own model for ``adjective`` (``adjective_key``), marked
+    when the model is fitted for the head alone (``fits_representation_only``)."""
+    return adjective_key(
+        settings, dataset, settings.modality, settings.model, adjective,
+        representation_only=new_pipeline(settings).fits_representation_only,
+    )  # fmt: skip
 
 
 def stores_model(settings: Settings) -> bool:
@@ -204,11 +220,11 @@ def fit_adjective(
     history: History = {}
     model = None
     if pipeline.stores_model:
-        key = adjective_key(settings, dataset, settings.modality, settings.model, adjective)
+        key = model_key(settings, dataset, adjective)
         trained = cache.get_or_train(
             key,
             lambda: pipeline.train_model(instances, on_epoch),
-            overrides=keys.unkeyed(settings.model.params),
+            overrides=keys.unkeyed(settings.model),
         )
         model, history = trained.model, trained.history
     history = history | pipeline.fit_instances(instances, model, on_epoch)
@@ -250,7 +266,7 @@ def _part(
         return net, net.fit(preprocess.fit(train).transform(train), on_epoch)
 
     key = adjective_key(settings, dataset, modality, model, train.label)
-    trained: Trained = cache.get_or_train(key, fit, part=part, overrides=keys.unkeyed(model.params))
+    trained: Trained = cache.get_or_train(key, fit, part=part, overrides=keys.unkeyed(model))
     return trained.model
 
 

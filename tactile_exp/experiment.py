@@ -18,10 +18,10 @@ from tactile_exp import metrics, recording, store
 from tactile_exp.config import Settings
 from tactile_exp.core import (
     AdjectiveResult,
-    adjective_key,
     ignored_schedule_keys,
     kernels,
     load,
+    model_key,
     new_pipeline,
     open_data,
     stores_model,
@@ -204,7 +204,7 @@ def _in_turn(
         return
     put_off = []
     for adjective in splits:
-        key = adjective_key(settings, dataset, settings.modality, settings.model, adjective)
+        key = model_key(settings, dataset, adjective)
         holder = store.training_elsewhere(tracker, key, lease=settings.tracking.claim_lease)
         if holder is None:
             yield adjective

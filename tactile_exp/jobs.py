@@ -1,5 +1,6 @@
 """A finished job as kept in the tracking store: what it was (``JobSpec``, read once from its
-``config.yaml``), its adjectives' child runs and their fitted pipelines. What predict, the
+``config.yaml``, whose ``_module_``s are imported again), its adjectives' child runs and their
+fitted pipelines. What predict, the
 exported models (pyfunc and ONNX) and the report's Fig. 6 read; no other module reads a job's
 config or the tracking client."""
 
@@ -11,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tactile_exp import scores_file
+from tactile_exp import plugins, scores_file
 from tactile_exp.artifacts import ArtifactError
 from tactile_exp.modalities import MODALITIES
 from tactile_exp.models.registry import MODELS
@@ -120,6 +121,10 @@ class StoredJob:
         except (OSError, yaml.YAMLError, MlflowException) as err:
             error = f"run {job_id}: artifact config.yaml unreadable ({err})"
             raise ArtifactError(error) from None
+        try:  # the job's components kept outside the package register as they import
+            plugins.import_modules(config, f"run {job_id}")
+        except plugins.PluginError as err:
+            raise PredictError(str(err)) from None
         return cls(tracker, run, config, JobSpec.of(config, f"run {job_id}"))
 
     @property

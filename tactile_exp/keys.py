@@ -32,33 +32,49 @@ def training_key(
     validation: float,
     seed: int,
     adjective: str,
+    representation_only: bool = False,
 ) -> str:
     """Hash of what determines one adjective's trained model (not combine/combine_instances).
 
     ``validation`` is the fraction of training objects held out for the validation score: they
-    are left out of training, so it changes the model."""
+    are left out of training, so it changes the model. ``representation_only``: the model is
+    fitted for a head alone (``AdjectivePipeline.fits_representation_only``), so it is not the
+    whole model another job would reuse."""
     keyed = {
         "format": FORMAT,
         "dataset": dataset,
         "modality": [modality.name, dotted.without(modality.params, MODALITY_UNKEYED)],
-        "model": [model.name, dotted.without(model.params, MODEL_UNKEYED)],
+        "model": [model.name, dotted.without(model.params, model_unkeyed(model.name))],
         "split": split,
         "validation": validation,
         "seed": seed,
         "adjective": adjective,
     }
+    if representation_only:  # absent otherwise: every other model keeps the key it had
+        keyed["fitted"] = "representation"
     raw = json.dumps(keyed, sort_keys=True, default=str)
     return hashlib.sha256(raw.encode()).hexdigest()[:20]
 
 
-def unkeyed(params: Mapping[str, Any]) -> dict[str, Any]:
-    """The settings of ``MODEL_UNKEYED`` in a job's model ``params``, by dotted key: what a model
-    it reuses takes from it (``artifacts.read_model``'s overrides). A schedule without a head
-    gives ``schedule.head`` None: the head then trains like the model, as in the job."""
+def model_unkeyed(name: str) -> tuple[str, ...]:
+    """The parameters of model ``name`` left out of its training key: every model's
+    (``MODEL_UNKEYED``) and those the model declares speed-only (``Model.speed_params``)."""
+    from tactile_exp.models.registry import MODELS
+
+    declared = MODELS[name].speed_params if name in MODELS else ()
+    return tuple(dict.fromkeys((*MODEL_UNKEYED, *declared)))
+
+
+def unkeyed(model: Component) -> dict[str, Any]:
+    """The settings of ``model``'s unkeyed parameters (``model_unkeyed``) in a job's
+    ``model.params``, by dotted key: what a model it reuses takes from it
+    (``artifacts.read_model``'s overrides). A schedule without a head gives ``schedule.head``
+    None: the head then trains like the model, as in the job; a speed parameter the job does
+    not set is left as the model was stored."""
     out = {}
-    for path in MODEL_UNKEYED:
+    for path in model_unkeyed(model.name):
         parent, _, leaf = path.rpartition(".")
-        node = dotted.get(params, parent) if parent else params
-        if isinstance(node, Mapping) and (parent or leaf in node):
+        node = dotted.get(model.params, parent) if parent else model.params
+        if isinstance(node, Mapping) and (leaf in node or (parent and path in MODEL_UNKEYED)):
             out[path] = node.get(leaf)
     return out

@@ -23,6 +23,9 @@ from typing import Any
 
 UNSET: Any = object()  # `Mark.hashed_unless` default: hashed at every value
 KEYED_GROUPS = ("model", "modality")  # whose parameters `Mark.keyed` applies to
+# The groups a model's YAML may take values from (``Model.reads``): a job whose model reads
+# none of a group's values leaves the group out of its hash, run name and logged config.
+MODEL_GROUPS = ("schedule", "loss")
 
 
 @dataclass(frozen=True)

@@ -58,17 +58,27 @@ class AdjectivePipeline:
         )
         self._combine_units = COMBINERS.build(combiner)
         self.parts_: dict[str, Model] = {}
+        # Unfitted: what the model declares (an estimator learns a representation only with a
+        # transformer, so it is the instance's to say, not the class's).
+        self._declared = MODELS.build(model.name, **model.params)
 
     @property
     def trains_model(self) -> bool:
         """Whether the model itself is trained: when it scores instances (no head) or learns
         the features the head classifies (a ConvNet); a fixed transform (``linear``) is not."""
-        return self.keeps_instances or MODELS[self.model.name].learns_representation
+        return self.keeps_instances or self._declared.learns_representation
 
     @property
     def stores_model(self) -> bool:
         """Whether the trained model is kept (and found again) by its training key."""
-        return self.trains_model and MODELS[self.model.name].storable
+        return self.trains_model and self._declared.storable
+
+    @property
+    def fits_representation_only(self) -> bool:
+        """Whether the model is fitted for the head alone, and less than whole: a model whose
+        transform is fitted apart from its classifier (``Model.representation_apart``) under a
+        combiner that retrains a head fits no classifier nothing would use."""
+        return not self.keeps_instances and self._declared.representation_apart
 
     @property
     def keeps_instances(self) -> bool:
@@ -96,9 +106,11 @@ class AdjectivePipeline:
     def train_model(
         self, instances: Instances, on_epoch: EpochCallback | None = None
     ) -> tuple[Model, History]:
-        """A new model trained on the training ``instances``, and its curves."""
+        """A new model trained on the training ``instances``, and its curves: only what
+        ``transform`` needs when the head alone classifies (``fits_representation_only``)."""
         model = MODELS.build(self.model.name, **self.model.params)
-        return model, model.fit(instances, on_epoch)
+        fit = model.fit_representation if self.fits_representation_only else model.fit
+        return model, fit(instances, on_epoch)
 
     def fit_instances(
         self,

@@ -144,7 +144,7 @@ def record_adjective(
     termination.check()
     adjective = split.adjective
     stores_model = core.stores_model(settings)
-    key = core.adjective_key(settings, dataset, settings.modality, settings.model, adjective)
+    key = core.model_key(settings, dataset, adjective)
     tags = {
         "config_hash": settings.config_hash,
         "run_level": "child",

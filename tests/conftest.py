@@ -111,3 +111,15 @@ def sigterm_raises(monkeypatch):
     before = signal.signal(signal.SIGTERM, termination.handle)
     yield
     signal.signal(signal.SIGTERM, before)
+
+
+def doc_block(page: str, first_line: str) -> str:
+    """The fenced code block of ``docs/<page>`` whose first line starts with ``first_line``:
+    an example a test runs as the page shows it."""
+    import re
+
+    text = (CONF.parent / "docs" / page).read_text()
+    for body in re.findall(r"^```\w*\n(.*?)^```", text, re.S | re.M):
+        if body.startswith(first_line):
+            return body
+    raise LookupError(f"docs/{page} has no code block starting with {first_line!r}")

@@ -21,7 +21,7 @@ def _run(*args: str) -> str:
 
 def test_help_lists_groups_and_examples():
     text = _run("--help")
-    assert "model: haptic_cnn, haptic_lstm" in text
+    assert "model: estimator, haptic_cnn, haptic_lstm" in text
     assert "python -m tactile_exp -m sweep=table1" in text
     assert "sweep=table1 hydra/launcher=joblib hydra.launcher.n_jobs=2" in text  # docs/scale.md
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import CONF, TINY_DATA
+from conftest import CONF, TINY_DATA, doc_block
 from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from sklearn.metrics import roc_auc_score
@@ -17,31 +17,11 @@ from sklearn.metrics import roc_auc_score
 from tactile_exp.config import settings_from_config
 from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
+from tactile_exp.testing import check_model
 
-MODULE = '''
-"""A nearest-centroid classifier: the whole of a new model's code."""
-
-import numpy as np
-
-from tactile_exp.models.base import Model
-from tactile_exp.models.registry import MODELS
-
-
-@MODELS.register("nearest_centroid")
-class NearestCentroid(Model):
-    learns_representation = False
-
-    def __init__(self, *, shrink: float = 0.0) -> None:
-        self.shrink = shrink
-
-    def fit(self, train, on_epoch=None):
-        X = train.X.reshape(len(train), -1)
-        self.direction_ = X[train.y == 1].mean(0) - (1 - self.shrink) * X[train.y == 0].mean(0)
-        return {}
-
-    def decision_function(self, X):
-        return np.asarray(X).reshape(len(X), -1) @ self.direction_
-'''
+# The page's own example: its module and its YAML, run here as the page shows them.
+MODULE = doc_block("extending.md", '"""A nearest-centroid classifier')
+YAML = doc_block("extending.md", "name: nearest_centroid")
 
 
 def table1_rows(conf: Path) -> list[str]:
@@ -71,9 +51,7 @@ def test_new_model_and_new_row_in_a_temporary_config_dir(tmp_path, monkeypatch, 
     (tmp_path / "my_models").mkdir()
     (tmp_path / "my_models" / "centroid.py").write_text(MODULE)
     monkeypatch.syspath_prepend(str(tmp_path))
-    (conf / "model" / "nearest_centroid.yaml").write_text(
-        "name: nearest_centroid\n_module_: my_models.centroid\nshrink: 0.0\n"
-    )
+    (conf / "model" / "nearest_centroid.yaml").write_text(YAML)
     (conf / "experiment" / "table1_z_nearest_centroid.yaml").write_text(
         "# @package _global_\n"
         "defaults:\n"
@@ -94,6 +72,8 @@ def test_new_model_and_new_row_in_a_temporary_config_dir(tmp_path, monkeypatch, 
     settings = settings_from_config(cfg)
     assert "nearest_centroid" in MODELS.names()
     assert settings.model.params == {"shrink": 0.0}
+    assert "schedule" not in settings.resolved  # it reads none (Model.reads)
+    check_model("nearest_centroid", config_dir=conf)
     result = run(settings)
     assert set(result.results) == {"hard", "soft"}
     for r in result.results.values():  # the AUC of the new model's scores, both classes there

@@ -128,3 +128,39 @@ def test_search_lists_follow_the_marks():
         assert own.startswith(search.SEARCH_ONLY)
     assert not "model.lr=0.1".startswith(search.SEARCH_ONLY)
     assert not "validation.other=1".startswith(search.SEARCH_ONLY)
+
+
+def test_a_model_without_epochs_carries_no_schedule_or_loss(compose_config):
+    """linear_svm reads neither group (``Model.reads``): a schedule or loss set for its job
+    changes neither its hash, nor its row, nor its name, nor its logged config."""
+    row = ["experiment=table1_a_haptic_static_1trial"]
+    plain = settings_from_config(compose_config(row), overrides=tuple(row))
+    quick = [*row, "schedule=quick", "loss=logistic", "schedule.lr=0.5"]
+    other = settings_from_config(compose_config(quick), overrides=tuple(quick))
+    assert (other.config_hash, other.row_hash) == (plain.config_hash, plain.row_hash)
+    assert other.run_name == plain.run_name
+    assert "schedule" not in other.resolved and "loss" not in other.resolved
+    assert "schedule" not in other.choices and "loss" not in other.choices
+    assert other.overrides == tuple(row)  # the run's overrides tag: what the report compares
+    cnn = settings_from_config(compose_config(["schedule=quick"]), overrides=("schedule=quick",))
+    assert "quick" in cnn.run_name and cnn.resolved["schedule"]["epochs"] == 2  # it reads them
+
+
+def test_a_parameter_the_model_declares_speed_only_stays_out_of_its_training_key():
+    """The estimator declares its estimators' ``n_jobs`` speed-only (``Model.speed_params``):
+    a job that changes them reuses the model; a learning parameter makes a new one."""
+    ridge = {"_target_": "sklearn.linear_model.RidgeClassifierCV"}
+    key = {"dataset": "d", "modality": Component("haptic", {}), "split": "published"}
+    key |= {"validation": 0.0, "seed": 0, "adjective": "hard"}
+
+    def trained_key(transformer: dict) -> str:
+        model = Component("estimator", {"classifier": ridge, "transformer": transformer})
+        return keys.training_key(model=model, **key)
+
+    pca = {"_target_": "sklearn.decomposition.PCA", "n_components": 4}
+    assert trained_key({**pca, "n_jobs": 2}) == trained_key(pca)
+    assert trained_key({**pca, "n_components": 5}) != trained_key(pca)
+    assert keys.unkeyed(Component("estimator", {"classifier": ridge, "transformer": pca})) == {}
+    assert keys.unkeyed(Component("estimator", {"classifier": {**ridge, "n_jobs": 2}})) == {
+        "classifier.n_jobs": 2
+    }

@@ -13,6 +13,7 @@ from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet
 from tactile_exp.models.linear import LinearModel
 from tactile_exp.models.random_guess import RandomGuess
 from tactile_exp.models.schedule import Schedule
+from tactile_exp.testing import check_model
 
 FAST_SCHEDULE = Schedule(epochs=3, finetune_epochs=2, batch_size=50)
 FAST = dict(schedule=FAST_SCHEDULE, device="cpu")
@@ -240,93 +241,35 @@ def test_bad_inputs_raise_clear_errors():
         model.decision_function(np.zeros((2, 64, 150), dtype=np.float32))
 
 
-# One example row per modality a model may declare; models that declare none take any rows.
-EXAMPLE_ROWS = {"signals": (32, 40), "features": (832,)}  # by accepted kind
-KIND_MODALITY = {"signals": "haptic", "features": "visual"}  # a modality giving each kind
-
-
-def _contract_case(shape: tuple[int, ...], n: int = 60) -> Instances:
-    rng = np.random.default_rng(0)
-    y = (np.arange(n) // 2 % 2).astype(np.int64)  # consecutive pairs share a label (and object)
-    X = rng.standard_normal((n, *shape)).astype(np.float32)
-    X[y == 1] += 0.5
-    return Instances(X, y, np.array([f"t{i}" for i in range(n)], dtype=object), np.arange(n) // 4)
-
-
 @pytest.mark.parametrize("name", MODELS.names())
-def test_every_registered_model_keeps_the_contract(compose_config, name):
-    """Built from its own YAML on the tiny schedule: fits, scores, clones, gives a head, and is
-    deterministic for a seed. A new model is tested here the moment it is registered."""
-    from tactile_exp.config import settings_from_config
-    from tactile_exp.models.base import clone
-
-    declared = MODELS[name].accepts
-    overrides = [f"model={name}", "schedule=tiny", "device=cpu"]
-    overrides += [f"modality={KIND_MODALITY[declared[0]]}"] if declared else []
-    params = settings_from_config(compose_config(overrides)).model.params
-    model = MODELS.build(name, **params)
-    if "schedule" in params:  # the schedule node, held as one Schedule value
-        params = {**params, "schedule": Schedule.of(params["schedule"])}
-    assert model.get_params() == params  # explicit keywords, held under their own names
-    assert model.input_shape_ is None
-    train = _contract_case(EXAMPLE_ROWS.get(declared[0] if declared else "", (24,)))
-    history = model.fit(train)
-    assert all(len(v) >= 1 for v in history.values())
-    scores = model.decision_function(train.X)
-    assert scores.shape == (len(train),) and np.isfinite(scores).all()
-    if declared == ("signals",):
-        model.check_steps(train.X.shape[-1])  # the steps it was just fitted on are fine
-
-    twin = clone(model)
-    assert type(twin) is type(model) and twin.get_params() == model.get_params()
-    twin.fit(train)
-    np.testing.assert_array_equal(twin.decision_function(train.X), scores)
-
-    features = model.transform(train.X) if model.learns_representation else train.X
-    pairs = features.reshape(len(train) // 2, -1)  # two instances combined per unit
-    units = Instances(pairs, train.y[::2], train.trial[::2], train.object_id[::2])
-    head = model.head()
-    head.fit(units)
-    assert head.decision_function(pairs).shape == (len(units),)
+def test_every_registered_model_keeps_the_contract(name):
+    """Built from its own YAML on the tiny schedule (``tactile_exp.testing.check_model``): fits,
+    scores, clones, is deterministic for a seed, gives a head, declares what the engine reads
+    and, when storable, round-trips through the store with the same scores. A new model is
+    tested here the moment it is registered; a plugin runs the same check."""
+    check_model(name)
 
 
-@pytest.mark.parametrize("name", MODELS.names())
-def test_every_registered_model_declares_what_the_engine_reads(tmp_path, name):
-    """What the store, the config check and the report read is declared on ``Model`` with a
-    default, never probed: the capabilities' types, ``input_shape_``, ``check_steps`` and, for a
-    storable model, ``state``/``restore`` that give back the same scores (artifacts.py's round
-    trip); a model that is not storable says so."""
-    from tactile_exp import artifacts
-    from tactile_exp.data.layout import INSTANCE_KINDS
+def test_a_model_that_breaks_the_contract_is_named_by_the_check(monkeypatch):
+    """The check fails, naming the promise, for a model whose seed does not make it
+    deterministic, and for one that does not hold a parameter under its own name."""
+    from tactile_exp.models.random_guess import RandomGuess
 
-    cls = MODELS[name]
-    assert isinstance(cls.learns_representation, bool) and isinstance(cls.storable, bool)
-    assert isinstance(cls.accepts, tuple) and set(cls.accepts) <= set(INSTANCE_KINDS)
-    assert cls.input_shape_ is None
-    declared = cls.accepts
-    shape = EXAMPLE_ROWS.get(declared[0] if declared else "", (24,))
-    model = MODELS.build(
-        name, **({"schedule": TINY, "device": "cpu"} if "schedule" in _parameters(cls) else {})
-    )
-    train = _contract_case(shape)
-    model.fit(train)
-    if not cls.storable:
-        with pytest.raises(NotImplementedError, match=f"{cls.__name__} is not storable"):
-            model.state()
-        return
-    assert model.input_shape_ == shape
-    artifacts.write_model(tmp_path, name, model)
-    loaded = artifacts.read_model(tmp_path, "here")
-    assert type(loaded) is cls and loaded.input_shape_ == shape
-    np.testing.assert_array_equal(
-        loaded.decision_function(train.X), model.decision_function(train.X)
-    )
+    class Unseeded(RandomGuess):
+        learns_representation = True
 
+        def fit(self, train, on_epoch=None):
+            self._rng = np.random.default_rng()
+            return {}
 
-def _parameters(cls) -> set[str]:
-    import inspect
+    class Renamed(RandomGuess):
+        def __init__(self, *, seed: int = 0) -> None:
+            super().__init__(seed=seed)
+            self.seed = seed + 1
 
-    return set(inspect.signature(cls.__init__).parameters)
+    for broken, promise in ((Unseeded, "same seed"), (Renamed, "under its own name")):
+        with MODELS.temporary(random=broken), pytest.raises(AssertionError, match=promise):
+            check_model("random")
 
 
 TINY = Schedule(epochs=1, finetune_epochs=1, batch_size=16)

@@ -27,6 +27,7 @@ from tactile_exp.experiment import run
 from tactile_exp.models import MODELS
 from tactile_exp.models.haptic_cnn import HapticCNN
 from tactile_exp.models.schedule import Schedule
+from tactile_exp.registry import Component
 from tactile_exp.runtime.processes import process_tags
 from tactile_exp.tracking import Tracker
 
@@ -734,13 +735,17 @@ def test_a_reused_model_takes_the_head_schedule_kernels_and_device_of_the_job(tm
     model.fit(data)
     artifacts.write_model(tmp_path, "linear", model)
     job = {"schedule": {"epochs": 2, "batch_size": 16, "head": {"lr": 0.1}}, "impl": "auto"}
-    assert keys.unkeyed(job) == {"schedule.head": {"lr": 0.1}, "impl": "auto"}
-    loaded = artifacts.read_model(tmp_path, "here", keys.unkeyed(job | {"device": "cpu"}))
+    assert keys.unkeyed(Component("linear", job)) == {"schedule.head": {"lr": 0.1}, "impl": "auto"}
+    loaded = artifacts.read_model(
+        tmp_path, "here", keys.unkeyed(Component("linear", job | {"device": "cpu"}))
+    )
     assert (loaded.impl, loaded.device) == ("auto", "cpu")
     assert loaded.schedule == Schedule.of(job["schedule"]) != model.schedule
     assert loaded.head().schedule.lr == 0.1
     np.testing.assert_array_equal(loaded.decision_function(data.X), model.decision_function(data.X))
     # a job whose schedule has no head: the reused model's head trains like the model, as there
-    plain = artifacts.read_model(tmp_path, "here", keys.unkeyed({"schedule": {"epochs": 2}}))
+    plain = artifacts.read_model(
+        tmp_path, "here", keys.unkeyed(Component("linear", {"schedule": {"epochs": 2}}))
+    )
     assert plain.schedule.head is None
-    assert keys.unkeyed({"Cs": None, "seed": 0}) == {}  # linear_svm: nothing unkeyed
+    assert keys.unkeyed(Component("linear_svm", {"Cs": None, "seed": 0})) == {}  # nothing unkeyed

@@ -25,6 +25,7 @@ import mlflow
 import pandas as pd
 from mlflow.pyfunc import PythonModel
 
+from tactile_exp import plugins
 from tactile_exp.jobs import JobSpec
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.predict import PredictError, apply, new_trials
@@ -48,7 +49,9 @@ class JobModel(PythonModel):
     def load_context(self, context: Any) -> None:
         folder = Path(context.artifacts["job"])
         self.job = json.loads((folder / "job.json").read_text())
-        self.spec = JobSpec.of(self.job["config"], f"job {self.job['job']}")
+        where = f"job {self.job['job']}"
+        plugins.import_modules(self.job["config"], where)  # its components outside the package
+        self.spec = JobSpec.of(self.job["config"], where)
         self.pipelines = {
             adjective: AdjectivePipeline.load(folder / "runs" / child, f"run {child}")
             for adjective, child in self.job["adjectives"].items()

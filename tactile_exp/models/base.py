@@ -42,6 +42,13 @@ class Model(ABC):
     # Why a fitted model of this kind cannot be exported to ONNX, or None where the modality's
     # network (`Modality.onnx_network`) takes its torch body and classification layer.
     onnx_refusal: str | None = "it is not a torch network with a classification layer"
+    # The config groups beside its own node that its YAML takes values from (``marks.
+    # MODEL_GROUPS``: schedule, loss). A group it does not read is left out of a job's config
+    # hash, run name and logged config: a model without epochs carries no ``schedule``.
+    reads: tuple[str, ...] = ("schedule", "loss")
+    # Its parameters (dotted, e.g. ``transform.n_jobs``) that change how fast it trains, not
+    # what it learns: left out of the training key, as ``marks``' ``keyed=False`` keys are.
+    speed_params: tuple[str, ...] = ()
     # Fitted (storable models): the shape of one training row, what ``restore`` rebuilds for.
     input_shape_: tuple[int, ...] | None = None
 
@@ -57,6 +64,21 @@ class Model(ABC):
     @abstractmethod
     def decision_function(self, X: np.ndarray) -> np.ndarray:
         """One real score per row of ``X``; larger means more likely positive."""
+
+    def fit_representation(
+        self, train: Instances, on_epoch: EpochCallback | None = None
+    ) -> History:
+        """Fit what ``transform`` needs, when only ``head()`` classifies (combined instances).
+        The whole model by default: a network learns its representation through its own
+        classifier. A model whose transform is fitted apart from its classifier fits only the
+        transform (``representation_apart``)."""
+        return self.fit(train, on_epoch)
+
+    @property
+    def representation_apart(self) -> bool:
+        """Whether ``fit_representation`` fits less than ``fit`` (then such a model is another
+        trained model: its training key says so)."""
+        return type(self).fit_representation is not Model.fit_representation
 
     def kernels(self) -> tuple[str, ...]:
         """The modules of compiled (numba) kernels ``fit`` runs, each with a ``warm_up()`` that

@@ -269,6 +269,7 @@ class LinearSVMModel(Model):
     """The `Model` face of `ObjectCVLinearSVM` (Table I rows A-F); groups = object ids."""
 
     learns_representation = False
+    reads = ()  # no schedule, no loss: C is chosen by its own cross-validation
     storable = True  # state()/restore(): the scaler's and the SVM's fitted arrays (artifacts.py)
     onnx_refusal = "a linear SVM on scikit-learn arrays, not a torch network"
 

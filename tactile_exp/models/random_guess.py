@@ -14,6 +14,7 @@ class RandomGuess(Model):
     """Scores drawn from U(0, 1), independent of the input; the chance floor of Table I."""
 
     learns_representation = False
+    reads = ()  # no schedule, no loss
     applies = False  # seeded random numbers: nothing to apply to new trials
     onnx_refusal = "its scores are seeded random numbers, not a network"
 

@@ -8,6 +8,7 @@ MODELS: Registry[Model] = Registry(
     "model",
     Model,
     modules=(
+        "tactile_exp.models.estimator",  # any scikit-learn-style estimator, named in YAML
         "tactile_exp.models.googlenet",
         "tactile_exp.models.haptic_cnn",
         "tactile_exp.models.haptic_lstm",

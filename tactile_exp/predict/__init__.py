@@ -9,7 +9,6 @@ adjective applies. ``python -m tactile_exp.predict --help`` is the command line.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -132,16 +131,10 @@ def apply(pipelines: Mapping[str, AdjectivePipeline], given: Trials) -> Predicti
 
 def _open(data: str | Path | None, source: Mapping[str, Any] | None) -> Any:
     """``data`` read by the job's own data source if it reads such a path (a plugin's: its
-    ``_module_`` imported first), else by any registered source that does."""
+    ``_module_`` imported with the job, ``StoredJob.read``), else by any registered source
+    that does."""
     node = dict(source or {})
-    module = node.pop("_module_", None)
-    if module:
-        try:
-            importlib.import_module(str(module))
-        except ImportError as err:
-            raise PredictError(
-                f"the job's data._module_ {module!r} cannot be imported ({err})"
-            ) from None
+    node.pop("_module_", None)
     name = node.pop("name", None)
     params = {k: v for k, v in node.items() if k != "path"}
     return open_path(str(data), None if name is None else str(name), params)
