@@ -785,3 +785,16 @@ def test_a_named_baseline_is_each_leaderboard_s_reference(folder_tracker, mlflow
         "model=haptic_cnn beats model=haptic_lstm"
     )
     assert slide["model=haptic_lstm"]["difference"] == ""
+
+
+def test_a_model_without_epochs_has_no_schedule_in_table1(mlflow_uri):
+    tracker = Tracker(mlflow_uri, "no_epochs_test")
+    params = {"choice.model": "estimator", "model.name": "estimator", "seed": "0"}
+    tags = {"run_level": "parent", "row_hash": "est", "config_hash": "est0", "overrides": ""}
+    with tracker.run("estimator-concat-c1-s0", params, tags) as rid:
+        tracker.log_metrics(rid, {"mean_auc": 0.7, "auc.hard": 0.7})
+    (g,) = runs.collect(tracker)
+    assert (g.schedule, g.schedule_epochs) == ("", "")
+    assert not any("schedule" in d for d in g.differences)
+    (row,) = table1.table1([g])
+    assert row["schedule"] == "no epochs"

@@ -196,8 +196,10 @@ def collect(tracker: Tracker, sweep_id: str | None = None, metric: str = "roc_au
                 row=params.get("paper.row", ""),
                 paper_auc=None if paper == "None" else float(paper),
                 schedule=params.get("choice.schedule", ""),
-                schedule_epochs=f"{params.get('schedule.epochs')}+"
-                f"{params.get('schedule.finetune_epochs')} epochs",
+                schedule_epochs=f"{params['schedule.epochs']}+"
+                f"{params['schedule.finetune_epochs']} epochs"
+                if "schedule.epochs" in params
+                else "",  # a model without epochs logs no schedule
                 split=params.get("split.name", ""),
                 modality=params.get("modality.name", ""),
                 model=params.get("model.name", ""),

@@ -46,7 +46,7 @@ def table1(
                     else {}
                 ),
                 "differences": "; ".join(g.differences),
-                "schedule": f"{g.schedule} ({g.schedule_epochs})",
+                "schedule": f"{g.schedule} ({g.schedule_epochs})" if g.schedule else "no epochs",
                 "adjectives": str(g.n_adjectives),
                 "split": g.split + (f" ({ev.folds_run} folds pooled)" if ev.folds_run else ""),
                 "seeds": " ".join(str(s) for s in g.seeds),
