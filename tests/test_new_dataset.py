@@ -122,7 +122,15 @@ def write_lab_data(root: Path, channels: int, sensor: str, labels_style: str) ->
 
 
 MODALITY_NAMES = ("haptic", "haptic_features", "multimodal", "signals", "visual")
-MODEL_NAMES = ("haptic_cnn", "haptic_lstm", "linear", "linear_svm", "random", "visual_googlenet")
+MODEL_NAMES = (
+    "estimator",
+    "haptic_cnn",
+    "haptic_lstm",
+    "linear",
+    "linear_svm",
+    "random",
+    "visual_googlenet",
+)
 
 
 @pytest.mark.slow
@@ -168,7 +176,8 @@ def test_every_modality_and_model_runs_or_is_refused_before_any_run(
                 outcomes[modality, model] = "ran"
     assert {r.info.status for r in _all_runs(client)} == {"FINISHED"}
     ran = sorted(pair for pair, outcome in outcomes.items() if outcome == "ran")
-    assert ran == [("signals", m) for m in ("haptic_lstm", "linear", "linear_svm", "random")]
+    ran_models = ("estimator", "haptic_lstm", "linear", "linear_svm", "random")
+    assert ran == [("signals", m) for m in ran_models]
     for modality in ("haptic", "haptic_features", "multimodal"):  # PHAC-2's layout, by declaration
         assert outcomes[modality, "linear"].startswith(
             f"error: modality: modality={modality} needs trials in the phac2-biotac layout"
@@ -185,7 +194,7 @@ def test_every_modality_and_model_runs_or_is_refused_before_any_run(
     )
     # sticky's one positive object is split by trial: flagged on every job that ran
     parents = [r for r in _all_runs(client) if r.data.tags.get("run_level") == "parent"]
-    assert len(parents) == 4
+    assert len(parents) == len(ran_models)
     assert all(r.data.tags["labels.seen_object"] == "sticky" for r in parents)
     assert all(r.data.tags["data.labels"] == "hard soft sticky" for r in parents)
 
