@@ -47,7 +47,7 @@ def main(overrides: list[str]) -> None:
         jobs = sweep.sweep_jobs(config)
         assert jobs is not None, "the basic sweeper's grid only"
         start = time.perf_counter()
-        valid, invalid = sweep.check_jobs(config, jobs)
+        valid, invalid, _ = sweep.check_jobs(config, jobs)
         total = time.perf_counter() - start
         print(
             f"{' '.join(overrides)}: {len(jobs)} jobs, {len(valid)} valid, {len(invalid)} invalid"

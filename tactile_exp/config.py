@@ -17,7 +17,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from tactile_exp import docs_test, marks, plugins
-from tactile_exp.errors import ConfigError
+from tactile_exp.errors import ConfigError, NotACell
 from tactile_exp.registry import Component
 
 DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?")  # what train.resolve_device accepts
@@ -371,6 +371,7 @@ def _resolve_split(
     (`tactile_exp.data.sources.resolve_split`) in the config and its row, before either is
     hashed: the job is hashed and named by the split it runs. Returns what to print once."""
     from tactile_exp.data.sources import DATA_SOURCES, resolve_split
+    from tactile_exp.data.splits import DECLARED
 
     node = resolved.get("split")
     if not isinstance(node, dict) or not isinstance(resolved.get("data"), dict):
@@ -378,13 +379,38 @@ def _resolve_split(
     data = _component(resolved["data"], "data")  # imports a plugin source's module
     if data.name not in DATA_SOURCES:
         return ""  # check_components names the unknown source
+    declared = node.get("name") == DECLARED
+    fold = node.get("fold", 0) if declared else None
     try:
         new, note = resolve_split(data.name, data.params, node, adjectives, min_objects)
     except TypeError as err:
         raise param_error("data", data.params, err) from err
+    if declared:
+        new = _declared_fold(new, fold)
     resolved["split"] = new
     row_config["split"] = {**new, "fold": None} if "fold" in new else dict(new)
     return note
+
+
+def _declared_fold(node: dict[str, Any], fold: Any) -> dict[str, Any]:
+    """``split=declared``'s ``split.fold`` on the split the data set declares: a fold of its
+    folds, or 0 where it declares one test side (PHAC-2's published split). A fold beyond them
+    is no cell of a sweep over data sets (`NotACell`), not a mistake."""
+    if not isinstance(fold, int) or isinstance(fold, bool) or fold < 0:
+        raise ConfigError(f"split.fold: expected a whole number >= 0, got {fold!r}")
+    if node["name"] != "folds":
+        if fold:
+            raise NotACell(
+                f"split.fold={fold}: the data set declares split={node['name']}, one test side "
+                "(split.fold=0)"
+            )
+        return node
+    if fold >= int(node["folds"]):
+        raise NotACell(
+            f"split.fold={fold}: the data set declares {node['folds']} folds "
+            f"(0..{node['folds'] - 1})"
+        )
+    return {**node, "fold": fold}
 
 
 def check_marked(resolved: dict[str, Any]) -> None:
@@ -584,7 +610,7 @@ def check_data_chain(settings: Settings, dataset: Any, modality: Any) -> None:
             if fits
             else (f"no modality fits it with model={settings.model.name}")
         )
-        raise ConfigError(
+        raise NotACell(
             f"modality: modality={settings.modality.name} needs {lacking}, which {dataset.path} "
             f"({dataset.sensor.describe()}) does not give; {advice}"
         )

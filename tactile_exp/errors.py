@@ -19,6 +19,13 @@ class ConfigError(ValueError):
     """An impossible config value, reported before any work starts."""
 
 
+class NotACell(ConfigError):
+    """A combination that does not exist rather than a mistake: a fold beyond the folds a data
+    set declares, a modality that reads channels a data set does not record. A single run is
+    refused like any ConfigError; a sweep lists such a cell as absent, not invalid, and runs the
+    others (a benchmark's grid of models x data sets x folds is rectangular, its data sets not)."""
+
+
 class TrackingError(RuntimeError):
     """The tracking store cannot be used (e.g. the server is down): reported before any work."""
 

@@ -189,7 +189,8 @@ def test_every_cell_is_checked_before_the_first_job(multirun):
         ("model=linear", "modality=haptic"),
     ]
     assert all(job[2:4] == ("schedule=tiny", "adjectives=[hard]") for job in jobs)
-    valid, invalid = sweep.check_jobs(config, jobs)
+    valid, invalid, absent = sweep.check_jobs(config, jobs)
+    assert absent == []
     assert [(e["num"], e["cell"], e["reason"]) for e in invalid] == [
         (0, "model=haptic_cnn modality=visual", INVALID_REASON)
     ]
@@ -200,6 +201,45 @@ def test_every_cell_is_checked_before_the_first_job(multirun):
         ("linear", "haptic"),
     ]
     assert {s.sweep_id for s in valid} == {str(config.hydra.sweep.dir)}
+
+
+def test_a_fold_beyond_the_declared_split_is_absent_not_invalid(multirun):
+    """PHAC-2's declared split has one test side: split.fold=1 is no cell of a grid over data
+    sets, listed apart from the invalid ones; a negative fold is a mistake."""
+    config = multirun("model=linear", "split=declared", "split.fold=0,1,-1")
+    jobs = sweep.sweep_jobs(config)
+    valid, invalid, absent = sweep.check_jobs(config, jobs)
+    assert [s.split for s in valid] == ["published"]
+    assert [(e["cell"], e["reason"]) for e in absent] == [
+        (
+            "split.fold=1",
+            "split.fold=1: the data set declares split=published, one test side (split.fold=0)",
+        )
+    ]
+    assert [(e["cell"], e["reason"]) for e in invalid] == [
+        ("split.fold=-1", "split.fold: expected a whole number >= 0, got -1")
+    ]
+
+
+def test_an_absent_job_is_recorded_absent_and_counted_apart(tmp_path, caplog):
+    folder = tmp_path / "m"
+    reason = "split.fold=3: the data set declares 2 folds (0..1)"
+    sweep._write(
+        folder / sweep.INVALID_FILE,
+        {"invalid": [], "absent": [{"num": 1, "overrides": ["split.fold=3"], "reason": reason}]},
+    )
+    assert sweep.SweepJob(folder, 1, ("split.fold=3",)).skipped()
+    outcome = yaml.safe_load((folder / "outcomes" / "1.yaml").read_text())
+    assert (outcome["status"], outcome["reason"]) == ("absent", reason)
+    sweep.SweepJob(folder, 0, ("split.fold=0",)).record("FINISHED")
+    callback = sweep.PrepareSweep()
+    callback.jobs = [("split.fold=0",), ("split.fold=3",)]
+    config = OmegaConf.create({"hydra": {"runtime": {"cwd": str(tmp_path)}, "sweep": {"dir": "m"}}})
+    caplog.set_level(logging.INFO, logger="tactile_exp.app.sweep")
+    callback.on_multirun_end(config)  # an absent cell is no failure: no exit
+    assert caplog.records[-1].getMessage() == (
+        "1 FINISHED, 0 skipped (invalid), 0 FAILED, 1 absent (not cells)"
+    )
 
 
 def test_a_sweep_file_s_params_come_first_and_another_sweeper_is_not_enumerated(multirun):

@@ -63,3 +63,86 @@ def test_two_complete_configurations_get_ranks_and_no_friedman():
     )
     assert bench.friedman is None and "Friedman's test needs 3" in bench.why_not
     assert bench.mean_ranks == {"model=linear": 1.0, "model=lstm": 2.0}
+
+
+def _needs_aeon() -> None:
+    """The rocket models need the timeseries extra: CI's timeseries venv must have it (fail,
+    never skip, there); elsewhere the test skips without it."""
+    import os
+
+    if os.environ.get("TACTILE_EXP_TIMESERIES"):
+        import aeon  # noqa: F401
+    else:
+        pytest.importorskip("aeon", reason="the timeseries extra: pip install -e '.[timeseries]'")
+
+
+@pytest.mark.timeseries
+@pytest.mark.slow  # ~3 min: 20 jobs of five models, MiniRocket's and MultiRocket's kernels compiled
+@pytest.mark.job
+def test_the_benchmark_sweep_on_imported_recipes_runs_every_cell_once(
+    tmp_path, cache_dir, mlflow_uri
+):
+    """``-m sweep=benchmark data.path=A,B`` on two public recipes imported from tiny copies of
+    their upstreams: every model x data set x declared fold is one FINISHED job, the folds past
+    a data set's K and the static features on non-PHAC-2 data are absent (not run, not failed);
+    the report ranks the models across the two data sets and draws the CD diagram; the same
+    command again trains nothing."""
+    import csv
+    import subprocess
+    import sys
+
+    from mlflow import MlflowClient
+    from public_fixture import pinned_recipe, write_bolt, write_icub
+
+    from tactile_exp.data.__main__ import main as data_main
+    from tactile_exp.report import cli
+
+    _needs_aeon()
+    data = []
+    for name, write in (("icub_grasp", write_icub), ("penn_bolt", write_bolt)):
+        src = write(tmp_path / f"{name}_clone")
+        recipe = pinned_recipe(name, src, tmp_path / f"{name}.yaml")
+        assert (
+            data_main(["public", "import", str(recipe), "--from", str(src), str(tmp_path / name)])
+            == 0
+        )
+        data.append(str(tmp_path / name))
+    command = [
+        sys.executable, "-m", "tactile_exp", "-m", "sweep=benchmark", f"data.path={','.join(data)}",
+        "schedule=tiny", f"cache_dir={cache_dir}", f"tracking.uri={mlflow_uri}",
+        f"hydra.sweep.dir={tmp_path / 'multirun'}",
+    ]  # fmt: skip
+    run = dict(stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=900)
+    first = subprocess.run(command, **run)
+    assert first.returncode == 0, first.stdout[-3000:]
+    # 6 models x 2 data sets x 5 folds: 5 models x 2 folds x 2 data sets run; the rest absent
+    # (folds 2..4 of K=2, and the static features, which read PHAC-2's layout only)
+    assert "20 FINISHED, 0 skipped (invalid), 0 FAILED, 40 absent (not cells)" in first.stdout
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("tactile_exp_benchmark").experiment_id
+    jobs = client.search_runs([experiment], "tags.run_level = 'parent'")
+    assert len(jobs) == 20 and {j.info.status for j in jobs} == {"FINISHED"}
+    assert {j.data.params["choice.model"] for j in jobs} == {
+        "linear", "haptic_lstm", "haptic_cnn", "minirocket", "multirocket",
+    }  # fmt: skip
+    for job in jobs:  # every label of every cell scored
+        children = client.search_runs(
+            [experiment], f"tags.mlflow.parentRunId = '{job.info.run_id}'"
+        )
+        assert children and all(0.0 <= c.data.metrics["auc"] <= 1.0 for c in children)
+
+    out = tmp_path / "report"
+    cli.main(
+        ["--tracking-uri", mlflow_uri, "--experiment", "tactile_exp_benchmark", "--out", str(out)]
+    )
+    rows = list(csv.DictReader((out / "benchmark.csv").read_text().splitlines()))
+    assert len(rows) == 5 and all(r["mean_rank"] for r in rows)
+    index = (out / "index.md").read_text()
+    assert index.startswith("# 5 configurations on 2 data sets\n")
+    assert "Friedman over 2 data sets and 5 configurations" in index
+    assert (out / "benchmark_cd.png").exists()
+
+    again = subprocess.run(command, **run)
+    assert again.returncode == 0, again.stdout[-3000:]
+    assert again.stdout.count("already FINISHED with this config") == 20
+    assert len(client.search_runs([experiment], "tags.run_level = 'parent'")) == 20

@@ -53,9 +53,34 @@ def _model_for(modality: str) -> str:
     return "haptic_cnn" if "haptic_cnn" in takes else (takes or takes_any)[0]
 
 
+def _name(group: str, option: str) -> str:
+    """The registered component an option builds: its YAML's ``name``."""
+    return yaml.safe_load((CONF / group / f"{option}.yaml").read_text())["name"]
+
+
 @pytest.mark.parametrize("group", sorted(REGISTRIES))
 def test_option_names_equal_registry_names(group):
-    assert _options(group) == REGISTRIES[group].names()
+    """Each registered component has the option of its name; any other option configures a
+    registered one (model=minirocket is model=estimator with aeon's MiniRocket)."""
+    named = {o: _name(group, o) for o in _options(group)}
+    assert sorted(o for o, n in named.items() if o == n) == REGISTRIES[group].names()
+    assert set(named.values()) <= set(REGISTRIES[group].names())
+
+
+# Options that build aeon's estimators compose only where the timeseries extra is installed.
+NEEDS_AEON = {
+    ("model", "minirocket"),
+    ("model", "multirocket"),
+    ("experiment", "benchmark_minirocket"),
+    ("experiment", "benchmark_multirocket"),
+}
+
+
+def _cases() -> list:
+    cases = [(g, o) for g in sorted(REGISTRIES) for o in _options(g)]
+    cases += [("experiment", o) for o in _options("experiment")]
+    cases += [("sweep", o) for o in _options("sweep")]
+    return [pytest.param(*c, marks=pytest.mark.timeseries) if c in NEEDS_AEON else c for c in cases]
 
 
 def _folder(root: Path) -> Path:
@@ -65,28 +90,25 @@ def _folder(root: Path) -> Path:
     return write_folder(root / "ds", Sensor("s", ("c0", "c1"), 10.0), labels, trials)
 
 
-@pytest.mark.parametrize(
-    "group,option",
-    [(g, o) for g in sorted(REGISTRIES) for o in _options(g)]
-    + [("experiment", o) for o in _options("experiment")]
-    + [("sweep", o) for o in _options("sweep")],
-)
+@pytest.mark.parametrize("group,option", _cases())
 def test_every_option_composes_and_builds(compose_config, group, option, tmp_path):
     overrides = [f"{group}={option}"]
     if group == "data" and option == "phac2":
         (tmp_path / "phac.h5").touch()  # only its existence is checked before a job
         overrides.append(f"data.path={tmp_path / 'phac.h5'}")
-    if group == "data" and option == "folder":  # opened before a job: split=declared asks it
+    folder = (group, option) in (("data", "folder"), ("sweep", "benchmark"))
+    if folder:  # opened before a job: split=declared asks it
         overrides.append(f"data.path={_folder(tmp_path)}")
     if group == "modality":
         overrides.append(f"model={_model_for(option)}")
-    if group == "model" and MODELS[option].accepts:
-        fits = [m for m in MODALITIES.names() if MODALITIES[m].emits in MODELS[option].accepts]
+    if group == "model" and MODELS[_name(group, option)].accepts:
+        accepts = MODELS[_name(group, option)].accepts
+        fits = [m for m in MODALITIES.names() if MODALITIES[m].emits in accepts]
         overrides.append(f"modality={fits[-1]}")
     cfg = compose_config(overrides)
     settings = settings_from_config(cfg)  # builds the model through its registry
     if group in REGISTRIES:
-        assert cfg[group].name == option
+        assert cfg[group].name == _name(group, option)
     if group == "experiment":
         _assert_experiment_applied(compose_config, cfg, option)
     for component, registry in (
@@ -116,7 +138,7 @@ def _assert_experiment_applied(compose_config, cfg, option: str) -> None:
         group = key.removeprefix("override /")
         alone = compose_config([f"{group}={chosen}"])[group]
         if "name" in alone:
-            assert cfg[group].name == chosen, (option, group)
+            assert cfg[group].name == alone.name, (option, group)
         else:
             assert cfg[group] == alone, (option, group)
     for key, value in _leaves(text).items():
@@ -474,7 +496,7 @@ def _lab(root, channels: int, sensor: str):
         (
             ["modality=signals"],
             "model.groups: groups=32 does not divide the 48 channels of each instance; "
-            "model.groups=48 (one group per channel, as M1 has one per signal; ours) or a "
+            "model.groups=channels (one group per channel, as M1 has one per signal; ours) or a "
             "divisor of 48 (modality=signals on {path})",
         ),
     ],

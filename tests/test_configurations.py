@@ -32,6 +32,26 @@ def test_names_say_what_differs_and_are_shared_across_data_sets():
     assert not any("fold" in n or "seed" in n or "data" in n for n in names.values())
 
 
+def test_an_experiment_file_names_its_bundle_and_what_differs_within_it():
+    """The benchmark's experiment files each set a model and a modality: the file is the name;
+    a setting that also differs between runs of one file (seed aside) is named beside it."""
+    made = [
+        group("grasp", "haptic_lstm", 1.0, ("experiment=benchmark_lstm",))[0],
+        group("grasp", "haptic_cnn", 1.0, ("experiment=benchmark_convnet",))[0],
+        group("grasp", "haptic_cnn", 1.0, ("experiment=benchmark_convnet", "model.widths=8"))[0],
+        group("slide", "haptic_lstm", 1.0, ("experiment=benchmark_lstm",))[0],
+    ]
+    for g in made:
+        g.params["choice.experiment"] = g.overrides.pop("experiment")
+    names = configurations.names(made)
+    assert [names[g.key] for g in made] == [
+        "experiment=benchmark_lstm",
+        "experiment=benchmark_convnet",
+        "experiment=benchmark_convnet model.widths=8",
+        "experiment=benchmark_lstm",
+    ]
+
+
 def test_a_lone_configuration_is_named_by_its_model_and_ties_by_their_hash():
     (g, _) = group("slip", "linear", 1.0)
     assert configurations.names([g]) == {g.key: "model=linear"}

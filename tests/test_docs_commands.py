@@ -283,7 +283,7 @@ COMPOSED: set[tuple[str, ...]] = set()
 
 def _without_readers_config(argv: list[str]) -> list[str]:
     """``argv`` less ``--config-dir DIR`` (the reader's own folder, not here) and the options it
-    alone gives (``model=minirocket``: no such file in ``conf/``); the rest composes."""
+    alone gives (``model=my_rocket``: no such file in ``conf/``); the rest composes."""
     if "--config-dir" not in argv:
         return argv
     at = argv.index("--config-dir")

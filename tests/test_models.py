@@ -296,6 +296,27 @@ def test_haptic_models_take_any_sensor(name):
         assert model.transform(X).shape == (n, 6 * 4 * 5)
 
 
+def test_one_group_per_channel_is_the_groups_of_that_count_on_any_sensor():
+    """groups=channels is groups=C for C-channel rows (the same net, the same scores), on 6
+    channels as on 10; a string other than `channels` is refused naming the parameter."""
+    rng = np.random.default_rng(1)
+    for channels in (6, 10):
+        X = rng.standard_normal((24, channels, 40)).astype(np.float32)
+        names = np.array([f"t{i}" for i in range(24)], dtype=object)
+        train = Instances(X, np.arange(24) % 2, names, np.arange(24))
+        fitted = []
+        for groups in ("channels", channels):
+            model = MODELS.build("haptic_cnn", schedule=TINY, device="cpu", groups=groups)
+            model.fit(train)
+            fitted.append(model)
+        np.testing.assert_array_equal(
+            fitted[0].decision_function(X), fitted[1].decision_function(X)
+        )
+        assert fitted[0].conv3_shape_ == (channels * 4, 5)
+    with pytest.raises(ValueError, match="groups: expected a whole number or 'channels'"):
+        MODELS.build("haptic_cnn", groups="per_channel")
+
+
 def test_head_schedule_is_its_own():
     head = {"epochs": 7, "batch_size": 64, "lr": 0.1}
     own = {"epochs": 3, "finetune_epochs": 2, "momentum": 0.5}

@@ -186,7 +186,7 @@ def test_every_modality_and_model_runs_or_is_refused_before_any_run(
     assert outcomes["visual", "linear"].startswith("error: modality: modality=visual needs photo")
     assert outcomes["signals", "haptic_cnn"] == (
         f"error: model.groups: groups=32 does not divide the {channels} channels of each "
-        f"instance; model.groups={channels} (one group per channel, as M1 has one per signal; "
+        "instance; model.groups=channels (one group per channel, as M1 has one per signal; "
         f"ours) or a divisor of {channels} (modality=signals on {data})"
     )
     assert outcomes["signals", "visual_googlenet"].startswith(

@@ -86,7 +86,7 @@ def plugin_dir(tmp_path, monkeypatch):
         (tmp_path / "conf" / "model" / f"{name}.yaml").write_text(
             f"name: {name}\n_module_: my_models.centroid\nshrink: 0.0\n"
         )
-    (tmp_path / "conf" / "model" / "minirocket.yaml").write_text(MINIROCKET)
+    (tmp_path / "conf" / "model" / "my_rocket.yaml").write_text(MINIROCKET)
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.chdir(tmp_path)
     for module in ("my_models.centroid", "my_models"):  # another test's folder of that name
@@ -168,12 +168,13 @@ def test_check_model_runs_the_contract_on_a_plugin(plugin_dir):
 
 
 @pytest.mark.slow  # ~55 s: a job in a new process and MiniRocket's kernels compiled once
+@pytest.mark.timeseries
 @pytest.mark.job
 def test_a_yaml_only_minirocket_model_runs_predicts_deploys_and_keeps_the_contract(
     plugin_dir, cache_dir, mlflow_uri
 ):
     """From a folder outside the repository: ``python -m tactile_exp --config-dir conf
-    model=minirocket`` runs a job; predict and the logged MLflow model score its test trials
+    model=my_rocket`` runs a job; predict and the logged MLflow model score its test trials
     as the job did; ``check_model`` passes; ONNX export is refused in one line."""
     if os.environ.get("TACTILE_EXP_TIMESERIES"):  # CI's timeseries venv: aeon must be there
         import aeon  # noqa: F401
@@ -187,7 +188,7 @@ def test_a_yaml_only_minirocket_model_runs_predicts_deploys_and_keeps_the_contra
     from tactile_exp.jobs import PredictError, StoredJob
 
     args = [
-        "--config-dir", "conf", "model=minirocket", *TINY_DATA, f"cache_dir={cache_dir}",
+        "--config-dir", "conf", "model=my_rocket", *TINY_DATA, f"cache_dir={cache_dir}",
         f"tracking.uri={mlflow_uri}", "adjectives=[hard]", f"hydra.run.dir={plugin_dir / 'run'}",
     ]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])}
@@ -201,7 +202,7 @@ def test_a_yaml_only_minirocket_model_runs_predicts_deploys_and_keeps_the_contra
     (job,) = client.search_runs([experiment], "tags.run_level = 'parent'")
     assert job.data.params["model.transformer._target_"].endswith("MiniRocket")
     assert "schedule.epochs" not in job.data.params  # a model without epochs
-    assert job.info.run_name.startswith("minirocket-concat-c1")
+    assert job.info.run_name.startswith("my_rocket-concat-c1")
     (child,) = client.search_runs([experiment], f"tags.mlflow.parentRunId = '{job.info.run_id}'")
     auc = child.data.metrics["auc"]
     assert 0.0 <= auc <= 1.0
@@ -218,4 +219,4 @@ def test_a_yaml_only_minirocket_model_runs_predicts_deploys_and_keeps_the_contra
     with pytest.raises(PredictError, match="not a torch network"):
         export_job(job.info.run_id, plugin_dir / "onnx", tracking_uri=mlflow_uri)
 
-    check_model("minirocket", config_dir=plugin_dir / "conf")
+    check_model("my_rocket", config_dir=plugin_dir / "conf")

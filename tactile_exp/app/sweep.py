@@ -3,7 +3,9 @@ what each job of a sweep records for it.
 
 A sweep survives its bad cells. Before the first job starts, every job's config is composed and
 checked as a single run checks it; invalid cells are listed in ``<sweep folder>/invalid.yaml``
-and skipped (``sweep.on_invalid=skip``) or nothing runs (``fail``). A job that fails while running
+and skipped (``sweep.on_invalid=skip``) or nothing runs (``fail``). Cells that do not exist (a fold
+beyond a data set's declared folds, a modality a data set cannot give: `NotACell`) are listed
+there as absent and never run, whatever ``on_invalid`` says. A job that fails while running
 records it and returns instead of raising: Hydra 1.3's basic sweeper re-raises a failed job's
 exception once its batch is done, which skips ``on_multirun_end`` and every later batch. Each job
 writes how it ended to ``<sweep folder>/outcomes/<hydra.job.num>.yaml`` (a file, so that it works
@@ -43,7 +45,7 @@ log = logging.getLogger(__name__)
 
 WORKER_GRACE_S = 60.0  # how long a terminated sweep waits for its workers to mark runs FAILED
 ON_INVALID = ("skip", "fail", "check")  # sweep.on_invalid; check: list, then run nothing
-INVALID_FILE = "invalid.yaml"  # in the sweep folder: the cells not run, and why
+INVALID_FILE = "invalid.yaml"  # in the sweep folder: the cells not run (invalid, absent), and why
 OUTCOMES = "outcomes"  # in the sweep folder: <hydra.job.num>.yaml, how each job ended
 EXIT_FAILED = 1  # a sweep with a FAILED job (a failed Hydra job exits 1 too)
 
@@ -173,6 +175,11 @@ class SweepJob:
                 log.warning("skipped: invalid config (%s): %s", path, entry["reason"])
                 self.record("skipped", entry["reason"])
                 return True
+        for entry in listed.get("absent") or []:
+            if tuple(entry["overrides"]) == self.overrides:
+                log.info("absent: not a cell of this grid: %s", entry["reason"])
+                self.record("absent", entry["reason"])
+                return True
         return False
 
     def record(self, status: str, reason: str = "") -> None:
@@ -243,24 +250,27 @@ class PrepareSweep(Callback):
             old.unlink(missing_ok=True)  # an earlier sweep's, in the same folder
         jobs = sweep_jobs(config)
         if jobs is None:
-            valid, invalid = [settings_from_config(config)], []
+            valid, invalid, absent = [settings_from_config(config)], [], []
         else:
             start = time.perf_counter()
             log.info("checking the configs of %d jobs before the first starts", len(jobs))
             try:
-                valid, invalid = check_jobs(config, jobs)
+                valid, invalid, absent = check_jobs(config, jobs)
             except HydraException:  # a cell with no config file (model=nope): the sweeper
                 return  # says so in its own words before it launches anything
             self.jobs = jobs
             log.info(
-                "%d valid, %d invalid (checked in %.1f s)",
+                "%d valid, %d invalid, %d absent (checked in %.1f s)",
                 len(valid),
                 len(invalid),
+                len(absent),
                 time.perf_counter() - start,
             )
             _flag_loss_axis(jobs, valid)
             listing = {"on_invalid": on_invalid, "jobs": len(jobs), "invalid": invalid}
-            _write(folder / INVALID_FILE, listing)
+            _write(folder / INVALID_FILE, listing | ({"absent": absent} if absent else {}))
+            if absent:
+                _show_absent(absent)
         if invalid:
             _show_invalid(listing, folder / INVALID_FILE)
             if on_invalid in ("fail", "check"):
@@ -269,7 +279,7 @@ class PrepareSweep(Callback):
                     "an invalid config (listed above); none run"
                 )
         if not valid:
-            raise ConfigError(f"all {len(self.jobs)} jobs have an invalid config; none run")
+            raise ConfigError(f"all {len(self.jobs)} jobs are invalid or absent; none run")
         if on_invalid == "check":  # composed and checked, as each job would be; nothing runs
             log.info("sweep.on_invalid=check: all %d jobs valid; none run", len(valid))
             sys.exit(0)
@@ -291,6 +301,8 @@ class PrepareSweep(Callback):
             f"{sum(o['status'] == status for o in ended.values())} {status}{shown}"
             for status, shown in (("FINISHED", ""), ("skipped", " (invalid)"), ("FAILED", ""))
         )
+        absent = sum(o["status"] == "absent" for o in ended.values())
+        line += f", {absent} absent (not cells)" if absent else ""
         failed = [o["overrides"] for _, o in sorted(ended.items()) if o["status"] == "FAILED"]
         if failed:
             where = axes(self.jobs or [o["overrides"] for o in ended.values()])
@@ -315,27 +327,29 @@ def _flag_loss_axis(jobs: Sequence[Sequence[str]], valid: Sequence[Settings]) ->
 
 def check_jobs(
     config: DictConfig, jobs: Sequence[Sequence[str]]
-) -> tuple[list[Settings], list[dict[str, Any]]]:
-    """The valid jobs' settings, and the invalid ones (``num``, ``overrides``, ``reason``)."""
+) -> tuple[list[Settings], list[dict[str, Any]], list[dict[str, Any]]]:
+    """The valid jobs' settings, the invalid ones and the absent ones (`NotACell`), each of
+    those as ``num``, ``cell``, ``reason``, ``overrides``."""
     from hydra.core.global_hydra import GlobalHydra
 
+    from tactile_exp.errors import NotACell
+
     loader = GlobalHydra.instance().config_loader()
-    valid, invalid = [], []
+    valid, invalid, absent = [], [], []
     where = axes(jobs)
     for num, overrides in enumerate(jobs):
         job = loader.load_sweep_config(config, list(overrides))  # as its launcher composes it
         try:
             valid.append(job_settings(job))
         except Exception as err:  # whatever would stop the job before its first run
-            invalid.append(
-                {
-                    "num": num,
-                    "cell": cell(overrides, where),
-                    "reason": _reason(err),
-                    "overrides": list(overrides),
-                }
-            )
-    return valid, invalid
+            entry = {
+                "num": num,
+                "cell": cell(overrides, where),
+                "reason": _reason(err),
+                "overrides": list(overrides),
+            }
+            (absent if isinstance(err, NotACell) else invalid).append(entry)
+    return valid, invalid, absent
 
 
 def _show_invalid(listing: dict[str, Any], path: Path) -> None:
@@ -345,6 +359,13 @@ def _show_invalid(listing: dict[str, Any], path: Path) -> None:
     lines = [f"{len(invalid)} of {listing['jobs']} jobs have an invalid config, {what}; in {path}:"]
     lines += [f"  #{e['num']} {e['cell']}: {e['reason']}" for e in invalid]
     log.warning("\n".join(lines))
+
+
+def _show_absent(absent: Sequence[dict[str, Any]]) -> None:
+    """The cells that do not exist, in one block: expected in a grid over data sets."""
+    lines = [f"{len(absent)} cells do not exist (a fold or modality their data lacks), not run:"]
+    lines += [f"  #{e['num']} {e['cell']}: {e['reason']}" for e in absent]
+    log.info("\n".join(lines))
 
 
 def track_invalid(tracker: Tracker, sweep_id: str, content: dict[str, Any]) -> None:

@@ -402,11 +402,16 @@ def declared_split(
 
 
 @SPLITS.register(DECLARED)
-def declared(dataset: DataSet, adjective: str, seed: int = 0) -> Split:
-    """The split the data set declares (`declared_split`) for its labels: what a job's
-    ``split=declared`` resolves to before it runs, here for a notebook's `make_split`."""
+def declared(dataset: DataSet, adjective: str, seed: int = 0, fold: int = 0) -> Split:
+    """The split the data set declares (`declared_split`) for its labels, fold ``fold`` of a
+    folds split: what a job's ``split=declared`` resolves to before it runs, here for a
+    notebook's `make_split`."""
     node, _ = declared_split(dataset, None, None)
     params = {k: v for k, v in node.items() if k != "name"}
+    if node["name"] == "folds":
+        params["fold"] = fold
+    elif fold:
+        raise DataError(f"{dataset.path}: declares split={node['name']}, one test side; fold=0")
     return SPLITS[str(node["name"])](dataset, adjective, seed, **params)
 
 

@@ -28,6 +28,8 @@ from tactile_exp.models.schedule import Schedule
 from tactile_exp.models.sgd import IMPLS, SGDModel
 from tactile_exp.train import Step, caffe_xavier_
 
+PER_CHANNEL = "channels"  # groups=channels: one group per input channel, whatever their number
+
 
 def _conv_out_len(length: int, kernel: int, stride: int) -> int:
     return (length + 2 * (kernel // 2) - kernel) // stride + 1
@@ -162,7 +164,7 @@ class HapticCNN(SGDModel):
         kernel_sizes: Sequence[int] = (5, 5, 5),
         widths: Sequence[int] = (4, 4, 4),
         strides: Sequence[int] = (2, 2, 2),
-        groups: int = 32,
+        groups: int | str = 32,
         impl: str = "auto",
         schedule: Schedule | Mapping[str, Any] | None = None,
         loss: str = "hinge",
@@ -179,9 +181,11 @@ class HapticCNN(SGDModel):
             device=device,
         )
         self.kernel_sizes, self.widths, self.strides = kernel_sizes, widths, strides
+        if isinstance(groups, str) and groups != PER_CHANNEL:
+            raise ValueError(f"groups: expected a whole number or {PER_CHANNEL!r}, got {groups!r}")
         self.groups = groups
         self.net_args = dict(
-            groups=groups,
+            groups=1 if groups == PER_CHANNEL else groups,
             kernel_sizes=tuple(kernel_sizes),
             widths=tuple(widths),
             strides=tuple(strides),
@@ -197,17 +201,18 @@ class HapticCNN(SGDModel):
         """Groups that divide the channels, and a conv stack that leaves time steps."""
         channels, steps = spec.shape if len(spec.shape) == 2 else (None, None)
         groups = self.net_args["groups"]
-        if channels is not None and channels % groups:
+        if channels is not None and self.groups != PER_CHANNEL and channels % groups:
             raise ValueError(
                 f"groups={groups} does not divide the {channels} channels of each instance; "
-                f"model.groups={channels} (one group per channel, as M1 has one per signal; ours) "
-                f"or a divisor of {channels}"
+                f"model.groups={PER_CHANNEL} (one group per channel, as M1 has one per signal; "
+                f"ours) or a divisor of {channels}"
             )
         if steps is not None:
             self.check_steps(steps)
 
     def _check_input(self, X: np.ndarray) -> None:
-        groups = self.net_args["groups"]
+        per_channel = self.groups == PER_CHANNEL and X.ndim == 3
+        groups = X.shape[1] if per_channel else self.net_args["groups"]
         if X.ndim != 3 or X.shape[1] % groups:
             raise ValueError(
                 f"haptic_cnn expects X of shape (n, channels, time) with channels a multiple "
@@ -215,7 +220,10 @@ class HapticCNN(SGDModel):
             )
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:
-        net = GroupedTemporalConvNet(*input_shape, **self.net_args)
+        args = self.net_args
+        if self.groups == PER_CHANNEL:
+            args = {**args, "groups": input_shape[0]}
+        net = GroupedTemporalConvNet(*input_shape, **args)
         self.conv3_shape_ = net.out_shape
         return net, net.n_features
 

@@ -95,6 +95,26 @@ def _differing(groups: list[Group], own: dict[str, dict[str, str]], keys: list[s
     return out
 
 
+def _within_experiments(
+    groups: list[Group], own: dict[str, dict[str, str]], differing: list[str]
+) -> list[str]:
+    """Where the experiment file differs it names the bundle it sets (``experiment=
+    benchmark_lstm``, not also ``model=haptic_lstm``): another key is kept only where it
+    differs between two groups of one experiment file."""
+    if "experiment" not in differing:
+        return differing
+    kept = []
+    for k in differing:
+        values: dict[str | None, set[str | None]] = {}
+        for g in groups:
+            values.setdefault(_value(g, "experiment", own[g.key]), set()).add(
+                _value(g, k, own[g.key])
+            )
+        if k == "experiment" or any(len(v) > 1 for v in values.values()):
+            kept.append(k)
+    return kept
+
+
 def _parts(g: Group, own: dict[str, str], keys: list[str]) -> list[str]:
     return [f"{k}={v}" for k in keys if (v := _value(g, k, own)) not in (None, "None")]
 
@@ -106,7 +126,9 @@ def names(groups: list[Group]) -> dict[str, str]:
     different data sets share one when their settings do."""
     own = {g.key: settings(g) for g in groups}
     keys = sorted({k for s in own.values() for k in s}, key=_order)
-    differing = _differing(groups, own, [k for k in keys if not _protocol(k)])
+    differing = _within_experiments(
+        groups, own, _differing(groups, own, [k for k in keys if not _protocol(k)])
+    )
     out = {
         g.key: " ".join(_parts(g, own[g.key], differing)) or _fallback(g, own[g.key])
         for g in groups
