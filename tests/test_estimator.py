@@ -229,17 +229,21 @@ def _needs_aeon() -> None:
         pytest.importorskip("aeon", reason="the timeseries extra: pip install -e '.[timeseries]'")
 
 
-def _planted(n: int, seed: int) -> Instances:
-    """Series (n, 6, 100) of noise; the positive ones carry one period of a sine, 12 steps long,
+def _bursts(y: np.ndarray, seed: int) -> np.ndarray:
+    """Series (n, 6, 100) of noise; those with y = 1 carry one period of a sine, 12 steps long,
     at a random time: found by its shape (it adds nothing to a series' mean), not its level."""
     rng = np.random.default_rng(seed)
-    y = np.arange(n) % 2
-    X = rng.standard_normal((n, 6, 100)).astype(np.float32)
+    X = rng.standard_normal((len(y), 6, 100)).astype(np.float32)
     for i in np.flatnonzero(y):
         start = rng.integers(0, 88)
         X[i, :, start : start + 12] += 1.5 * np.sin(np.linspace(0, 2 * np.pi, 12))
+    return X
+
+
+def _planted(n: int, seed: int) -> Instances:
+    y = np.arange(n) % 2
     names = np.array([f"t{seed}_{i}" for i in range(n)], dtype=object)
-    return Instances(X, y, names, np.arange(n) + 1000 * seed)
+    return Instances(_bursts(y, seed), y, names, np.arange(n) + 1000 * seed)
 
 
 @pytest.mark.timeseries
@@ -291,3 +295,28 @@ def test_minirocket_on_the_embedded_data_logs_rankings(tiny_config, mlflow_uri):
         assert len(np.unique(scores)) > 2
         truth = np.array([u.label for u in units])
         assert child.data.metrics["auc"] == pytest.approx(roc_auc_score(truth, scores))
+
+
+@pytest.mark.timeseries
+@pytest.mark.slow
+@pytest.mark.job
+def test_minirocket_finds_a_planted_burst_in_a_folder_data_set(tiny_config, mlflow_uri, tmp_path):
+    """A MiniRocket job on a folder data set (12 objects x 4 trials of 6 channels): the positive
+    objects' trials carry the burst of `_bursts`; two folds of the declared split (K=5: six
+    objects of each class) score their test trials with more than two values and find it
+    (AUC > 0.9)."""
+    from tactile_exp import experiment
+    from tactile_exp.data.dataset import Sensor
+    from tactile_exp.data.folder import write_folder
+
+    _needs_aeon()
+    labels = {f"obj{o:02d}": {"burst": o % 2} for o in range(12)}
+    trials = {name: list(_bursts(np.full(4, o % 2), seed=10 + o)) for o, name in enumerate(labels)}
+    data = write_folder(tmp_path / "bursts", Sensor("s", tuple("abcdef"), 100.0), labels, trials)
+    for fold in (0, 1):
+        overrides = ["data=folder", f"data.path={data}", "modality=signals", "model=minirocket"]
+        overrides += ["combine_instances=separate", "split.fold=" + str(fold)]
+        result = experiment.run(settings_from_config(tiny_config(overrides, adjectives="null")))
+        (res,) = result.results.values()
+        assert len(np.unique(res.test.scores)) > 2
+        assert res.metrics["auc"] > 0.9
