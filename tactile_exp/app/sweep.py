@@ -23,6 +23,7 @@ import signal
 import sys
 import time
 import traceback
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -270,7 +271,7 @@ class PrepareSweep(Callback):
             listing = {"on_invalid": on_invalid, "jobs": len(jobs), "invalid": invalid}
             _write(folder / INVALID_FILE, listing | ({"absent": absent} if absent else {}))
             if absent:
-                _show_absent(absent)
+                _show_absent(absent, folder / INVALID_FILE)
         if invalid:
             _show_invalid(listing, folder / INVALID_FILE)
             if on_invalid in ("fail", "check"):
@@ -361,10 +362,13 @@ def _show_invalid(listing: dict[str, Any], path: Path) -> None:
     log.warning("\n".join(lines))
 
 
-def _show_absent(absent: Sequence[dict[str, Any]]) -> None:
-    """The cells that do not exist, in one block: expected in a grid over data sets."""
-    lines = [f"{len(absent)} cells do not exist (a fold or modality their data lacks), not run:"]
-    lines += [f"  #{e['num']} {e['cell']}: {e['reason']}" for e in absent]
+def _show_absent(absent: Sequence[dict[str, Any]], path: Path) -> None:
+    """The cells that do not exist, one line per reason (expected in a grid over data sets:
+    a benchmark lists dozens); each cell is in ``path``."""
+    reasons = Counter(e["reason"] for e in absent)
+    lines = [f"{len(absent)} cells do not exist (a fold or modality their data lacks), not run"]
+    lines[0] += f"; in {path}:"
+    lines += [f"  {n} x {reason}" for reason, n in reasons.items()]
     log.info("\n".join(lines))
 
 
