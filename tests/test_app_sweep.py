@@ -294,6 +294,17 @@ def test_on_invalid_check_composes_every_job_and_runs_none(multirun, mlflow_uri,
     assert [e.name for e in MlflowClient(mlflow_uri).search_experiments()] == ["Default"]
 
 
+def test_one_mistake_in_every_job_is_one_line(multirun, capsys):
+    """Every cell fails for one reason (an impossible value they share, data.path left out of
+    sweep=benchmark): the sweep says it once, not once per cell."""
+    config = multirun("model=linear,haptic_lstm", "combine=0")
+    with pytest.raises(SystemExit) as stop:
+        sweep.PrepareSweep().on_multirun_start(config)
+    assert stop.value.code == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("error: every one of the 2 jobs: combine: ")
+
+
 def test_a_cell_without_a_config_file_is_left_to_hydra_s_own_error(multirun, tmp_path):
     """`model=nope`: the sweeper names the missing file before it launches anything."""
     sweep.PrepareSweep().on_multirun_start(multirun("model=linear,nope", "adjectives=[hard]"))

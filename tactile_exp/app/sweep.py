@@ -272,6 +272,9 @@ class PrepareSweep(Callback):
             _write(folder / INVALID_FILE, listing | ({"absent": absent} if absent else {}))
             if absent:
                 _show_absent(absent, folder / INVALID_FILE)
+        reasons = {e["reason"] for e in invalid}
+        if not valid and len(reasons) == 1:  # one mistake (data.path=... left out): one line
+            raise ConfigError(f"every one of the {len(self.jobs)} jobs: {reasons.pop()}")
         if invalid:
             _show_invalid(listing, folder / INVALID_FILE)
             if on_invalid in ("fail", "check"):
