@@ -261,10 +261,10 @@ class PrepareSweep(Callback):
                 return  # says so in its own words before it launches anything
             self.jobs = jobs
             log.info(
-                "%d valid, %d invalid, %d absent (checked in %.1f s)",
+                "%d valid, %d invalid%s (checked in %.1f s)",
                 len(valid),
                 len(invalid),
-                len(absent),
+                f", {len(absent)} absent" if absent else "",
                 time.perf_counter() - start,
             )
             _flag_loss_axis(jobs, valid)
