@@ -20,6 +20,7 @@ import numpy as np
 
 from tactile_exp.data.layout import EPS, PAC_PER_ROW, TrialData, TrialName
 from tactile_exp.data.phac2 import default_cache_dir
+from tactile_exp.models.scratch import empty_on_huge_pages
 from tactile_exp.preprocess.cache import cache_key, load_arrays, save_arrays
 
 CODE_VERSION = 1  # bump when the cached arrays' meaning changes
@@ -351,7 +352,8 @@ class HapticPreprocessor:
         idx = self.arrays.index(trials)
         a = self.arrays
         k = N_SCALAR + self.n_components
-        out = np.empty((idx.size, 2, a.offsets, len(EPS), k, a.steps), dtype=np.float32)
+        # on huge pages: a fit trains on these rows in place (``scratch.on_huge_pages``)
+        out = empty_on_huge_pages(idx.size, 2, a.offsets, len(EPS), k, a.steps)
         weight = self._weight.astype(np.float32)[:, None]  # (2, 1, 4, k, 23)
         # the signals are stored minus `centre`: fold W @ centre + b into a per-trial bias
         bias = np.einsum("fekc,nfc->nfek", self._weight, a.centre[idx]) + self._bias
