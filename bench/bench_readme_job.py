@@ -129,7 +129,7 @@ def main() -> None:
                     figures[f"{name}, CPU s{tag}"] = cpu
                 figures[f"{name}, peak resident MB{tag}"] = peak
         for tag in tags:
-            job_log = (folders[tag] / "job, first run.log").read_text()
+            job_log = (folders[tag] / f"job, first run{tag}.log").read_text()
             phases = [line for line in job_log.splitlines() if "phases:" in line]
             if phases:
                 print(f"the first run's log{tag}: {phases[-1].split(' - ', 1)[-1]}")
