@@ -1,6 +1,6 @@
 """The README's job (``experiment=quick_table1_i``) from fresh caches, phase by phase.
 
-Target: under 90 s from a fresh clone after install, data generation included. Each phase runs
+Target: under 45 s from a fresh clone after install, data generation included. Each phase runs
 in a child process, in order, with empty cache folders (``$TACTILE_EXP_CACHE``, numba's cache
 under it) and MLflow store, as on a fresh clone:
 
@@ -13,24 +13,33 @@ under it) and MLflow store, as on a fresh clone:
 
 Phases 1 + 2 are what a fresh clone pays. Wall and CPU seconds (children's user + system:
 both cores busy shows as CPU > wall; the generation's workers, children of a fork server, are
-not counted; the job's compile process is, the job waits for it) and the load average after each
-phase are printed; other work on the machine slows every phase, so read them with the load.
+not counted; the job's compile process is, the job waits for it), the peak resident memory of the
+phase's process (``wait4``'s ``ru_maxrss``: the largest of it and the processes it waited for,
+the job's compile process among them) and the load average after each phase are printed; other
+work on the machine slows every phase, so read them with the load. The job's log says what its
+own phases took (its ``phases:`` line, printed at the end).
 
-Run: ``.venv/bin/python bench/bench_readme_job.py [--json bench/results/bench_readme_job.json]``
+With ``--before REV`` the phases run for the package at git revision ``REV`` too (exported under
+the cache folder with its ``conf/``, as bench_roofline does), each from its own empty caches,
+before and now alternating phase by phase: a before/after in one run.
+
+Run: ``.venv/bin/python bench/bench_readme_job.py [--before REV]
+[--json bench/results/bench_readme_job.json]``
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import os
-import resource
 import subprocess
 import sys
+import tarfile
 import tempfile
 import time
 from pathlib import Path
 
-TARGET_S = 90.0
+TARGET_S = 45.0
 GENERATE = (
     "from tactile_exp.data.phac2 import default_cache_dir\n"
     "from tactile_exp.data.synthetic import default_file\n"
@@ -43,65 +52,104 @@ COMPILE = (
     "convnet_tiles.warm_up()\n"
 )
 JOB = ["-m", "tactile_exp", "experiment=quick_table1_i"]
+ROOT = Path(__file__).resolve().parent.parent
 
 
-def _children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def phase(name: str, args: list[str], env: dict[str, str], cwd: Path) -> tuple[float, float]:
-    """Wall and CPU seconds of ``python args`` in a child; its output goes to ``cwd/name.log``."""
-    start, start_cpu = time.perf_counter(), _children_cpu()
+def phase(name: str, args: list[str], env: dict[str, str], cwd: Path) -> tuple[float, ...]:
+    """Wall and CPU seconds and peak resident MB of ``python args`` in a child; its output goes
+    to ``cwd/name.log``."""
+    start = time.perf_counter()
     with open(cwd / f"{name}.log", "w") as log:
-        subprocess.run(
-            [sys.executable, *args], env=env, cwd=cwd, stdout=log, stderr=log, check=True
-        )
-    wall, cpu = time.perf_counter() - start, _children_cpu() - start_cpu
-    print(f"{name:28s} {wall:7.1f} s wall {cpu:7.1f} s CPU   load {os.getloadavg()[0]:.1f}")
-    return wall, cpu
+        child = subprocess.Popen([sys.executable, *args], env=env, cwd=cwd, stdout=log, stderr=log)
+        _, status, usage = os.wait4(child.pid, 0)
+    child.returncode = os.waitstatus_to_exitcode(status)
+    if child.returncode:
+        raise subprocess.CalledProcessError(child.returncode, args)
+    wall, cpu = time.perf_counter() - start, usage.ru_utime + usage.ru_stime
+    peak = usage.ru_maxrss / 1024  # kB on Linux
+    print(
+        f"{name:36s} {wall:7.1f} s wall {cpu:7.1f} s CPU {peak:7.0f} MB peak   "
+        f"load {os.getloadavg()[0]:.1f}"
+    )
+    return wall, cpu, peak
+
+
+def package(rev: str | None) -> Path:
+    """The folder holding ``tactile_exp`` and ``conf/`` at ``rev`` (None: this checkout)."""
+    if rev is None:
+        return ROOT
+    sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", rev], check=True,
+                         capture_output=True, text=True).stdout.strip()  # fmt: skip
+    cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
+    folder = cache / "bench-before" / sha
+    for part in ("tactile_exp", "conf"):  # bench_roofline exports the package alone
+        if not (folder / part).exists():
+            archive = subprocess.run(["git", "-C", str(ROOT), "archive", sha, part], check=True,
+                                     capture_output=True).stdout  # fmt: skip
+            folder.mkdir(parents=True, exist_ok=True)
+            with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+                tar.extractall(folder, filter="data")
+    return folder
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--before", default=None, help="also run the package at this git rev")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
-    root = Path(__file__).resolve().parent.parent
+    tags = {"": None} if args.before is None else {"": None, " (before)": args.before}
     figures: dict[str, float] = {}
     with tempfile.TemporaryDirectory(prefix="bench-readme-job-") as tmp:
-        folder = Path(tmp)
-        env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-        env["TACTILE_EXP_CACHE"] = str(folder / "cache")
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(root), env.get("PYTHONPATH")]))
-        env["MLFLOW_TRACKING_URI"] = f"sqlite:///{folder / 'mlflow.db'}"
-        outputs = f"hydra.run.dir={folder / 'outputs'}"
-        phases = {
-            "generation": ["-c", GENERATE],
-            "job, first run": [*JOB, outputs],
-        }
-        for name, argv in phases.items():
-            figures[f"{name}, s"], figures[f"{name}, CPU s"] = phase(name, argv, env, folder)
-        del figures["generation, CPU s"]  # its workers' time is not counted (docstring)
-        env["MLFLOW_TRACKING_URI"] = f"sqlite:///{folder / 'mlflow-again.db'}"
-        figures["job, again, s"], figures["job, again, CPU s"] = phase(
-            "job, again", [*JOB, outputs], env, folder
-        )
-        env["NUMBA_CACHE_DIR"] = str(folder / "numba-alone")
-        figures["compile alone, s"], figures["compile alone, CPU s"] = phase(
-            "compile alone", ["-c", COMPILE], env, folder
-        )
-    fresh = sum(figures[f"{name}, s"] for name in phases)
-    figures["fresh clone (generation + first run), s"] = fresh
+        envs, folders = {}, {}
+        for tag, rev in tags.items():
+            folder = folders[tag] = Path(tmp) / ("before" if tag else "now")
+            folder.mkdir()
+            env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+            env["TACTILE_EXP_CACHE"] = str(folder / "cache")
+            env["PYTHONPATH"] = str(package(rev))
+            env["MLFLOW_TRACKING_URI"] = f"sqlite:///{folder / 'mlflow.db'}"
+            envs[tag] = env
+        steps = [
+            ("generation", ["-c", GENERATE], None),
+            ("job, first run", JOB, "mlflow.db"),
+            ("job, again", JOB, "mlflow-again.db"),
+            ("compile alone", ["-c", COMPILE], "numba-alone"),
+        ]
+        for name, argv, store in steps:
+            for tag in tags:
+                folder, env = folders[tag], dict(envs[tag])
+                if name.startswith("job"):
+                    env["MLFLOW_TRACKING_URI"] = f"sqlite:///{folder / store}"
+                    argv = [*JOB, f"hydra.run.dir={folder / 'outputs'}"]
+                if name == "compile alone":
+                    env["NUMBA_CACHE_DIR"] = str(folder / store)
+                wall, cpu, peak = phase(name + tag, argv, env, folder)
+                figures[f"{name}, s{tag}"] = wall
+                if name != "generation":  # its workers' time is not counted (docstring)
+                    figures[f"{name}, CPU s{tag}"] = cpu
+                figures[f"{name}, peak resident MB{tag}"] = peak
+        for tag in tags:
+            job_log = (folders[tag] / f"job, first run{tag}.log").read_text()
+            phases = [line for line in job_log.splitlines() if "phases:" in line]
+            if phases:
+                print(f"the first run's log{tag}: {phases[-1].split(' - ', 1)[-1]}")
+    for tag in tags:
+        fresh = figures[f"generation, s{tag}"] + figures[f"job, first run, s{tag}"]
+        figures[f"fresh clone (generation + first run), s{tag}"] = fresh
+        print(f"fresh clone{tag}: {fresh:.1f} s (target {TARGET_S:.0f} s)")
     figures = {k: round(v, 1) for k, v in figures.items()}
-    print(f"fresh clone: {fresh:.1f} s (target {TARGET_S:.0f} s)")
     if args.json:
         sys.path.insert(0, str(Path(__file__).parent))
         from record import write
 
         notes = (
             "phases in order from empty caches, each in a child process; CPU s: the children's "
-            "user + system time; load average at the end in machine"
+            "user + system time; peak resident MB: the phase's process or the largest it "
+            "waited for (wait4's ru_maxrss); "
+            "load average at the end in machine"
         )
+        if args.before is not None:
+            notes += f"; (before) = the package at --before {args.before}, phases alternating"
         write(args.json, "bench_readme_job", figures, notes)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 import logging
 import os
+import time
 import warnings
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
@@ -108,7 +109,9 @@ def run(settings: Settings) -> JobResult:
     """Run (or skip, if already FINISHED) one job and log it to MLflow."""
     if settings.split_note:
         log.info("split: %s", settings.split_note)
+    start = time.perf_counter()
     dataset, modality, splits = open_data(settings)  # generated on first use
+    phases = {"data (generated on first use)": time.perf_counter() - start}
     compiled = kernels(settings, modality)
     if compiled:  # a first compile (empty cache) overlaps opening the store and preprocessing
         from tactile_exp.models.numba_setup import compile_ahead
@@ -130,7 +133,10 @@ def run(settings: Settings) -> JobResult:
             return JobResult(done, {}, skipped=True, validation=validation)
     tracker.end_stale_runs(settings.config_hash)
     with recording.job_run(tracker, settings) as parent_id:
+        start = time.perf_counter()
         modality.check(dataset)
+        phases["preprocessing"] = time.perf_counter() - start
+        start = time.perf_counter()
         notes = label_notes(settings, dataset, splits) | schedule_notes(settings)
         recording.record_data(tracker, parent_id, dataset, notes)
         results: dict[str, AdjectiveResult] = {}
@@ -153,6 +159,10 @@ def run(settings: Settings) -> JobResult:
                 result.sizes["seconds"],
             )
         results = {a: results[a] for a in splits}  # the adjectives' order, whichever ran first
+        phases[f"{len(results)} adjectives"] = time.perf_counter() - start
+        log.info(
+            "phases: %s", ", ".join(f"{name} {seconds:.1f} s" for name, seconds in phases.items())
+        )
         means = recording.record_summary(tracker, parent_id, settings, dataset, results)
         if not trial:
             key = headline.key

@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import logging
+import re
 import subprocess
 import sys
 
@@ -30,9 +32,17 @@ def _runs(uri: str, config_hash: str | None = None):
     return client, client.search_runs([exp.experiment_id], filter_string=query, max_results=1000)
 
 
-def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri):
+def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri, caplog):
     settings = settings_from_config(tiny_config(["seed=11"]))
-    result = run(settings)
+    with caplog.at_level(logging.INFO, logger="tactile_exp.experiment"):
+        result = run(settings)
+    # one line says what each phase took: the data, the preprocessing, the adjectives
+    (phases,) = [r.getMessage() for r in caplog.records if r.getMessage().startswith("phases:")]
+    assert re.fullmatch(
+        r"phases: data \(generated on first use\) [\d.]+ s, preprocessing [\d.]+ s, "
+        r"3 adjectives [\d.]+ s",
+        phases,
+    )
     client, runs = _runs(mlflow_uri, settings.config_hash)
     parents = [r for r in runs if r.data.tags["run_level"] == "parent"]
     children = [r for r in runs if r.data.tags["run_level"] == "child"]

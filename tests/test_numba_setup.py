@@ -92,6 +92,21 @@ def test_a_cold_module_is_compiled_in_another_process_and_announced_once(
     assert caplog.records == [] and not (tmp_path / "pid").exists()
 
 
+def test_compiles_started_together_compile_a_module_once(tmp_path, monkeypatch):
+    """Two compile processes for the same kernels on one cache (jobs side by side, a test run's
+    workers): the second waits for the first's compile and finds them cached."""
+    (tmp_path / "toy_kernels.py").write_text(
+        TOY_KERNELS.replace('"w"', '"a"').replace("str(os.getpid())", "f'{os.getpid()} '")
+    )  # each compile appends its pid
+    _importable(tmp_path, monkeypatch)
+    monkeypatch.setattr(numba_setup.numba.config, "CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setenv("TOY_MARK", str(tmp_path / "pids"))
+    both = [numba_setup._compile_elsewhere(["toy_kernels"]) for _ in range(2)]
+    assert [process.wait() for process in both] == [0, 0]
+    assert len((tmp_path / "pids").read_text().split()) == 1
+    assert numba_setup._cached("toy_kernels")
+
+
 def test_compile_ahead_fills_the_cache_from_another_process_and_the_first_call_waits(
     tmp_path, monkeypatch, caplog
 ):

@@ -209,6 +209,21 @@ def test_pca_matches_sklearn_on_normalised_rows(dataset):
         np.testing.assert_allclose(np.concatenate(pcs), expected, atol=2e-3)
 
 
+def test_transform_writes_into_a_given_array_of_its_shape_only(dataset):
+    """The haptic modality hands ``transform`` its instances' array (on huge pages, where a fit
+    trains on them in place): the same values as a new array, any other array refused."""
+    arrays = compute_haptic_arrays(dataset, steps=20, offsets=5)
+    prep = HapticPreprocessor(arrays).fit(train_test(dataset)[0])
+    names = [dataset.trials[0], "loofah_503_02"]
+    given = np.full((2, 2, 5, 4, 8, 20), np.nan, np.float32)
+    out = prep.transform(names, given)
+    assert np.shares_memory(out, given)
+    np.testing.assert_array_equal(out, prep.transform(names))
+    for bad in (given[:1], given.astype(np.float64), given[:, :, :, :, :, ::-1]):
+        with pytest.raises(ValueError, match="out must be C-contiguous float32"):
+            prep.transform(names, bad)
+
+
 def test_transform_commutes_with_resampling(dataset):
     """Normalising after resampling (our fast path) equals resampling normalised rows."""
     lens = (30, 55, 17, 9)

@@ -7,7 +7,14 @@ from pathlib import Path
 import numpy as np
 
 from tactile_exp.models import scratch as scratch_module
-from tactile_exp.models.scratch import HUGE_PAGE, carved, mapped, on_huge_pages, scratch
+from tactile_exp.models.scratch import (
+    HUGE_PAGE,
+    carved,
+    empty_on_huge_pages,
+    mapped,
+    on_huge_pages,
+    scratch,
+)
 
 
 def _mapping(address: int) -> tuple[int, int, str]:
@@ -100,6 +107,24 @@ def test_a_training_set_is_copied_onto_huge_pages_from_one_page_else_left_as_it_
     np.testing.assert_array_equal(copy, big[:, :, ::2].astype(np.float32))
     small = rng.standard_normal((10, 32, 60)).astype(np.float32)  # 77 kB
     assert on_huge_pages(small) is small
+
+
+def test_instances_written_on_huge_pages_are_trained_on_in_place_not_copied():
+    """A modality's instances (``empty_on_huge_pages``) hold the training set once: a fit takes
+    them, or a reshaped view of them, as they are; a strided view or float64 is still copied."""
+    X = empty_on_huge_pages(60, 2, 5, 32, 60)  # 4.6 MB: 2.3 MB every other step
+    assert X.dtype == np.float32 and X.flags.c_contiguous and X.ctypes.data % HUGE_PAGE == 0
+    X[...] = np.random.default_rng(0).standard_normal(X.shape)
+    rows = X.reshape(-1, 32, 60)  # as the haptic modality hands them on
+    assert on_huge_pages(rows) is rows
+    strided = on_huge_pages(rows[:, :, ::2])
+    assert not np.shares_memory(strided, X) and strided.ctypes.data % HUGE_PAGE == 0
+    np.testing.assert_array_equal(strided, rows[:, :, ::2])
+    wide = on_huge_pages(rows.astype(np.float64))
+    assert not np.shares_memory(wide, X)
+    np.testing.assert_array_equal(wide, rows)
+    small = empty_on_huge_pages(10, 32, 60)  # 77 kB: from malloc, as np.empty
+    assert small.shape == (10, 32, 60) and small.dtype == np.float32
 
 
 def test_carved_arrays_are_zeroed_back_to_back_from_a_huge_page_boundary():

@@ -16,7 +16,7 @@ from tactile_exp.data.layout import Instances
 from tactile_exp.models import sgd
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
-from tactile_exp.models.scratch import HUGE_PAGE
+from tactile_exp.models.scratch import HUGE_PAGE, empty_on_huge_pages
 from tactile_exp.models.sgd import FinetuneWarning
 
 SCHEDULES = Path(__file__).resolve().parents[1] / "conf" / "schedule"
@@ -146,3 +146,24 @@ def test_a_cpu_fit_reads_its_training_set_from_huge_pages(monkeypatch):
     np.testing.assert_array_equal(copy, model._preprocess(X).astype(np.float32))
     model.decision_function(X)  # scoring reads rows in order: no copy
     assert len(copies) == 1
+
+
+def test_features_in_batches_equal_one_batch_and_a_fit_on_huge_pages_does_not_copy(monkeypatch):
+    """Scoring ``INFERENCE_BATCH`` rows a call gives each row's features as one call does (the
+    compiled ConvNet and LSTM compute every row on its own), and a training set already on huge
+    pages, as the haptic modality writes its instances, is trained on in place."""
+    rng = np.random.default_rng(0)
+    X = empty_on_huge_pages(700, 32, 24)
+    X[...] = rng.standard_normal(X.shape)
+    y = (rng.random(700) < 0.5).astype(int)
+    data = Instances(X, y, np.array([f"t{i}" for i in range(700)]), np.arange(700) // 10)
+    real, taken = sgd.on_huge_pages, []
+    monkeypatch.setattr(sgd, "on_huge_pages", lambda X: taken.append(real(X)) or taken[-1])
+    for name in ("haptic_cnn", "haptic_lstm"):
+        model = MODELS.build(name, schedule=Schedule(epochs=1, finetune_epochs=1), device="cpu")
+        model.fit(data)
+        assert taken.pop() is X
+        whole = model.transform(X)
+        monkeypatch.setattr(sgd, "INFERENCE_BATCH", 256)  # 3 calls, the last of 188 rows
+        np.testing.assert_array_equal(model.transform(X), whole)
+        monkeypatch.setattr(sgd, "INFERENCE_BATCH", 1024)

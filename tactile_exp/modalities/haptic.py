@@ -11,6 +11,7 @@ import numpy as np
 from tactile_exp.data.dataset import PHAC2_LAYOUT
 from tactile_exp.data.layout import Instances, InstanceSpec, TrialData, TrialName, Trials
 from tactile_exp.modalities.base import MODALITIES, Modality, trial_rows
+from tactile_exp.models.scratch import empty_on_huge_pages
 
 if TYPE_CHECKING:
     from tactile_exp.modalities.networks import Load, Network
@@ -133,10 +134,19 @@ class Haptic(Modality):
         return self
 
     def transform(self, trials: Trials) -> Instances:
-        from tactile_exp.preprocess.haptic import HapticPreprocessor
+        from tactile_exp.preprocess.haptic import EP_NAMES, N_SCALAR, HapticPreprocessor
 
         pre = HapticPreprocessor(self.arrays(trials), self.pca_components, self.per_finger)
-        X = pre.restore(self.state_).transform(trials.names)  # (n, fingers, offsets, 32, steps)
+        # on huge pages: a fit trains on these rows in place (``scratch.on_huge_pages``)
+        out = empty_on_huge_pages(
+            len(trials.names),
+            2,
+            self.offsets,
+            len(EP_NAMES),
+            N_SCALAR + self.pca_components,
+            self.steps,
+        )
+        X = pre.restore(self.state_).transform(trials.names, out)  # (n, 2, offsets, 32, steps)
         per_trial = X.shape[1] * X.shape[2]
         return Instances(X.reshape(-1, *X.shape[3:]), *trial_rows(trials, per_trial))
 

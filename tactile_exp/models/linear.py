@@ -12,6 +12,7 @@ from torch import nn
 
 from tactile_exp.models.registry import MODELS
 from tactile_exp.models.schedule import Schedule
+from tactile_exp.models.scratch import empty_on_huge_pages
 from tactile_exp.models.sgd import SGDModel
 
 ROW_BLOCK = 64  # rows per float64 block in _column_mean_std: 12 MB at 24,320 columns
@@ -92,7 +93,8 @@ class LinearModel(SGDModel):
         flat = X.reshape(len(X), -1)
         if not self.standardize:
             return flat
-        out = np.subtract(flat, self.mean_, dtype=np.float32)
+        out = empty_on_huge_pages(*flat.shape)  # where a fit trains on it (``on_huge_pages``)
+        np.subtract(flat, self.mean_, out=out, dtype=np.float32)
         return np.divide(out, self.scale_, out=out)
 
     def _build_body(self, input_shape: tuple[int, ...]) -> tuple[nn.Module, int]:

@@ -19,6 +19,7 @@ then depend on whether its kernels had been compiled before.
 from __future__ import annotations
 
 import atexit
+import fcntl
 import importlib
 import importlib.util
 import logging
@@ -64,13 +65,20 @@ def _cached(module: str) -> bool:
 
 def _warm_up(modules: Sequence[str]) -> None:
     """The background process: each module's ``warm_up()`` compiles its kernels into the cache
-    (here, where ``ensure_compiled`` starts no process of its own)."""
+    (here, where ``ensure_compiled`` starts no process of its own), one such process at a time
+    per module and cache (a lock file beside its mark): processes that start together (jobs side
+    by side on a fresh cache, a test run's workers) wait for the first one's compile, then find
+    the kernels cached, instead of compiling them again on the same cores."""
     global _COMPILER
     _COMPILER = True
     for module in modules:
-        importlib.import_module(module).warm_up()
-        _mark(module).parent.mkdir(parents=True, exist_ok=True)
-        _mark(module).touch()
+        mark = _mark(module)
+        mark.parent.mkdir(parents=True, exist_ok=True)
+        with open(mark.with_name(f"{mark.name}.lock"), "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not mark.exists():
+                importlib.import_module(module).warm_up()
+                mark.touch()
 
 
 def _stop_compiles() -> None:

@@ -63,13 +63,33 @@ def carved(shapes: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
     return [part.reshape(shape) for part, shape in zip(parts, shapes, strict=True)]
 
 
+def empty_on_huge_pages(*shape: int) -> np.ndarray:
+    """An uninitialised C-contiguous float32 array of ``shape``, on huge pages (``mapped``) from
+    ``HUGE_PAGE`` bytes: what a modality writes its instances into, so that a fit trains on them
+    in place (``on_huge_pages``) instead of holding a second copy of its training set."""
+    count = int(np.prod(shape))
+    return (mapped(count) if 4 * count >= HUGE_PAGE else np.empty(count, np.float32)).reshape(shape)
+
+
+def _in_a_mapping(X: np.ndarray) -> bool:
+    """Whether ``X`` is a C-contiguous float32 view of an array built on a mapping (``mapped``'s;
+    a file's ``np.memmap`` too, which only costs the huge pages)."""
+    root = X
+    while isinstance(root.base, np.ndarray):
+        root = root.base
+    return X.dtype == np.float32 and X.flags.c_contiguous and isinstance(root.base, mmap.mmap)
+
+
 def on_huge_pages(X: np.ndarray) -> np.ndarray:
-    """``X`` as a C-contiguous float32 copy on huge pages (``mapped``) from ``HUGE_PAGE`` bytes,
-    else as ``np.ascontiguousarray``: a training set whose batches the kernels read row by row
-    at random. On 4 kB pages each instance's rows (19 kB at the paper's sizes) cost the core
-    TLB misses as well as cache misses."""
+    """``X`` as a C-contiguous float32 array on huge pages (``mapped``) from ``HUGE_PAGE`` bytes:
+    ``X`` itself when it lies in a mapping already (``empty_on_huge_pages``), else a copy; below
+    ``HUGE_PAGE`` bytes as ``np.ascontiguousarray``: a training set whose batches the kernels read
+    row by row at random. On 4 kB pages each instance's rows (19 kB at the paper's sizes) cost
+    the core TLB misses as well as cache misses."""
     if 4 * X.size < HUGE_PAGE:
         return np.ascontiguousarray(X, dtype=np.float32)
+    if _in_a_mapping(X):
+        return X
     copy = mapped(X.size).reshape(X.shape)
     copy[...] = X
     return copy

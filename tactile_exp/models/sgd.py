@@ -55,7 +55,10 @@ from tactile_exp.train import (
     validate_losses,
 )
 
-INFERENCE_BATCH = 4096
+# Rows per body call when scoring or computing features: the compiled ConvNet's whole-batch
+# activations take ~90 MB at 1024 rows (~360 MB at 4096, most of the README job's peak memory);
+# each row's features do not depend on the batch it is in.
+INFERENCE_BATCH = 1024
 IMPLS = ("auto", "compiled", "torch")
 
 
@@ -294,11 +297,15 @@ class SGDModel(Model):
 
     @torch.no_grad()
     def _features(self, X: torch.Tensor) -> torch.Tensor:
+        """The body's features of ``X``, ``INFERENCE_BATCH`` rows a call, written into one array
+        (not a list of parts concatenated: a second copy of them all)."""
         self.body_.eval()
-        parts = [self.body_(X[i : i + INFERENCE_BATCH]) for i in range(0, len(X), INFERENCE_BATCH)]
-        if not parts:
-            return X.new_zeros((0, self.classifier_.in_features))
-        return parts[0] if len(parts) == 1 else torch.cat(parts)
+        if 0 < len(X) <= INFERENCE_BATCH:
+            return self.body_(X)
+        out = X.new_empty((len(X), self.classifier_.in_features))
+        for i in range(0, len(X), INFERENCE_BATCH):
+            out[i : i + INFERENCE_BATCH] = self.body_(X[i : i + INFERENCE_BATCH])
+        return out
 
     def transform(self, X: np.ndarray) -> np.ndarray:
         """The body's features for each row of ``X``: (n, D) float32."""

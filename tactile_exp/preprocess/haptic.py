@@ -344,14 +344,24 @@ class HapticPreprocessor:
                     f"expected {shapes[name]} for {n_components} electrode PCs"
                 )
 
-    def transform(self, trials: Sequence[str | TrialName]) -> np.ndarray:
-        """(n, 2 fingers, offsets, n_channels, steps) float32 for ``trials``, in order."""
+    def transform(
+        self, trials: Sequence[str | TrialName], out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(n, 2 fingers, offsets, n_channels, steps) float32 for ``trials``, in order, written
+        into ``out`` when given (float32, C-contiguous, (n, 2, offsets, EPs, 4 + k, steps)),
+        else into a new array."""
         if not hasattr(self, "_weight"):
             raise RuntimeError("HapticPreprocessor.transform called before fit")
         idx = self.arrays.index(trials)
         a = self.arrays
         k = N_SCALAR + self.n_components
-        out = np.empty((idx.size, 2, a.offsets, len(EPS), k, a.steps), dtype=np.float32)
+        shape = (idx.size, 2, a.offsets, len(EPS), k, a.steps)
+        if out is None:
+            out = np.empty(shape, dtype=np.float32)
+        elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ValueError(
+                f"out must be C-contiguous float32 {shape}, got {out.dtype} {out.shape}"
+            )
         weight = self._weight.astype(np.float32)[:, None]  # (2, 1, 4, k, 23)
         # the signals are stored minus `centre`: fold W @ centre + b into a per-trial bias
         bias = np.einsum("fekc,nfc->nfek", self._weight, a.centre[idx]) + self._bias
