@@ -7,8 +7,7 @@ of each model compiles its kernels (ours and aeon's) and reads the data, so no m
 that in the figures; then ``--rounds`` rounds run every model, in alternating order. Prints each
 model's median seconds per adjective (``sizes.seconds``: preprocessing, fit and scoring) and its
 mean test AUC over the labels. A model whose modality the data set cannot give (the static
-features off PHAC-2's layout) is listed as not run. The rocket models need the timeseries
-extra (``pip install -e '.[timeseries]'``).
+features off PHAC-2's layout) is listed as not run.
 
     python bench/bench_benchmark_models.py --data DIR --labels 3 --rounds 1 [--json OUT]
 """

@@ -65,18 +65,6 @@ def test_two_complete_configurations_get_ranks_and_no_friedman():
     assert bench.mean_ranks == {"model=linear": 1.0, "model=lstm": 2.0}
 
 
-def _needs_aeon() -> None:
-    """The rocket models need the timeseries extra: CI's timeseries venv must have it (fail,
-    never skip, there); elsewhere the test skips without it."""
-    import os
-
-    if os.environ.get("TACTILE_EXP_TIMESERIES"):
-        import aeon  # noqa: F401
-    else:
-        pytest.importorskip("aeon", reason="the timeseries extra: pip install -e '.[timeseries]'")
-
-
-@pytest.mark.timeseries
 @pytest.mark.slow  # ~3 min: 20 jobs of five models, MiniRocket's and MultiRocket's kernels compiled
 @pytest.mark.job
 def test_the_benchmark_sweep_on_imported_recipes_runs_every_cell_once(
@@ -97,7 +85,6 @@ def test_the_benchmark_sweep_on_imported_recipes_runs_every_cell_once(
     from tactile_exp.data.__main__ import main as data_main
     from tactile_exp.report import cli
 
-    _needs_aeon()
     data = []
     for name, write in (("icub_grasp", write_icub), ("penn_bolt", write_bolt)):
         src = write(tmp_path / f"{name}_clone")

@@ -67,20 +67,11 @@ def test_option_names_equal_registry_names(group):
     assert set(named.values()) <= set(REGISTRIES[group].names())
 
 
-# Options that build aeon's estimators compose only where the timeseries extra is installed.
-NEEDS_AEON = {
-    ("model", "minirocket"),
-    ("model", "multirocket"),
-    ("experiment", "benchmark_minirocket"),
-    ("experiment", "benchmark_multirocket"),
-}
-
-
 def _cases() -> list:
     cases = [(g, o) for g in sorted(REGISTRIES) for o in _options(g)]
     cases += [("experiment", o) for o in _options("experiment")]
     cases += [("sweep", o) for o in _options("sweep")]
-    return [pytest.param(*c, marks=pytest.mark.timeseries) if c in NEEDS_AEON else c for c in cases]
+    return cases
 
 
 def _folder(root: Path) -> Path:

@@ -218,17 +218,6 @@ def test_a_model_fitted_for_a_head_alone_has_its_own_training_key():
     assert not AdjectivePipeline(Component("haptic", {}), cnn, "concat", 2).fits_representation_only
 
 
-def _needs_aeon() -> None:
-    """The shipped rocket models need the timeseries extra: CI's timeseries venv must have it
-    (fail, never skip, there); elsewhere these tests skip without it."""
-    import os
-
-    if os.environ.get("TACTILE_EXP_TIMESERIES"):
-        import aeon  # noqa: F401
-    else:
-        pytest.importorskip("aeon", reason="the timeseries extra: pip install -e '.[timeseries]'")
-
-
 def _bursts(y: np.ndarray, seed: int) -> np.ndarray:
     """Series (n, 6, 100) of noise; those with y = 1 carry one period of a sine, 12 steps long,
     at a random time: found by its shape (it adds nothing to a series' mean), not its level."""
@@ -246,7 +235,6 @@ def _planted(n: int, seed: int) -> Instances:
     return Instances(_bursts(y, seed), y, names, np.arange(n) + 1000 * seed)
 
 
-@pytest.mark.timeseries
 @pytest.mark.slow  # aeon's kernels compiled on first use
 @pytest.mark.parametrize("name", ["minirocket", "multirocket"])
 def test_the_shipped_rocket_models_rank_and_find_a_planted_signal(name):
@@ -257,7 +245,6 @@ def test_the_shipped_rocket_models_rank_and_find_a_planted_signal(name):
 
     from tactile_exp.testing import check_model, model_params
 
-    _needs_aeon()
     params = model_params(name)
     model = MODELS.build(params.pop("name"), **params)
     model.fit(_planted(60, seed=0))
@@ -268,7 +255,6 @@ def test_the_shipped_rocket_models_rank_and_find_a_planted_signal(name):
     check_model(name)
 
 
-@pytest.mark.timeseries
 @pytest.mark.slow
 @pytest.mark.job
 def test_minirocket_on_the_embedded_data_logs_rankings(tiny_config, mlflow_uri):
@@ -280,7 +266,6 @@ def test_minirocket_on_the_embedded_data_logs_rankings(tiny_config, mlflow_uri):
     from tactile_exp import experiment
     from tactile_exp.jobs import StoredJob
 
-    _needs_aeon()
     config = tiny_config(["model=minirocket", "combine_instances=separate"], "[hard,soft]")
     job_id = experiment.run(settings_from_config(config)).run_id
     stored = StoredJob.open(job_id, tracking_uri=mlflow_uri)
@@ -297,7 +282,6 @@ def test_minirocket_on_the_embedded_data_logs_rankings(tiny_config, mlflow_uri):
         assert child.data.metrics["auc"] == pytest.approx(roc_auc_score(truth, scores))
 
 
-@pytest.mark.timeseries
 @pytest.mark.slow
 @pytest.mark.job
 def test_minirocket_finds_a_planted_burst_in_a_folder_data_set(tiny_config, mlflow_uri, tmp_path):
@@ -309,7 +293,6 @@ def test_minirocket_finds_a_planted_burst_in_a_folder_data_set(tiny_config, mlfl
     from tactile_exp.data.dataset import Sensor
     from tactile_exp.data.folder import write_folder
 
-    _needs_aeon()
     labels = {f"obj{o:02d}": {"burst": o % 2} for o in range(12)}
     trials = {name: list(_bursts(np.full(4, o % 2), seed=10 + o)) for o, name in enumerate(labels)}
     data = write_folder(tmp_path / "bursts", Sensor("s", tuple("abcdef"), 100.0), labels, trials)

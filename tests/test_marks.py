@@ -41,18 +41,7 @@ def _training_keys(settings: config.Settings, tmp_path: Path) -> dict[str, str]:
     }
 
 
-# A benchmark row whose model is aeon's (model=minirocket, model=multirocket) composes only
-# where the timeseries extra is installed: CI's timeseries venv checks its pins.
-NEEDS_AEON = ("experiment=benchmark_minirocket", "experiment=benchmark_multirocket")
-JOBS = [
-    pytest.param(job, marks=pytest.mark.timeseries)
-    if set(job["overrides"]) & set(NEEDS_AEON)
-    else job
-    for job in PINNED
-]
-
-
-@pytest.mark.parametrize("job", JOBS, ids=lambda job: " ".join(job["overrides"]) or "defaults")
+@pytest.mark.parametrize("job", PINNED, ids=lambda job: " ".join(job["overrides"]) or "defaults")
 def test_hashes_and_training_keys_of_existing_jobs_are_unchanged(
     compose_config, job, tmp_path, monkeypatch
 ):

@@ -168,7 +168,6 @@ def test_check_model_runs_the_contract_on_a_plugin(plugin_dir):
 
 
 @pytest.mark.slow  # ~55 s: a job in a new process and MiniRocket's kernels compiled once
-@pytest.mark.timeseries
 @pytest.mark.job
 def test_a_yaml_only_minirocket_model_runs_predicts_deploys_and_keeps_the_contract(
     plugin_dir, cache_dir, mlflow_uri
@@ -176,10 +175,6 @@ def test_a_yaml_only_minirocket_model_runs_predicts_deploys_and_keeps_the_contra
     """From a folder outside the repository: ``python -m tactile_exp --config-dir conf
     model=my_rocket`` runs a job; predict and the logged MLflow model score its test trials
     as the job did; ``check_model`` passes; ONNX export is refused in one line."""
-    if os.environ.get("TACTILE_EXP_TIMESERIES"):  # CI's timeseries venv: aeon must be there
-        import aeon  # noqa: F401
-    else:
-        pytest.importorskip("aeon", reason="the timeseries extra: pip install -e '.[timeseries]'")
     import mlflow
     import pandas as pd
 
