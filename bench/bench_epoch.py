@@ -36,19 +36,18 @@ Run: ``.venv/bin/python bench/bench_epoch.py [--repeats 3] [--threads 2] [--adje
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import os
 import statistics
 import subprocess
 import sys
-import tarfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
+from revision import package_at
 
 ROOT = Path(__file__).resolve().parent.parent
 SGEMM = 2000
@@ -200,17 +199,7 @@ class Package:
     def __init__(self, rev: str | None, threads: int, adjective: str) -> None:
         env, folder = dict(os.environ), ROOT
         if rev is not None:
-            sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", rev], check=True,
-                                 capture_output=True, text=True).stdout.strip()  # fmt: skip
-            cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
-            folder = cache / "bench-before" / sha
-            for part in ("tactile_exp", "conf"):  # bench_roofline exports the package alone
-                if not (folder / part).exists():
-                    archive = subprocess.run(["git", "-C", str(ROOT), "archive", sha, part],
-                                             check=True, capture_output=True).stdout  # fmt: skip
-                    folder.mkdir(parents=True, exist_ok=True)
-                    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-                        tar.extractall(folder, filter="data")
+            folder = package_at(rev)
             env["NUMBA_CACHE_DIR"] = str(folder / "numba")
         env["PYTHONPATH"] = str(folder)
         self.child = subprocess.Popen(

@@ -30,14 +30,14 @@ Run: ``.venv/bin/python bench/bench_readme_job.py [--before REV]
 from __future__ import annotations
 
 import argparse
-import io
 import os
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
+
+from revision import package_at
 
 TARGET_S = 45.0
 GENERATE = (
@@ -78,18 +78,7 @@ def package(rev: str | None) -> Path:
     """The folder holding ``tactile_exp`` and ``conf/`` at ``rev`` (None: this checkout)."""
     if rev is None:
         return ROOT
-    sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", rev], check=True,
-                         capture_output=True, text=True).stdout.strip()  # fmt: skip
-    cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
-    folder = cache / "bench-before" / sha
-    for part in ("tactile_exp", "conf"):  # bench_roofline exports the package alone
-        if not (folder / part).exists():
-            archive = subprocess.run(["git", "-C", str(ROOT), "archive", sha, part], check=True,
-                                     capture_output=True).stdout  # fmt: skip
-            folder.mkdir(parents=True, exist_ok=True)
-            with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-                tar.extractall(folder, filter="data")
-    return folder
+    return package_at(rev)
 
 
 def main() -> None:

@@ -60,19 +60,18 @@ Run: ``.venv/bin/python bench/bench_roofline.py [--repeats 7] [--threads 2] [--b
 from __future__ import annotations
 
 import argparse
-import io
 import itertools
 import json
 import os
 import subprocess
 import sys
-import tarfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
+from revision import package_at
 
 N_TRAIN, CHANNELS, STEPS, BATCH = 5300, 32, 150, 1000
 GROUPS, KERNEL, WIDTH, STRIDE = 32, 5, 4, 2
@@ -366,29 +365,13 @@ class Package:
         folder = ROOT
         self.subject = "this checkout"
         if rev is not None:
-            sha = subprocess.run(
-                ["git", "-C", str(ROOT), "rev-parse", rev],
-                check=True,
-                capture_output=True,
-                text=True,
-            ).stdout.strip()
             self.subject = subprocess.run(  # names the revision in the result file's notes
-                ["git", "-C", str(ROOT), "log", "-1", "--format=%s", sha],
+                ["git", "-C", str(ROOT), "log", "-1", "--format=%s", rev],
                 check=True,
                 capture_output=True,
                 text=True,
             ).stdout.strip()
-            cache = Path(os.environ.get("TACTILE_EXP_CACHE", Path.home() / ".cache/tactile_exp"))
-            folder = cache / "bench-before" / sha  # kept: its kernels compile once per revision
-            if not (folder / "tactile_exp").exists():
-                archive = subprocess.run(
-                    ["git", "-C", str(ROOT), "archive", sha, "tactile_exp"],
-                    check=True,
-                    capture_output=True,
-                ).stdout
-                folder.mkdir(parents=True, exist_ok=True)
-                with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-                    tar.extractall(folder, filter="data")
+            folder = package_at(rev)
             env["NUMBA_CACHE_DIR"] = str(folder / "numba")
         env["PYTHONPATH"] = str(folder)
         self.child = subprocess.Popen(
