@@ -1,6 +1,8 @@
 """Time and peak memory of haptic and visual preprocessing on the full default synthetic file.
 
-Measures, in one run: the haptic arrays' first (uncached) and cached load, the engine's 24 x
+Measures, in one run: every BioTac array of the file read through h5py's gzip filter and through
+``deflate.read_array`` (ISA-L), CPU seconds, alternating twice; the haptic arrays' first
+(uncached) and cached load, the engine's 24 x
 (fit on an adjective's training trials + transform of its train and test trials), and the visual
 arrays' first and cached load. Targets: cached preprocessing under 5 s, peak memory under 2 GB.
 
@@ -23,6 +25,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import h5py
+import numpy as np
+
+from tactile_exp.data.deflate import read_array
 from tactile_exp.data.layout import ADJECTIVES, Split
 from tactile_exp.data.phac2 import PHAC2, default_cache_dir
 from tactile_exp.data.splits import make_split
@@ -67,6 +73,18 @@ def measure(label: str, fn: Callable[[], Any]) -> tuple[Any, float, float]:
     return result, seconds, grown_gb
 
 
+def read_biotacs(dataset: PHAC2, read: Callable[[h5py.Dataset], np.ndarray]) -> float:
+    """CPU seconds to read every BioTac array of ``dataset``'s file with ``read``."""
+    with h5py.File(dataset.path, "r") as f:
+        arrays: list[h5py.Dataset] = []
+        f.visititems(lambda name, node: arrays.append(node) if "/biotacs/" in f"/{name}" else None)
+        arrays = [a for a in arrays if isinstance(a, h5py.Dataset)]
+        start = time.process_time()
+        for array in arrays:
+            read(array)
+        return time.process_time() - start
+
+
 def engine_loop(splits: list[Split], arrays: HapticArrays) -> int:
     """What one job does: fit and transform once per adjective."""
     instances = 0
@@ -89,6 +107,13 @@ def main() -> None:
         f"data: {path} ({len(dataset.trials)} trials, "
         f"{sum(map(len, dataset.photographs().values()))} photographs)"
     )
+    for _ in range(2):  # alternating: the machine's speed moves
+        h5py_s = read_biotacs(dataset, lambda ds: ds[()])
+        isal_s = read_biotacs(dataset, read_array)
+        print(
+            f"BioTac arrays read, CPU s: h5py's gzip filter {h5py_s:.2f}, "
+            f"ISA-L (deflate.read_array) {isal_s:.2f} ({h5py_s / isal_s:.1f}x)"
+        )
     with tempfile.TemporaryDirectory() as tmp:
         cache = Path(tmp)
         _, h_first, h_first_mem = measure(

@@ -20,6 +20,7 @@ import h5py
 import numpy as np
 
 from tactile_exp.data.dataset import PHAC2_LAYOUT, Sensor
+from tactile_exp.data.deflate import read_array
 from tactile_exp.data.layout import (
     ADC_MAX,
     ADJECTIVES,
@@ -307,7 +308,7 @@ class _TrialReader:
             return None
         if ds.shape != (self.n, *tail):
             raise self.fail(key, f"shape {ds.shape}, expected {(self.n, *tail)}")
-        arr = ds[()]
+        arr = read_array(ds)
         if arr.dtype.kind == "f" and np.isnan(arr).any():
             raise self.fail(key, f"{int(np.isnan(arr).sum())} NaN value(s), expected none")
         if integer and arr.dtype.kind not in "iu":

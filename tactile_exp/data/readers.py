@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 
 from tactile_exp.data.csv_import import read_trial
+from tactile_exp.data.deflate import read_array
 from tactile_exp.data.layout import DataError
 from tactile_exp.registry import Registry
 
@@ -91,7 +92,7 @@ def bolt_hdf5(file: Path, channels: tuple[str, ...]) -> list[np.ndarray]:
                     node = f.get(f"{name}/{finger}/{part}")
                     if not isinstance(node, h5py.Dataset):
                         raise DataError(f"{file}: no dataset /{name}/{finger}/{part}")
-                    arr = np.asarray(node[()], dtype=np.float64)
+                    arr = np.asarray(read_array(node), dtype=np.float64)
                     parts.append(arr.reshape(len(arr), -1))
             if len({len(p) for p in parts}) != 1:
                 raise DataError(f"{file}: /{name}: the fingers' arrays differ in length")
