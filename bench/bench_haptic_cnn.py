@@ -41,6 +41,7 @@ import torch.nn.functional as F
 from sklearn.metrics import roc_auc_score
 
 from tactile_exp.data.layout import Instances
+from tactile_exp.models import grouped_conv_autograd as backward
 from tactile_exp.models import grouped_conv_numba as kernels
 from tactile_exp.models.haptic_cnn import GroupedTemporalConvNet, HapticCNN
 from tactile_exp.models.schedule import Schedule
@@ -125,13 +126,13 @@ def _all_groups_forward(x, w, b, stride, out):
 @kernels.numba.njit(parallel=True)
 def _all_groups_grad_weight(grad, x, stride, grad_w, grad_b):
     for g in kernels.numba.prange(x.shape[0]):
-        kernels._grad_weight_bias(grad[g], x[g], stride, grad_w[g], grad_b[g])
+        backward._grad_weight_bias(grad[g], x[g], stride, grad_w[g], grad_b[g])
 
 
 @kernels.numba.njit(parallel=True)
 def _all_groups_grad_input(grad, w, stride, y, work):
     for g in kernels.numba.prange(grad.shape[0]):
-        kernels._conv_grad_input(grad[g], w[g], stride, y[g], work[kernels.numba.get_thread_id()])
+        backward._conv_grad_input(grad[g], w[g], stride, y[g], work[kernels.numba.get_thread_id()])
 
 
 def kernel_rates(repeats: int) -> None:

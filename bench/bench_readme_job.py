@@ -45,11 +45,10 @@ GENERATE = (
     "from tactile_exp.data.synthetic import default_file\n"
     "default_file(default_cache_dir())\n"
 )
-COMPILE = (
-    "from tactile_exp.models import convnet_tiles, grouped_conv_numba, linear_sgd\n"
-    "linear_sgd.warm_up()\n"
-    "grouped_conv_numba.warm_up()\n"
-    "convnet_tiles.warm_up()\n"
+COMPILE = (  # the job's model's kernel modules (row I: the haptic ConvNet), as its compile ahead
+    "from tactile_exp.models import MODELS\n"
+    "for module in MODELS.build('haptic_cnn').kernels():\n"
+    "    __import__(module, fromlist=['warm_up']).warm_up()\n"
 )
 JOB = ["-m", "tactile_exp", "experiment=quick_table1_i"]
 ROOT = Path(__file__).resolve().parent.parent

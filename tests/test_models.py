@@ -70,6 +70,31 @@ def test_grouping_keeps_signals_separate(channels, perturbed, group):
     assert changed.tolist() == [g == group for g in range(32)]
 
 
+def test_the_convnet_compiles_its_stacks_backward_only_for_a_loss_the_tiled_step_lacks():
+    """A job compiles ahead what ``kernels()`` lists: the tiled step trains with the registered
+    losses, so the stack's backward (``grouped_conv_autograd``) is listed only when stage 1
+    trains with another (a plugin's), and nothing is listed where no kernel runs."""
+    from tactile_exp.models.losses import LOSSES, hinge
+
+    usual = (
+        "tactile_exp.models.linear_sgd",
+        "tactile_exp.models.grouped_conv_numba",
+        "tactile_exp.models.convnet_tiles",
+    )
+    assert MODELS.build("haptic_cnn").kernels() == usual
+    assert MODELS.build("haptic_cnn", loss="logistic", pretrain_loss=None).kernels() == usual
+    with LOSSES.temporary(squared_hinge=lambda s, y: hinge(s, y) ** 2):
+        # stage 2 trains the layer alone (``linear_sgd``): its loss needs no backward of the stack
+        assert MODELS.build("haptic_cnn", loss="squared_hinge").kernels() == usual
+        for plugin in (
+            dict(pretrain_loss="squared_hinge"),
+            dict(loss="squared_hinge", pretrain_loss=None),
+        ):
+            kernels = MODELS.build("haptic_cnn", **plugin).kernels()
+            assert kernels == (*usual, "tactile_exp.models.grouped_conv_autograd"), plugin
+    assert MODELS.build("haptic_cnn", impl="torch").kernels() == ()
+
+
 def test_auto_is_compiled_on_cpu_and_torch_still_selectable():
     net = GroupedTemporalConvNet(32, 30)
     x = torch.randn(3, 32, 30)

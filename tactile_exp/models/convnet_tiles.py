@@ -9,7 +9,7 @@ group, the classification layer, each instance's loss and its gradient, and back
 layers, with the tile's activations (~1.4 MB at the paper's sizes with 16 lanes) in the core's L2
 cache. Nothing of a tile outlives it but its share of the gradients. The loss is computed inside
 (``linear_sgd.LOSSES``: the registered losses it computes); a step with another loss runs through
-autograd (``grouped_conv_numba``).
+autograd (``grouped_conv_autograd``).
 
 Layout per tile: (groups, channels, time, lanes), the tile's instances innermost and
 contiguous as in ``grouped_conv_numba``, with ``pad`` zero rows before and after each channel's

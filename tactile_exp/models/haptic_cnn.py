@@ -2,13 +2,13 @@
 
 PyTorch's CPU grouped ``Conv1d`` is the project's hot spot (bench/bench_haptic_cnn.py): with 32
 groups of a few channels it runs at a few GFLOP/s. ``impl="compiled"`` runs the three conv + ReLU
-layers through numba kernels over a batch-innermost layout (``grouped_conv_numba``), an order of
-magnitude faster on CPU; ``impl="torch"`` runs the plain ``F.conv1d(groups=...)``; ``impl="auto"``
-(default) picks compiled on CPU and torch on GPU (the kernels are CPU only). Both agree to float
-rounding (tests; ``bench/bench_haptic_cnn.py`` measures the speed). Training goes through
-``GroupedTemporalConvNet.batch_step``, which compiled runs the whole step, the classification
-layer, the loss and the gradients included, in tiles of instances that stay in cache
-(``convnet_tiles``).
+layers through numba kernels over a batch-innermost layout (``grouped_conv_numba``; their autograd
+function, ``grouped_conv_autograd``), an order of magnitude faster on CPU; ``impl="torch"`` runs
+the plain ``F.conv1d(groups=...)``; ``impl="auto"`` (default) picks compiled on CPU and torch on
+GPU (the kernels are CPU only). Both agree to float rounding (tests; ``bench/bench_haptic_cnn.py``
+measures the speed). Training goes through ``GroupedTemporalConvNet.batch_step``, which compiled
+runs the whole step, the classification layer, the loss and the gradients included, in tiles of
+instances that stay in cache (``convnet_tiles``).
 """
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ class GroupedTemporalConvNet(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self._compiled(x):
-            from tactile_exp.models.grouped_conv_numba import grouped_conv_stack  # numba: lazy
+            from tactile_exp.models.grouped_conv_autograd import grouped_conv_stack  # numba: lazy
 
             return grouped_conv_stack(
                 x.float(), self.weights, self.biases, groups=self.groups, strides=self.strides
@@ -226,6 +226,18 @@ class HapticCNN(SGDModel):
         net = GroupedTemporalConvNet(*input_shape, **args)
         self.conv3_shape_ = net.out_shape
         return net, net.n_features
+
+    def kernels(self) -> tuple[str, ...]:
+        """``SGDModel.kernels``, with the conv stack's backward (``grouped_conv_autograd``) only
+        where stage 1 trains with a loss the tiled step does not compute (a plugin's loss): the
+        usual losses never run it, so a job does not compile it."""
+        kernels = super().kernels()
+        if kernels:
+            from tactile_exp.models.linear_sgd import LOSSES  # numba: lazy
+
+            if (self.pretrain_loss or self.loss) not in LOSSES:
+                kernels += ("tactile_exp.models.grouped_conv_autograd",)
+        return kernels
 
     def _train_step(self, body: nn.Module, classifier: nn.Linear, loss: str) -> Step:
         return lambda X, y, index: body.batch_step(X, y, classifier, loss, index)
