@@ -79,17 +79,25 @@ def load(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
     return dataset, modality, splits
 
 
-def open_data(settings: Settings) -> tuple[Any, Modality, dict[str, Split]]:
-    """Open the data and check ``combine`` and every split, cheaply (before a run is created)."""
-    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
+def open_modality(settings: Settings) -> Modality:
+    """The job's modality, built from its settings alone (no data read)."""
     try:
-        modality = MODALITIES.build(
+        return MODALITIES.build(
             settings.modality.name,
             cache_dir=settings.cache_dir / "preprocessed",
             **settings.modality.params,
         )
     except (TypeError, ValueError) as err:
         raise param_error("modality", settings.modality.params, err) from err
+
+
+def open_data(
+    settings: Settings, modality: Modality | None = None
+) -> tuple[Any, Modality, dict[str, Split]]:
+    """Open the data (generated on first use) and check ``combine`` and every split, cheaply
+    (before a run is created), with ``modality`` (``open_modality``'s, built here if None)."""
+    modality = open_modality(settings) if modality is None else modality
+    dataset = DATA_SOURCES.build(settings.data.name, **settings.data.params)
     check_data_chain(settings, dataset, modality)
     limit, unit = modality.max_combine(dataset)
     if settings.combine > limit:

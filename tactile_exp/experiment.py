@@ -25,6 +25,7 @@ from tactile_exp.core import (
     model_key,
     new_pipeline,
     open_data,
+    open_modality,
     stores_model,
 )
 from tactile_exp.data.dataset import select_labels
@@ -110,13 +111,14 @@ def run(settings: Settings) -> JobResult:
     if settings.split_note:
         log.info("split: %s", settings.split_note)
     start = time.perf_counter()
-    dataset, modality, splits = open_data(settings)  # generated on first use
-    phases = {"data (generated on first use)": time.perf_counter() - start}
+    modality = open_modality(settings)
     compiled = kernels(settings, modality)
-    if compiled:  # a first compile (empty cache) overlaps opening the store and preprocessing
+    if compiled:  # a first compile (empty cache) overlaps generating, opening and preprocessing
         from tactile_exp.models.numba_setup import compile_ahead
 
         compile_ahead(compiled)
+    dataset, modality, splits = open_data(settings, modality)  # generated on first use
+    phases = {"data (generated on first use)": time.perf_counter() - start}
     tracker = recording.open_tracker(settings)
     if settings.tracking.skip_finished:
         done = recording.finished_job(tracker, settings, dataset.identity())

@@ -69,28 +69,30 @@ def test_job_logs_parent_and_one_child_per_adjective(tiny_config, mlflow_uri, ca
     assert {"config.yaml", "auc_per_adjective.csv", "roc.png"} <= listed
 
 
-def test_a_job_compiles_its_kernels_ahead_before_it_preprocesses(tiny_config, monkeypatch):
-    """The job hands its models' kernels to ``compile_ahead`` once its data are open, before
-    the preprocessing (the modality's check) that the compile overlaps; a job without compiled
-    kernels starts nothing."""
+def test_a_job_compiles_its_kernels_ahead_before_it_opens_its_data(tiny_config, monkeypatch):
+    """The job hands its models' kernels to ``compile_ahead`` before it opens (or generates) its
+    data and preprocesses them (the modality's check), all of which the compile overlaps; a job
+    without compiled kernels starts nothing."""
+    from tactile_exp import core
     from tactile_exp.modalities.haptic import Haptic
     from tactile_exp.models import numba_setup
 
     calls = []
     monkeypatch.setattr(numba_setup, "compile_ahead", lambda modules: calls.append(modules))
-    check = Haptic.check
+    check, build = Haptic.check, core.DATA_SOURCES.build
     monkeypatch.setattr(
         Haptic, "check", lambda self, data: calls.append("check") or check(self, data)
     )
+    monkeypatch.setattr(
+        core.DATA_SOURCES, "build", lambda *a, **k: calls.append("data") or build(*a, **k)
+    )
     run(settings_from_config(tiny_config(["seed=12"], adjectives="[hard]")))
     names = [m.rsplit(".", 1)[-1] for m in calls[0]]
-    assert (
-        sorted(names) == ["convnet_tiles", "grouped_conv_numba", "linear_sgd"]
-        and calls[1] == "check"
-    )
+    assert sorted(names) == ["convnet_tiles", "grouped_conv_numba", "linear_sgd"]
+    assert calls[1:] == ["data", "check"]
     calls.clear()
     run(settings_from_config(tiny_config(["model=random", "seed=12"], adjectives="[hard]")))
-    assert calls == ["check"]
+    assert calls == ["data", "check"]
 
 
 def test_schedule_overrides_the_job_does_not_train_by_are_warned_and_tagged(
