@@ -32,7 +32,7 @@ from tactile_exp.data.dataset import select_labels
 from tactile_exp.data.layout import Split
 from tactile_exp.data.splits import object_counts
 from tactile_exp.models.schedule import STEPS, Schedule
-from tactile_exp.runtime import workers
+from tactile_exp.runtime import memory, workers
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +137,7 @@ def run(settings: Settings) -> JobResult:
     with recording.job_run(tracker, settings) as parent_id:
         start = time.perf_counter()
         modality.check(dataset)
+        memory.give_back()  # the trials read and freed while preprocessing
         phases["preprocessing"] = time.perf_counter() - start
         start = time.perf_counter()
         notes = label_notes(settings, dataset, splits) | schedule_notes(settings)
@@ -160,6 +161,7 @@ def run(settings: Settings) -> JobResult:
                 shown_value,
                 result.sizes["seconds"],
             )
+            memory.give_back()  # what the last adjective's pipeline freed
         results = {a: results[a] for a in splits}  # the adjectives' order, whichever ran first
         phases[f"{len(results)} adjectives"] = time.perf_counter() - start
         log.info(
