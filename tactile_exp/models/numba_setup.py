@@ -6,9 +6,10 @@ or the checkout, so kernels compile once per machine. numba reads these settings
 imported, hence this module: kernel modules import ``numba`` from here.
 
 The first compile takes about half a minute (the ConvNet's kernels), on one core. A job asks for
-it ahead (``compile_ahead``): a background process compiles the kernels its model runs into the
-cache while the job reads and preprocesses its data (one core), and the first kernel call waits
-for that process, then loads the compiled code from the cache. Without a compile ahead the first
+it ahead (``compile_ahead``), before it opens its data: a background process compiles the kernels
+its model runs into the cache while the job generates (on first use), reads and preprocesses its
+data, and the first kernel call waits for that process, then loads the compiled code from the
+cache. Without a compile ahead the first
 call starts that process itself and waits (``ensure_compiled``): kernels are never compiled in the
 process that runs them, because numba's code compiled in the calling process can round
 differently from the same code loaded from its cache (the LSTM training step's FC and output
