@@ -33,11 +33,16 @@ def _shared_tmp(factory: pytest.TempPathFactory, name: str) -> Path:
 
 
 @pytest.fixture(scope="session", autouse=True)
-def numba_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One compiled-kernel cache per test run, shared by every test (set before numba loads);
-    ``$TACTILE_EXP_TEST_NUMBA_CACHE`` keeps it across runs (CI's fast then slow suite)."""
-    kept = os.environ.get("TACTILE_EXP_TEST_NUMBA_CACHE")
-    path = Path(kept) if kept else _shared_tmp(tmp_path_factory, "numba")
+def numba_cache() -> Path:
+    """The compiled-kernel cache every test uses (set before numba loads): the machine's, as
+    jobs use it (``numba_setup``), so a test run loads what the README's job or an earlier run
+    compiled instead of compiling every kernel again (numba recompiles a module whose source
+    changed); ``$TACTILE_EXP_TEST_NUMBA_CACHE`` names another (CI: an empty one, so the fast
+    suite compiles every kernel from scratch and the slow suite reuses them)."""
+    from tactile_exp.data.phac2 import default_cache_dir
+
+    kept = os.environ.get("TACTILE_EXP_TEST_NUMBA_CACHE") or os.environ.get("NUMBA_CACHE_DIR")
+    path = Path(kept) if kept else default_cache_dir() / "numba"
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     return path
 
