@@ -53,11 +53,15 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def mlflow_template(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """An empty MLflow sqlite store, made once: creating the schema costs ~1.5 s per file."""
+    """An empty MLflow sqlite store, made once for the test run (every worker copies it):
+    creating the schema costs ~1.5 s per file."""
     from mlflow.tracking import MlflowClient
 
-    path = tmp_path_factory.mktemp("mlflow-template") / "mlflow.db"
-    MlflowClient(f"sqlite:///{path}").search_experiments()  # creates the schema
+    path = _shared_tmp(tmp_path_factory, "mlflow-template") / "mlflow.db"
+    if not path.exists():  # made under another name, then renamed: a worker sees it whole
+        made = path.with_name(f"making-{os.getpid()}.db")
+        MlflowClient(f"sqlite:///{made}").search_experiments()  # creates the schema
+        os.replace(made, path)
     return path
 
 
