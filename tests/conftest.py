@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import os
 import shutil
 from pathlib import Path
@@ -57,11 +58,15 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def mlflow_template(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """An empty MLflow sqlite store, made once: creating the schema costs ~1.5 s per file."""
+    """An empty MLflow sqlite store, made once for the test run (every worker copies it):
+    creating the schema costs ~1.5 s per file."""
     from mlflow.tracking import MlflowClient
 
-    path = tmp_path_factory.mktemp("mlflow-template") / "mlflow.db"
-    MlflowClient(f"sqlite:///{path}").search_experiments()  # creates the schema
+    path = _shared_tmp(tmp_path_factory, "mlflow-template") / "mlflow.db"
+    if not path.exists():  # made under another name, then renamed: a worker sees it whole
+        made = path.with_name(f"making-{os.getpid()}.db")
+        MlflowClient(f"sqlite:///{made}").search_experiments()  # creates the schema
+        os.replace(made, path)
     return path
 
 
@@ -76,11 +81,18 @@ def mlflow_uri(mlflow_template: Path, tmp_path: Path) -> str:
 
 @pytest.fixture(scope="session")
 def compose_config():
-    """compose(overrides) -> resolved-ready DictConfig, as Hydra would build it."""
+    """compose(overrides) -> resolved-ready DictConfig, as Hydra would build it. The same
+    overrides are composed once per test process (~0.1 s a compose; many tests compose the
+    same groups) and each call gets its own copy, which it may change: interpolations such as
+    ``${oc.env:...}`` stay unresolved until read, as in a fresh compose."""
+    composed: dict[tuple[str, ...], DictConfig] = {}
 
     def _compose(overrides: list[str] | None = None) -> DictConfig:
-        with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-            return compose("config", overrides=list(overrides or []), return_hydra_config=False)
+        key = tuple(overrides or [])
+        if key not in composed:
+            with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+                composed[key] = compose("config", overrides=list(key), return_hydra_config=False)
+        return copy.deepcopy(composed[key])
 
     return _compose
 

@@ -71,9 +71,11 @@ def _children(uri: str, parent_id: str):
     [("table1_k_image_googlenet_1view", 1), ("table1_l_image_googlenet_8views", VIEWS)],
 )
 def test_visual_rows_run_end_to_end(visual_config, mlflow_uri, row, combine):
-    settings = settings_from_config(
-        visual_config([f"experiment={row}", f"combine={combine}", "modality.batch_size=64"])
-    )
+    # 32x32 crops, as _small_visual: the checks below count units, views and epochs and
+    # recompute the AUC from the logged scores, so none depends on the crop size, and the trunk
+    # runs at a fraction of its 224x224 cost (that geometry: tests/test_preprocess_trunk.py)
+    overrides = [f"experiment={row}", f"combine={combine}", "modality.batch_size=64"]
+    settings = settings_from_config(visual_config([*overrides, "modality.size=32"]))
     assert (settings.modality.name, settings.model.name) == ("visual", "visual_googlenet")
     result = run(settings)
     client, children = _children(mlflow_uri, result.run_id)
