@@ -24,6 +24,20 @@ TINY_DATA = [
 ]
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """In an xdist worker, torch's and BLAS's own threads on this worker's share of the cores:
+    two workers with two threads each on two cores spent ~10% more CPU on the fast suite,
+    waiting on each other's threads (tests that compare thread counts set theirs)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if workers > 1:
+        import torch
+        from threadpoolctl import threadpool_limits
+
+        share = max(1, (os.cpu_count() or 1) // workers)
+        torch.set_num_threads(share)
+        threadpool_limits(share, user_api="blas")
+
+
 def _shared_tmp(factory: pytest.TempPathFactory, name: str) -> Path:
     """A folder of this test run, shared by its xdist worker processes (each has its own basetemp
     under one parent), so kernels compile and tiny data is generated once, not once per worker."""

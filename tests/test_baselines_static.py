@@ -9,7 +9,7 @@ import pytest
 from baselines_fixture import make_trial
 from baselines_oracles import pc_polyfit
 from scipy import signal
-from threadpoolctl import threadpool_info
+from threadpoolctl import threadpool_info, threadpool_limits
 
 from tactile_exp.baselines import static as st
 from tactile_exp.data.layout import PAC_RATE_HZ
@@ -199,7 +199,8 @@ def test_shared_pca_is_fitted_on_training_trials_only():
 
 
 def test_trial_static_restores_the_blas_threads():
-    before = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
-    st.trial_static(make_trial())
-    after = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
-    assert after == before
+    with threadpool_limits(2, user_api="blas"):  # whatever the test process's own count
+        before = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+        st.trial_static(make_trial())
+        after = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+    assert after == before and set(before) == {2}
