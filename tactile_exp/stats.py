@@ -34,7 +34,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats as sps
-from threadpoolctl import ThreadpoolController
+
+from tactile_exp.runtime.blas import one_blas_thread
 
 ALPHA = 0.05
 N_BOOT = 2000
@@ -220,14 +221,6 @@ def _counts(uniforms: np.ndarray) -> np.ndarray:
     return counts
 
 
-@functools.cache
-def _blas() -> ThreadpoolController:
-    """numpy's BLAS, found once: a replicate's products are small (replicates x objects),
-    where more than one BLAS thread only adds synchronisation, several times the product's
-    own CPU time on a loaded 2-core machine."""
-    return ThreadpoolController()
-
-
 @functools.lru_cache(maxsize=4096)
 def _uniforms(object_id: int, n_boot: int, seed: int) -> np.ndarray:
     """The object's uniform number in each replicate: shared by every adjective testing it."""
@@ -265,7 +258,7 @@ def bootstrap(test: HeldOut, adjective: str, n_boot: int = N_BOOT, seed: int = S
         cn = _draws(f"{adjective}-", neg_ids, n_boot, seed, RESAMPLING)
         if test.metric == "roc_auc":
             wins, u, v = test.pairs
-            with _blas().limit(limits=1, user_api="blas"):  # see _blas
+            with one_blas_thread():  # small products (runtime/blas.py)
                 kept = np.sum((cp @ wins) * cn, axis=1) / ((cp @ u) * (cn @ v))
         else:
             kept = _resampled(test, cp, cn)

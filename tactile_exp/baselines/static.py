@@ -23,14 +23,13 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cache
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 from scipy import optimize, signal
-from threadpoolctl import ThreadpoolController
 
 from tactile_exp.data.layout import BASELINE_STATE, EPS, PAC_RATE_HZ, TrialData
+from tactile_exp.runtime.blas import one_blas_thread
 
 PHASES: tuple[str, ...] = tuple(EPS)  # squeeze, hold, slow_slide, fast_slide (concat order)
 RISE_WINDOW = 50  # Hanning taps for the pdc smoothing
@@ -48,12 +47,6 @@ PAC_NAMES = ("pac_energy", "pac_sc", "pac_sv", "pac_ss", "pac_sk")
 FINGER_FEATURES = ("pdc_rise", "pdc_area", "pdc_max", *PAC_NAMES, "tac_area", "tdc_tau")
 GRIPPER_NAMES = ("gripper_min", "gripper_mean")
 TRANSFORM_NAMES = ("transform_distance",)
-
-
-@cache
-def _blas() -> ThreadpoolController:
-    """numpy's and scipy's BLAS, found once (a lookup costs ~5 ms; limiting it costs ~20 us)."""
-    return ThreadpoolController()
 
 
 class FeatureWarning(UserWarning):
@@ -302,7 +295,7 @@ def trial_static(
     baseline-subtracted with the mean of the trial's MOVE_ARM_START_POSITION rows (gripper
     and transform signals are not, as the authors).
     """
-    with _blas().limit(limits=1, user_api="blas"):  # see the module docstring
+    with one_blas_thread():  # see the module docstring
         rest = trial.segment(BASELINE_STATE)
         fingers = []
         for f in trial.fingers:
@@ -491,7 +484,7 @@ def static_matrix(
     add overhead on 38 x 38 matrices: ~7x slower on the loaded 2-core machine).
     """
     n, parts = len(idx), []
-    with _blas().limit(limits=1, user_api="blas"):
+    with one_blas_thread():
         for e in range(len(PHASES)):
             if shared is None:
                 mean = table.mean[idx, e][:, None, :]  # (n, 1, 38)
