@@ -82,3 +82,16 @@ def test_every_other_storage_reads_as_h5py_reads_it(tmp_path, store):
         assert (got[50:] == 7).all() and (got[:50, :3] == arr[:50, :3]).all()
     elif store is not _empty:
         np.testing.assert_array_equal(got, arr)
+
+
+def test_a_chunk_that_does_not_inflate_is_an_oserror_naming_the_dataset(tmp_path):
+    """As HDF5's own gzip filter fails (an OSError, which the readers report in one line)."""
+    arr = RNG.integers(0, 4096, (100, 4))
+    with h5py.File(tmp_path / "f.h5", "w") as f:
+        ds = f.create_dataset("grp/x", data=arr, chunks=(50, 4), compression="gzip", shuffle=True)
+        ds.id.write_direct_chunk((50, 0), b"not deflate at all")
+    with h5py.File(tmp_path / "f.h5", "r") as f:
+        with pytest.raises(OSError):
+            f["grp/x"][()]
+        with pytest.raises(OSError, match=r"/grp/x: the chunk at \(50, 0\) does not inflate"):
+            read_array(f["grp/x"])

@@ -18,6 +18,7 @@ import cv2
 import h5py
 import numpy as np
 from isal import isal_zlib
+from isal.isal_zlib import error as IsalError
 
 _SHUFFLE, _DEFLATE = h5py.h5z.FILTER_SHUFFLE, h5py.h5z.FILTER_DEFLATE
 
@@ -50,7 +51,10 @@ def read_array(ds: h5py.Dataset) -> np.ndarray:
         mask, raw = ds.id.read_direct_chunk(start)
         if mask:  # a filter was skipped for this chunk: HDF5 knows how to read it
             return ds[()]
-        chunk = _chunk(raw, filters[0] == _SHUFFLE, ds.dtype, ds.chunks)
+        try:
+            chunk = _chunk(raw, filters[0] == _SHUFFLE, ds.dtype, ds.chunks)
+        except (IsalError, ValueError) as err:  # as HDF5's own filter fails: an OSError
+            raise OSError(f"{ds.name}: the chunk at {start} does not inflate ({err})") from err
         ends = (min(a + c, n) for a, c, n in zip(start, ds.chunks, ds.shape, strict=True))
         where = tuple(slice(a, b) for a, b in zip(start, ends, strict=True))
         out[where] = chunk[tuple(slice(0, s.stop - s.start) for s in where)]
