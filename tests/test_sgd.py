@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 import yaml
 from sklearn.linear_model import LogisticRegression
 from sklearn.metrics import log_loss, roc_auc_score
@@ -163,7 +164,28 @@ def test_features_in_batches_equal_one_batch_and_a_fit_on_huge_pages_does_not_co
         model = MODELS.build(name, schedule=Schedule(epochs=1, finetune_epochs=1), device="cpu")
         model.fit(data)
         assert taken.pop() is X
+        monkeypatch.setattr(sgd, "INFERENCE_BATCH", 1024)  # one call
         whole = model.transform(X)
         monkeypatch.setattr(sgd, "INFERENCE_BATCH", 256)  # 3 calls, the last of 188 rows
         np.testing.assert_array_equal(model.transform(X), whole)
-        monkeypatch.setattr(sgd, "INFERENCE_BATCH", 1024)
+
+
+@pytest.mark.parametrize("n", [513, 600])
+def test_the_linear_head_scores_blocks_of_rows_as_the_whole_matrix(monkeypatch, n):
+    """Scoring preprocesses a block of rows at a time (no standardised copy of the whole input),
+    and the scores are the bits that standardising and scoring all rows at once gives, a last
+    block of one row (513 = 2 x 256 + 1) included: torch multiplies a lone row another way."""
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((n, 40, 6)).astype(np.float32) * 3 + 1
+    y = (X[:, 0, 0] + rng.standard_normal(n) > 1).astype(int)
+    data = Instances(X, y, np.array([f"t{i}" for i in range(n)]), np.arange(n))
+    model = MODELS.build("linear", schedule=Schedule(epochs=2, finetune_epochs=1), device="cpu")
+    model.fit(data)
+    with torch.no_grad(), model._torch_threads():
+        whole = model.classifier_(model._tensor(X)).squeeze(1).double().numpy()
+    blocks = []
+    real = model._tensor
+    monkeypatch.setattr(model, "_tensor", lambda rows: blocks.append(len(rows)) or real(rows))
+    monkeypatch.setattr(sgd, "INFERENCE_BATCH", 256)
+    np.testing.assert_array_equal(model.decision_function(X), whole)
+    assert max(blocks) <= 257 and sum(blocks) == n
