@@ -224,18 +224,19 @@ def fit_adjective(
         part: _part(settings, dataset, cache, part, modality, model, trials["train"], progress)
         for part, (modality, model) in pipeline.preprocess.parts().items()
     }
-    instances = pipeline.fit_preprocess(trials["train"], parts)
-    history: History = {}
-    model = None
-    if pipeline.stores_model:
+
+    def trainer(train: Callable[[], tuple[Model, History]]) -> tuple[Model, History]:
+        """The model by its training key, trained by ``train`` if the cache has none."""
         key = model_key(settings, dataset, adjective)
-        trained = cache.get_or_train(
-            key,
-            lambda: pipeline.train_model(instances, on_epoch),
-            overrides=keys.unkeyed(settings.model),
-        )
-        model, history = trained.model, trained.history
-    history = history | pipeline.fit_instances(instances, model, on_epoch)
+        trained = cache.get_or_train(key, train, overrides=keys.unkeyed(settings.model))
+        return trained.model, trained.history
+
+    history = pipeline.fit(
+        trials["train"],
+        parts=parts,
+        on_epoch=on_epoch,
+        trainer=trainer if pipeline.stores_model else None,
+    )
     test = pipeline.preprocess.transform(trials["test"])
     scored = {"test": pipeline.score(test), "train": pipeline.train_scores()}
     if "val" in trials:

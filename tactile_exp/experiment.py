@@ -148,19 +148,22 @@ def run(settings: Settings) -> JobResult:
         # A search trial shows and logs its validation AUC only: test metrics wait for the
         # study's final evaluation.
         shown, label = ("auc", "validation AUC") if trial else (headline.key, headline.label)
-        for i, result in enumerate(_adjectives(settings, tracker, parent_id, dataset, splits), 1):
+        # Not enumerate: its reused tuple would hold the last result, and with it its
+        # pipeline (model, training units), while the next adjective is fitted.
+        for result in _adjectives(settings, tracker, parent_id, dataset, splits):
             results[result.adjective] = replace(result, pipeline=None)  # kept in its run
             values = result.sides["val"].metrics if trial and "val" in result.sides else {}
             shown_value = values.get("auc", float("nan")) if trial else result.metrics[shown]
             log.info(
                 "[%d/%d] %s %s %.3f (%.1f s)",
-                i,
+                len(results),
                 len(splits),
                 result.adjective,
                 label,
                 shown_value,
                 result.sizes["seconds"],
             )
+            del result  # its pipeline (model, training units) freed before the next adjective
             memory.give_back()  # what the last adjective's pipeline freed
         results = {a: results[a] for a in splits}  # the adjectives' order, whichever ran first
         phases[f"{len(results)} adjectives"] = time.perf_counter() - start

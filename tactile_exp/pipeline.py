@@ -16,6 +16,8 @@ trained by whoever fits it (``core.fit_adjective`` from a model cache), never by
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +31,7 @@ from tactile_exp.models.registry import MODELS
 from tactile_exp.registry import Component
 
 SETTINGS = "pipeline.json"
+Trainer = Callable[[Callable[[], tuple[Model, History]]], tuple[Model, History]]
 
 
 class AdjectivePipeline:
@@ -91,11 +94,14 @@ class AdjectivePipeline:
         model: Model | None = None,
         parts: dict[str, Model] | None = None,
         on_epoch: EpochCallback | None = None,
+        trainer: Trainer | None = None,
     ) -> History:
-        """Fit on ``train``; ``model``: an already trained model to use instead of training one
-        (found by its training key), ``parts``: the modality's fitted parts (``parts()``).
-        Returns the training curves (model, then ``head_*``)."""
-        return self.fit_instances(self.fit_preprocess(train, parts or {}), model, on_epoch)
+        """Fit on ``train``; ``model``: an already trained model to use instead of training one,
+        ``trainer``: what trains the model when none is given (``fit_instances``), ``parts``:
+        the modality's fitted parts (``parts()``). Returns the training curves (model, then
+        ``head_*``). The training instances are this call's alone: they are freed once their
+        units are made, before the head trains."""
+        return self.fit_instances(self.fit_preprocess(train, parts or {}), model, on_epoch, trainer)
 
     def fit_preprocess(self, train: Trials, parts: dict[str, Model]) -> Instances:
         """Give the modality its fitted ``parts``, fit it on ``train``: the training instances."""
@@ -117,12 +123,17 @@ class AdjectivePipeline:
         instances: Instances,
         model: Model | None = None,
         on_epoch: EpochCallback | None = None,
+        trainer: Trainer | None = None,
     ) -> History:
-        """``fit`` after the preprocessing: the model (unless given trained) and the head."""
+        """``fit`` after the preprocessing: the model (unless given trained) and the head.
+        ``trainer(train)`` returns the model and its curves, from ``train()`` or found elsewhere
+        (a job's model cache, by the model's training key); without it ``train()`` is called."""
         self.n_train_instances_ = len(instances)
         history: History = {}
         if model is None and self.trains_model:
-            model, history = self.train_model(instances, on_epoch)
+            train = partial(self.train_model, instances, on_epoch)
+            model, history = train() if trainer is None else trainer(train)
+            del train
         elif model is None:
             model = MODELS.build(self.model.name, **self.model.params)
         self.model_ = model
@@ -131,6 +142,7 @@ class AdjectivePipeline:
             self.train_units_ = instances
             return history
         units = self._units(instances)
+        del instances  # freed here when the caller holds no reference (``fit``)
         self.head_ = model.head()
         history |= {f"head_{k}": v for k, v in self.head_.fit(units).items()}
         self.train_units_ = units

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import weakref
 from pathlib import Path
 from typing import Any, Self
 
@@ -19,6 +20,7 @@ from tactile_exp.config import settings_from_config
 from tactile_exp.data.layout import Instances, Trials
 from tactile_exp.modalities import MODALITIES, Modality
 from tactile_exp.modalities.haptic import Haptic
+from tactile_exp.models.linear import LinearModel
 from tactile_exp.pipeline import AdjectivePipeline
 from tactile_exp.registry import Component
 
@@ -51,6 +53,34 @@ def test_fit_adjective_scores_every_side_and_a_cache_gives_the_same_model_back(r
     # The fitted pipeline scores new trials as it scored the test side.
     scores, _ = first.pipeline.decision_function(split.trials("test", dataset))
     np.testing.assert_array_equal(scores, test.scores)
+
+
+def test_the_training_instances_are_freed_before_the_head_trains(row_i, monkeypatch):
+    """Row I's head trains on the units of the ConvNet's features: the modality's training
+    instances (the ConvNet's input, the larger array) are gone by then, whether the ConvNet is
+    trained or found in the cache."""
+    settings, dataset, split = row_i
+    made, alive_at_head = [], []
+    transform = Haptic.transform
+
+    def tracked(self, trials):
+        out = transform(self, trials)
+        made.append(weakref.ref(out.X.base if out.X.base is not None else out.X))
+        return out
+
+    monkeypatch.setattr(Haptic, "transform", tracked)
+    fit = LinearModel.fit
+
+    def head_fit(self, train, on_epoch=None):
+        alive_at_head.append(made[0]() is not None)
+        return fit(self, train, on_epoch)
+
+    monkeypatch.setattr(LinearModel, "fit", head_fit)
+    cache = MemoryCache()
+    for _ in range(2):  # trained, then found by its training key
+        made.clear()
+        core.fit_adjective(settings, dataset, split, cache)
+    assert alive_at_head == [False, False] and len(cache.keys) == 1
 
 
 def test_validation_side_has_its_own_metrics(tiny_config):

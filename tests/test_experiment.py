@@ -9,6 +9,7 @@ import logging
 import re
 import subprocess
 import sys
+import weakref
 
 import numpy as np
 import pytest
@@ -93,6 +94,24 @@ def test_a_job_compiles_its_kernels_ahead_before_it_opens_its_data(tiny_config, 
     calls.clear()
     run(settings_from_config(tiny_config(["model=random", "seed=12"], adjectives="[hard]")))
     assert calls == ["data", "check"]
+
+
+def test_an_adjectives_pipeline_is_freed_before_the_next_adjective_fits(tiny_config, monkeypatch):
+    """A job keeps each adjective's result without its pipeline (the model and its training
+    units): the last one's is gone before the next adjective is fitted."""
+    from tactile_exp import core
+
+    fit, pipelines, alive = core.fit_adjective, [], []
+
+    def tracked(*args, **kwargs):
+        alive.append([p() is not None for p in pipelines])
+        result = fit(*args, **kwargs)
+        pipelines.append(weakref.ref(result.pipeline))
+        return result
+
+    monkeypatch.setattr(core, "fit_adjective", tracked)
+    run(settings_from_config(tiny_config(["seed=13"], adjectives="[hard,squishy,soft]")))
+    assert alive == [[], [False], [False, False]]
 
 
 def test_schedule_overrides_the_job_does_not_train_by_are_warned_and_tagged(
