@@ -12,7 +12,7 @@ Each model's figures, per epoch of its stage 1 (the whole network; the paper's b
   as the optimiser's ``zero_grad`` does), nothing else: the floor the epoch is held against;
 - the phases of the epoch loop of ``train.sgd_epochs`` outside the step (``PHASES``), each timed
   alone over one epoch's batches: the shuffle, the optimiser
-  (``zero_grad`` and ``torch.optim.SGD.step`` per batch), the loss bookkeeping (``total +=
+  (the gradients reset and ``train.momentum_step`` per batch), the loss bookkeeping (``total +=
   value * len(batch)``) and the per-epoch sync (``float(total)``);
 - an epoch at the rate of the step's fastest call (a batch's seconds per row, the best of the
   epoch's calls, times the rows): what a best-of timing of the step (bench_roofline) would
@@ -43,6 +43,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -146,9 +147,15 @@ class Subject:
     def phases(self) -> dict[str, float]:
         """Each phase of ``train.sgd_epochs``' loop outside the step (``PHASES``), over one epoch's
         batches, alone: wall seconds."""
+        from tactile_exp import train
+
         X, y, params, step, batch = self._loop_parts()
         n = len(X)
-        optimiser = torch.optim.SGD(params, lr=1e-9, momentum=0.9)
+        if hasattr(train, "momentum_step"):  # the loop's own update (a --before package: torch's)
+            velocity = [None] * len(params)
+            update = partial(train.momentum_step, params, velocity, lr=1e-9, momentum=0.9)
+        else:
+            update = torch.optim.SGD(params, lr=1e-9, momentum=0.9).step
         with self.fitted._torch_threads():
             value = step(X, y, torch.arange(min(n, batch)))  # gradients to step with
             grads = [p.grad.clone() for p in params]
@@ -159,10 +166,10 @@ class Subject:
 
             def optimise() -> None:
                 for _ in sizes:
-                    optimiser.zero_grad(set_to_none=True)
                     for p, g in zip(params, grads, strict=True):
+                        p.grad = None
                         p.grad = g
-                    optimiser.step()
+                    update()
 
             out["optimiser"] = _timed(optimise)[0]
             total = torch.zeros(())

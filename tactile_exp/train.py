@@ -119,14 +119,15 @@ def sgd_epochs(
     generator: torch.Generator,
     report: Callable[[float], None] | None = None,
 ) -> list[float]:
-    """Minibatch SGD with momentum over shuffled ``X``; returns the mean loss of each epoch.
+    """Minibatch SGD with momentum (``momentum_step``) over shuffled ``X``; returns the mean
+    loss of each epoch.
 
     ``step(X, y, index)`` returns the mean loss of the rows ``index`` of ``X``, detached, with
     its gradient added to the parameters' ``.grad``: ``autograd_step`` of a loss, or one pass
     that computes both, reading the rows in place rather than from a copied batch (the compiled
     haptic ConvNet's and LSTM's: no autograd graph around a kernel that already has the
     gradients)."""
-    optimiser = torch.optim.SGD(params, lr=lr, momentum=momentum)
+    velocity: list[torch.Tensor | None] = [None] * len(params)
     n = len(X)
     curve = []
     for _ in range(epochs):
@@ -134,14 +135,43 @@ def sgd_epochs(
         total = torch.zeros((), device=X.device)
         for start in range(0, n, batch_size):
             index = order[start : start + batch_size]
-            optimiser.zero_grad(set_to_none=True)
+            for param in params:
+                param.grad = None
             value = step(X, y, index)
-            optimiser.step()
+            momentum_step(params, velocity, lr=lr, momentum=momentum)
             total += value * len(index)
         curve.append(float(total) / n)
         if report is not None:
             report(curve[-1])
     return curve
+
+
+@torch.no_grad()
+def momentum_step(
+    params: Sequence[torch.Tensor],
+    velocity: list[torch.Tensor | None],
+    *,
+    lr: float,
+    momentum: float,
+) -> None:
+    """One step of ``torch.optim.SGD(params, lr, momentum)`` (no dampening, weight decay or
+    Nesterov), op for op as its CPU update, so the same bits: ``velocity[i]`` starts as a copy
+    of the first gradient, then ``v = momentum * v + grad``; ``param -= lr * v``. Written out
+    because torch.optim's first optimiser imports torch's compiler stack (torch._dynamo: ~0.9 s
+    and 70 MB in every training process), and that import's frames keep the caller's alive
+    until the cyclic garbage collector runs (the first adjective's training set with them).
+    Parameters without a gradient are left as they are."""
+    for i, param in enumerate(params):
+        grad = param.grad
+        if grad is None:
+            continue
+        if momentum != 0:
+            if velocity[i] is None:
+                velocity[i] = grad.detach().clone()
+            else:
+                velocity[i].mul_(momentum).add_(grad)
+            grad = velocity[i]
+        param.add_(grad, alpha=-lr)
 
 
 def caffe_xavier_(weight: torch.Tensor, fan_in: int) -> torch.Tensor:

@@ -9,6 +9,7 @@ from tactile_exp.models.losses import LOSSES
 from tactile_exp.train import (
     add_gradients,
     autograd_step,
+    momentum_step,
     resolve_device,
     seed_everything,
     sgd_epochs,
@@ -152,3 +153,27 @@ def test_add_gradients_adds_as_autograds_backward_does():
     for p, a, b in zip(params, kept, second, strict=True):
         assert p.grad.abs().max() > 0
         torch.testing.assert_close(a + b, p.grad, rtol=0, atol=0)
+
+
+def test_the_momentum_step_is_torch_optims_sgd_to_the_bit():
+    """``momentum_step`` gives ``torch.optim.SGD``'s parameters over several steps, a parameter
+    without a gradient in one step left alone (and its velocity with it), in float32 and 64."""
+    for dtype in (torch.float32, torch.float64):
+        gen = torch.Generator().manual_seed(0)
+        ours = [torch.randn(5, 3, generator=gen, dtype=dtype), torch.randn(7, dtype=dtype)]
+        theirs = [p.clone().requires_grad_() for p in ours]
+        start = [p.clone() for p in ours]
+        optimiser = torch.optim.SGD(theirs, lr=0.03, momentum=0.9)
+        velocity = [None, None]
+        for step in range(5):
+            grads = [torch.randn(p.shape, generator=gen, dtype=dtype) for p in ours]
+            if step == 2:
+                grads[1] = None
+            for p, q, g in zip(ours, theirs, grads, strict=True):
+                p.grad = g
+                q.grad = None if g is None else g.clone()
+            momentum_step(ours, velocity, lr=0.03, momentum=0.9)
+            optimiser.step()
+            for p, q in zip(ours, theirs, strict=True):
+                assert torch.equal(p, q.detach())
+        assert not torch.equal(ours[1], start[1])  # the parameters moved
