@@ -62,6 +62,26 @@ INFERENCE_BATCH = 256
 IMPLS = ("auto", "compiled", "torch")
 
 
+def _in_blocks(n: int, block: Callable[[int, int], torch.Tensor]) -> torch.Tensor:
+    """``block(start, end)`` over ``n`` rows, ``INFERENCE_BATCH`` at a time, written into one
+    tensor (not parts concatenated: a second copy of them all). Scoring preprocesses a block at a
+    time too: the linear head's standardised copy of its input is as large as the input. A last
+    block of one row joins the one before: torch computes a lone row's product another way, so
+    its last bits would differ from the same row's in a block."""
+    starts = list(range(0, n, INFERENCE_BATCH))
+    if len(starts) > 1 and n - starts[-1] == 1:
+        starts.pop()
+    if len(starts) <= 1:
+        return block(0, n)
+    ends = [*starts[1:], n]
+    first = block(0, ends[0])
+    out = first.new_empty((n, *first.shape[1:]))
+    out[: ends[0]] = first
+    for start, end in zip(starts[1:], ends[1:], strict=True):
+        out[start:end] = block(start, end)
+    return out
+
+
 class FinetuneWarning(UserWarning):
     """Stage 2 left the classification layer as stage 1 made it."""
 
@@ -297,48 +317,27 @@ class SGDModel(Model):
 
     @torch.no_grad()
     def _features(self, X: torch.Tensor) -> torch.Tensor:
-        """The body's features of ``X``, ``INFERENCE_BATCH`` rows a call, written into one array
-        (not a list of parts concatenated: a second copy of them all)."""
+        """The body's features of preprocessed ``X``, a block of rows a call (``_in_blocks``)."""
         self.body_.eval()
-        if 0 < len(X) <= INFERENCE_BATCH:
-            return self.body_(X)
-        out = X.new_empty((len(X), self.classifier_.in_features))
-        for i in range(0, len(X), INFERENCE_BATCH):
-            out[i : i + INFERENCE_BATCH] = self.body_(X[i : i + INFERENCE_BATCH])
-        return out
+        if len(X) == 0:
+            return X.new_empty((0, self.classifier_.in_features))
+        return _in_blocks(len(X), lambda start, end: self.body_(X[start:end]))
 
     def transform(self, X: np.ndarray) -> np.ndarray:
         """The body's features for each row of ``X``: (n, D) float32."""
+        X = np.asarray(X)
         with self._torch_threads():
-            return self._by_block(X, self._features).cpu().numpy()
+            features = _in_blocks(len(X), lambda a, b: self._features(self._tensor(X[a:b])))
+        return features.cpu().numpy()
 
     @torch.no_grad()
     def decision_function(self, X: np.ndarray) -> np.ndarray:
-        with self._torch_threads():
-            scores = self._by_block(X, lambda F: self.classifier_(self._features(F)).squeeze(1))
-        return scores.double().cpu().numpy()
-
-    @torch.no_grad()
-    def _by_block(
-        self, X: np.ndarray, apply: Callable[[torch.Tensor], torch.Tensor]
-    ) -> torch.Tensor:
-        """``apply`` to ``X`` preprocessed, ``INFERENCE_BATCH`` rows at a time, into one tensor:
-        only a block of ``X`` is preprocessed at once (the linear head's standardised copy of
-        its input is as large as the input). A last block of one row joins the one before:
-        torch computes a single row's product another way, so its last bits would differ."""
         X = np.asarray(X)
-        starts = list(range(0, len(X), INFERENCE_BATCH))
-        if len(starts) > 1 and len(X) - starts[-1] == 1:
-            starts.pop()
-        if len(starts) <= 1:
-            return apply(self._tensor(X))
-        ends = [*starts[1:], len(X)]
-        first = apply(self._tensor(X[: ends[0]]))
-        out = first.new_empty((len(X), *first.shape[1:]))
-        out[: ends[0]] = first
-        for start, end in zip(starts[1:], ends[1:], strict=True):
-            out[start:end] = apply(self._tensor(X[start:end]))
-        return out
+        with self._torch_threads():
+            scores = _in_blocks(
+                len(X), lambda a, b: self.classifier_(self._features(self._tensor(X[a:b])))
+            )
+        return scores.squeeze(1).double().cpu().numpy()
 
     def _state_arrays(self) -> dict[str, np.ndarray]:
         """Fitted input statistics kept beside the weights (none by default)."""
